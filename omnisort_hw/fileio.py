@@ -1,0 +1,128 @@
+"""Atomic file writes: temp file, fsync, rename, fsync of the directory; previous versions kept."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+HISTORY_DIRNAME = "history"
+
+
+def _fsync_dir(directory: Path) -> None:
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def history_dir(path: str | os.PathLike[str]) -> Path:
+    """The folder beside `path` where previous versions of it are kept."""
+    return Path(path).parent / HISTORY_DIRNAME
+
+
+def history_versions(path: str | os.PathLike[str]) -> list[Path]:
+    """Previous versions of `path`, oldest first (names sort by their UTC timestamp)."""
+    target = Path(path)
+    folder = history_dir(target)
+    if not folder.is_dir():
+        return []
+    prefix = f"{target.name}."
+    return sorted(
+        p for p in folder.iterdir() if p.name.startswith(prefix) and not p.name.endswith(".tmp")
+    )
+
+
+def prune_history(path: str | os.PathLike[str], keep: int) -> list[Path]:
+    """Delete all but the newest `keep` previous versions of `path`; returns the deleted paths."""
+    versions = history_versions(path)
+    doomed = versions[: max(0, len(versions) - max(0, keep))]
+    for old in doomed:
+        old.unlink(missing_ok=True)
+    return doomed
+
+
+def _keep_previous(target: Path) -> None:
+    """Preserve the current `target` in the history folder before it is replaced.
+
+    A hard link is atomic and costs nothing (the rename below leaves the old inode to the link);
+    where links are not supported the file is copied to a temp name, fsynced and renamed.
+    """
+    history = history_dir(target)
+    history.mkdir(exist_ok=True)
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+    dest = history / f"{target.name}.{stamp}"
+    try:
+        os.link(target, dest)
+    except FileExistsError:
+        return
+    except OSError:
+        tmp = history / f".{dest.name}.tmp"
+        shutil.copy2(target, tmp)
+        with open(tmp, "rb") as handle:
+            os.fsync(handle.fileno())
+        os.replace(tmp, dest)
+    _fsync_dir(history)
+
+
+def atomic_write_bytes(
+    path: str | os.PathLike[str],
+    data: bytes,
+    keep_history: bool = True,
+    history_keep: int | None = None,
+) -> Path:
+    """Write `data` to `path` so that readers see either the old or the new file, never half.
+
+    With `keep_history`, an existing file is first kept as `history/NAME.TIMESTAMP` beside it;
+    `history_keep` then bounds how many previous versions stay (None: all).
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    if keep_history and target.exists():
+        _keep_previous(target)
+        if history_keep is not None:
+            prune_history(target, history_keep)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp_name, target)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+    _fsync_dir(target.parent)
+    return target
+
+
+def atomic_write_json(
+    path: str | os.PathLike[str],
+    obj: Any,
+    keep_history: bool = True,
+    history_keep: int | None = None,
+) -> Path:
+    """Serialise `obj` as indented JSON and write it atomically."""
+    text = json.dumps(obj, indent=2, sort_keys=False) + "\n"
+    return atomic_write_bytes(
+        path, text.encode("utf-8"), keep_history=keep_history, history_keep=history_keep
+    )
+
+
+def remove_stale_temps(directory: str | os.PathLike[str]) -> list[Path]:
+    """Delete temp files left by writes that were killed before their rename."""
+    folder = Path(directory)
+    if not folder.is_dir():
+        return []
+    stale = [p for p in folder.glob(".*.tmp") if p.is_file()]
+    history = folder / HISTORY_DIRNAME
+    if history.is_dir():
+        stale += [p for p in history.glob(".*.tmp") if p.is_file()]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
