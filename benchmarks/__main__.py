@@ -1,0 +1,67 @@
+"""`make bench`: run every benchmark module, print its figures, save them to results.json.
+
+Usage: python -m benchmarks [--shared DIR] [--only NAME ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import platform
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+
+
+def machine() -> dict[str, Any]:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version()}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks")
+    parser.add_argument("--shared", type=Path, default=HERE.parent.parent / "shared")
+    parser.add_argument("--only", nargs="*", default=None, help="module names without bench_")
+    args = parser.parse_args()
+    names = sorted(p.stem for p in HERE.glob("bench_*.py"))
+    if args.only:
+        names = [n for n in names if n.removeprefix("bench_") in args.only]
+    out_path = HERE / "results.json"
+    results: dict[str, Any] = json.loads(out_path.read_text()) if out_path.exists() else {}
+    results["machine"] = machine()
+    failed = 0
+    for name in names:
+        module = importlib.import_module(f"benchmarks.{name}")
+        print(f"== {name}", flush=True)
+        t0 = time.perf_counter()
+        try:
+            figures = module.run(args.shared)
+        except Exception as exc:
+            failed += 1
+            print(f"   FAILED: {type(exc).__name__}: {exc}", flush=True)
+            continue
+        figures["_wall_s"] = round(time.perf_counter() - t0, 2)
+        figures["_date"] = datetime.now(UTC).isoformat(timespec="seconds")
+        results[name.removeprefix("bench_")] = figures
+        for key, value in figures.items():
+            print(f"   {key:<44} {value}", flush=True)
+    out_path.write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
+    print(f"figures saved to {out_path}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,49 @@
+"""The `omnisort` command line. Each command group lives in its own module with `register()`."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from omnisort_hw.errors import OmnisortError
+
+# Each module defines `register(subparsers)` and sets `func` on its parsers; `func(args)`
+# returns the exit code. Heavy imports stay inside the command functions.
+COMMAND_MODULES: tuple[str, ...] = (
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="omnisort", description="Fisheye camera + laser-plane robotic sorting cell."
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except OmnisortError as exc:
+        print(f"omnisort: error [{exc.code}]: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("omnisort: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        # Device errors live in drivers/ and do not derive from OmnisortError; any class with
+        # a `code` attribute is one of ours and gets the same treatment.
+        code = getattr(exc, "code", None)
+        if isinstance(code, str):
+            print(f"omnisort: error [{code}]: {exc}", file=sys.stderr)
+            return 2
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,46 @@
+"""Typed errors of the product. Each carries a message a technician can act on."""
+
+from __future__ import annotations
+
+
+class OmnisortError(Exception):
+    """Base of every error the product raises on purpose; `code` is stable for the protocol."""
+
+    code = "error"
+    exit_code = 2
+
+
+class InputError(OmnisortError):
+    """A file, image or argument given by the user is unusable (the message names it)."""
+
+    code = "bad_input"
+
+
+class ConfigError(OmnisortError):
+    """A configuration or scene file is wrong; the message names the key."""
+
+    code = "bad_config"
+
+
+class CalibrationError(OmnisortError):
+    """A calibration could not be computed from the data given (the message says why)."""
+
+    code = "calibration_failed"
+
+
+class FeatureNotFoundError(CalibrationError):
+    """An expected image feature (board, border, marker, laser stripe) was not found."""
+
+    code = "feature_not_found"
+
+
+class CalibrationFileError(OmnisortError):
+    """A calibration file is missing, corrupt, stale or from another camera."""
+
+    code = "bad_calibration_file"
+
+
+class MotionRefusedError(OmnisortError):
+    """A motion was refused before anything was sent to the arm."""
+
+    code = "motion_refused"

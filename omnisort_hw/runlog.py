@@ -1,0 +1,138 @@
+"""The one place that talks to rerun. Every stage logs plain numpy arrays through a RunLog.
+
+One `.rrd` file per run. `RunLog(None)` (or `NullLog`) is a no-op, so stages can always log
+without asking whether logging is on. The core never imports this module's dependencies:
+stages receive a RunLog from the caller.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+class RunLog:
+    """Logs images, points, lines, scalars and text of one run to one `.rrd` file."""
+
+    def __init__(self, path: str | Path | None, application_id: str = "omnisort") -> None:
+        self.path = Path(path) if path is not None else None
+        self._rec: Any = None
+        self._rr: Any = None
+        if self.path is not None:
+            import rerun as rr
+
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._rr = rr
+            self._rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
+            self._rec.save(str(self.path))
+
+    @property
+    def enabled(self) -> bool:
+        return self._rec is not None
+
+    def set_step(self, timeline: str, step: int) -> None:
+        """Set the sequence index that following entries belong to (image number, pick number)."""
+        if self._rec is not None:
+            self._rec.set_time(timeline, sequence=int(step))
+
+    def image(self, entity: str, image: np.ndarray, bgr: bool = True) -> None:
+        """Log an image; OpenCV's BGR order is converted to RGB."""
+        if self._rec is None:
+            return
+        img = np.asarray(image)
+        if img.ndim == 3 and img.shape[2] == 3 and bgr:
+            img = img[:, :, ::-1]
+        self._rec.log(entity, self._rr.Image(np.ascontiguousarray(img)))
+
+    def points2d(
+        self,
+        entity: str,
+        points: np.ndarray,
+        color: Sequence[int] | np.ndarray | None = None,
+        radius: float = 2.0,
+        labels: Sequence[str] | None = None,
+    ) -> None:
+        if self._rec is None:
+            return
+        pts = np.asarray(points, dtype=np.float32).reshape(-1, 2)
+        self._rec.log(
+            entity, self._rr.Points2D(pts, colors=color, radii=radius, labels=labels)
+        )
+
+    def points3d(
+        self,
+        entity: str,
+        points: np.ndarray,
+        color: Sequence[int] | np.ndarray | None = None,
+        radius: float = 2.0,
+    ) -> None:
+        if self._rec is None:
+            return
+        pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        self._rec.log(entity, self._rr.Points3D(pts, colors=color, radii=radius))
+
+    def lines2d(self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None) -> None:
+        if self._rec is None:
+            return
+        self._rec.log(
+            entity,
+            self._rr.LineStrips2D([np.asarray(s, np.float32).reshape(-1, 2) for s in strips], colors=color),
+        )
+
+    def lines3d(self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None) -> None:
+        if self._rec is None:
+            return
+        self._rec.log(
+            entity,
+            self._rr.LineStrips3D([np.asarray(s, np.float32).reshape(-1, 3) for s in strips], colors=color),
+        )
+
+    def pose(self, entity: str, matrix: np.ndarray) -> None:
+        """Log a 4x4 homogeneous transform (translation in mm) as the entity's frame."""
+        if self._rec is None:
+            return
+        m = np.asarray(matrix, dtype=float)
+        self._rec.log(entity, self._rr.Transform3D(translation=m[:3, 3], mat3x3=m[:3, :3]))
+
+    def scalar(self, entity: str, value: float) -> None:
+        if self._rec is None:
+            return
+        self._rec.log(entity, self._rr.Scalars(float(value)))
+
+    def text(self, entity: str, text: str) -> None:
+        """Log a document (parameters, a summary) as markdown/plain text."""
+        if self._rec is None:
+            return
+        self._rec.log(entity, self._rr.TextDocument(text))
+
+    def event(self, entity: str, message: str, level: str = "INFO") -> None:
+        if self._rec is None:
+            return
+        self._rec.log(entity, self._rr.TextLog(message, level=level))
+
+    def close(self) -> None:
+        """Flush and close the file; later calls are no-ops."""
+        if self._rec is not None:
+            self._rec.flush()
+            self._rec.disconnect()
+            self._rec = None
+
+    def __enter__(self) -> RunLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+NullLog = RunLog(None)
+
+
+def entity_paths(rrd_path: str | Path) -> set[str]:
+    """Entity paths stored in an `.rrd` file (used by tests and `omnisort review --list`)."""
+    from rerun.chunk import RrdReader
+
+    return {str(chunk.entity_path) for chunk in RrdReader(str(rrd_path)).stream()}
