@@ -52,11 +52,16 @@ class Frame:
 
 @dataclass(frozen=True)
 class SafetyStatus:
-    """The arm's safety state as the controller reports it."""
+    """The arm's safety state as the controller reports it.
+
+    `robot_mode` is the controller's mode name (UR: "RUNNING", "IDLE", "POWER_OFF", ...; sim:
+    "RUNNING"); `safety_mode` the safety mode name ("NORMAL", "PROTECTIVE_STOP", ...).
+    """
 
     protective_stop: bool
     emergency_stop: bool
     robot_mode: str
+    safety_mode: str = "NORMAL"
 
     @property
     def ok(self) -> bool:
@@ -65,18 +70,18 @@ class SafetyStatus:
 
     def raise_if_stopped(self, device: str) -> None:
         """Raise `SafetyStopError` (emergency first) when a stop is active."""
+        state = f"{self.safety_mode}, robot mode {self.robot_mode}"
         if self.emergency_stop:
             raise SafetyStopError(
-                f"arm at {device} is in EMERGENCY STOP (robot mode {self.robot_mode}): release the "
-                "emergency stop button, then power on and release the brakes on the teach pendant",
+                f"arm at {device} is in EMERGENCY STOP ({state}): release the emergency stop "
+                "button, then power on and release the brakes on the teach pendant",
                 kind="emergency",
                 device=device,
             )
         if self.protective_stop:
             raise SafetyStopError(
-                f"arm at {device} is in a PROTECTIVE STOP (robot mode {self.robot_mode}): find and "
-                "remove the cause (collision, limit), then unlock the protective stop on the "
-                "pendant",
+                f"arm at {device} is in a PROTECTIVE STOP ({state}): find and remove the cause "
+                "(collision, limit), then unlock the protective stop on the teach pendant",
                 kind="protective",
                 device=device,
             )

@@ -53,6 +53,12 @@ class BadReplyError(DeviceError):
     code = "bad_device_reply"
 
 
+class DeviceNotReadyError(DeviceError):
+    """The device is there but not in a state to obey (arm powered off, brakes on, not remote)."""
+
+    code = "device_not_ready"
+
+
 class UnsupportedError(DeviceError):
     """The device has no such feature (e.g. a camera without manual exposure)."""
 
@@ -92,6 +98,7 @@ __all__ = [
     "DeviceDisconnectedError",
     "DeviceError",
     "DeviceNotFoundError",
+    "DeviceNotReadyError",
     "DeviceTimeoutError",
     "MotionLimitError",
     "SafetyStopError",
