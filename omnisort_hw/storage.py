@@ -22,10 +22,14 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from omnisort_hw import fileio
+from omnisort_hw.core.camera_io import MODEL_KEYS
 from omnisort_hw.errors import CalibrationFileError, MotionRefusedError
+
+if TYPE_CHECKING:
+    from omnisort_hw.core.camera_model import OcamModel
 
 FORMAT_VERSION = 1
 Kind = Literal["camera", "system"]
@@ -34,10 +38,11 @@ FILE_NAMES: dict[str, str] = {"camera": "camera.json", "system": "system.json"}
 META_KEY = "storage"
 CHECKSUM_KEY = "checksum"
 
-# Top-level keys the core's payloads must carry. The OCam model's own keys are the core's
-# business; storage only checks that the payload is a non-empty object.
+# Top-level keys the core's payloads must carry: camera.json is the core's OCam model dict
+# (`camera_io.MODEL_KEYS`, plus its calibration record); system.json has the shared keys of the
+# architecture. Deeper checks of the model belong to `OcamModel.from_dict` (`camera_model()`).
 REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
-    "camera": (),
+    "camera": MODEL_KEYS,
     "system": (
         "camera",
         "camera_rotation",
@@ -262,6 +267,17 @@ class CalibrationStore:
     def load_system(self) -> dict[str, Any]:
         """The verified system calibration payload from `system.json`."""
         return self.load("system")
+
+    def camera_model(self) -> OcamModel:
+        """The verified camera.json as the core's OcamModel (model keys checked by the core)."""
+        from omnisort_hw.core.camera_model import OcamModel
+        from omnisort_hw.errors import InputError
+
+        rec = self.read("camera")
+        try:
+            return OcamModel.from_dict(rec.payload, source=str(rec.path))
+        except InputError as exc:
+            raise CalibrationFileError(str(exc)) from None
 
     def history(self, kind: str) -> list[Path]:
         """Previous versions of `kind`, oldest first."""

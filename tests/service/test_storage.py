@@ -16,19 +16,24 @@ import numpy as np
 import pytest
 
 from omnisort_hw import fileio
+from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import CalibrationFileError, ConfigError, MotionRefusedError
 from omnisort_hw.storage import (
     REQUIRED_KEYS,
     CalibrationStore,
     StorageConfig,
+    checksum_of,
     read_calibration_file,
 )
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
 
+MODEL = OcamModel.equidistant(640, 480, fov_deg=185.0).to_dict()
+
+
 def camera_payload(tag: int = 0) -> dict:
-    return {"model": "ocam", "ss": [-250.0, 0.0, 0.001 + tag], "image_size": [1280, 960]}
+    return {**MODEL, "rms_px": 0.1 + tag, "images_used": [f"img{tag}.png"]}
 
 
 def system_payload(tag: int = 0) -> dict:
@@ -65,9 +70,11 @@ def test_history_is_bounded_and_each_version_loads(tmp_path: Path) -> None:
         store.save_camera(camera_payload(tag))
     versions = store.history("camera")
     assert len(versions) == 3
-    tags = [read_calibration_file(v, "camera").payload["ss"][2] for v in versions]
-    assert tags == pytest.approx([0.001 + 2, 0.001 + 3, 0.001 + 4])
-    assert store.load_camera()["ss"][2] == pytest.approx(5.001)
+    tags = [read_calibration_file(v, "camera").payload["rms_px"] for v in versions]
+    assert tags == pytest.approx([2.1, 3.1, 4.1])
+    assert store.load_camera()["rms_px"] == pytest.approx(5.1)
+    model = store.camera_model()
+    assert model.image_size == (640, 480)
 
 
 def test_missing_files_block_motion(tmp_path: Path) -> None:
@@ -86,6 +93,9 @@ def test_missing_files_block_motion(tmp_path: Path) -> None:
         (lambda t: t.replace('"model": "ocam"', '"model": "0cam"'), "checksum mismatch"),
         (lambda t: "[1, 2]", "not a JSON object"),
         (lambda t: json.dumps({"model": "x"}), "no checksum"),
+        (lambda t: _resign(t, lambda d: d.pop("poly")), "required key.*poly"),
+        (lambda t: _resign(t, lambda d: d["storage"].update(kind="system")), "not 'camera'"),
+        (lambda t: _resign(t, lambda d: d["storage"].update(saved="yesterday")), "ISO"),
         (lambda t: "\udcff", "not valid JSON"),
     ],
 )
@@ -104,6 +114,15 @@ def test_corrupt_camera_file_is_a_clear_error(tmp_path: Path, mutate, needle: st
         store.check_motion_allowed()
 
 
+def _resign(text: str, change) -> str:
+    """Edit a stored document and recompute its checksum (a well-formed but wrong file)."""
+    doc = json.loads(text)
+    doc.pop("checksum")
+    change(doc)
+    doc["checksum"] = checksum_of(doc)
+    return json.dumps(doc)
+
+
 def test_required_system_keys_are_checked(tmp_path: Path) -> None:
     store = make_store(tmp_path)
     bad = system_payload()
@@ -111,7 +130,9 @@ def test_required_system_keys_are_checked(tmp_path: Path) -> None:
     with pytest.raises(CalibrationFileError, match="laser_plane"):
         store.save_system(bad)
     with pytest.raises(CalibrationFileError, match="reserved"):
-        store.save_camera({"checksum": "x"})
+        store.save_camera({**MODEL, "checksum": "x"})
+    with pytest.raises(CalibrationFileError, match="without poly"):
+        store.save_camera({k: v for k, v in MODEL.items() if k != "poly"})
 
 
 def test_stale_and_wrong_serial_block_motion(tmp_path: Path) -> None:
@@ -158,13 +179,15 @@ WRITER = textwrap.dedent(
     import sys
     from pathlib import Path
     from omnisort_hw.storage import CalibrationStore
+    from omnisort_hw.core.camera_model import OcamModel
     store = CalibrationStore(Path(sys.argv[1]), history_keep=4, expected_serial="CAM-1")
+    model = OcamModel.equidistant(640, 480).to_dict()
     big = [float(i) * 0.5 for i in range(150_000)]
     tag = int(sys.argv[2])
     print("ready", flush=True)
     while True:
         tag += 1
-        store.save_camera({"model": "ocam", "tag": tag, "table": big})
+        store.save_camera({**model, "tag": tag, "table": big})
     """
 )
 
@@ -174,7 +197,7 @@ def test_sigkill_during_write_keeps_a_loadable_calibration(tmp_path: Path) -> No
     """A writer killed at random moments never leaves a current file that fails to load."""
     state = tmp_path / "state"
     store = CalibrationStore(state, history_keep=4, expected_serial="CAM-1")
-    store.save_camera({"model": "ocam", "tag": 0, "table": []})
+    store.save_camera({**MODEL, "tag": 0, "table": []})
     rng = random.Random(7)
     env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
     last_tag = 0

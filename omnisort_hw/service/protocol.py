@@ -1,0 +1,492 @@
+"""The control protocol: one JSON object per line each way, validated field by field.
+
+Request:  {"id": 7, "cmd": "status", "args": {...}, "token": "..."}
+Reply:    {"id": 7, "ok": true, "result": {...}}
+          {"id": 7, "ok": false, "error": {"code": "...", "message": "...", ...}}
+
+`parse_request` never raises anything but `ProtocolError`, whatever the bytes are, so the server
+can answer every line with a typed error. Each command's arguments are declared once in
+`COMMANDS` (type, range, length, choices, required); unknown arguments are refused.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+# Error codes of the protocol. Typed errors of the product and of the drivers keep their own
+# `code` inside `details` where it says more (e.g. device_timeout, bad_calibration_file).
+BAD_JSON = "bad_json"
+BAD_REQUEST = "bad_request"
+UNKNOWN_COMMAND = "unknown_command"
+BAD_ARGUMENT = "bad_argument"
+UNAUTHORIZED = "unauthorized"
+BUSY = "busy"
+MOTION_REFUSED = "motion_refused"
+DEVICE_ERROR = "device_error"
+NOT_AVAILABLE = "not_available"
+INTERNAL = "internal"
+ERROR_CODES: tuple[str, ...] = (
+    BAD_JSON,
+    BAD_REQUEST,
+    UNKNOWN_COMMAND,
+    BAD_ARGUMENT,
+    UNAUTHORIZED,
+    BUSY,
+    MOTION_REFUSED,
+    DEVICE_ERROR,
+    NOT_AVAILABLE,
+    INTERNAL,
+    # Product errors passed through with their own code (omnisort_hw.errors).
+    "bad_input",
+    "bad_config",
+    "calibration_failed",
+    "feature_not_found",
+    "bad_calibration_file",
+)
+
+MAX_ID_CHARS = 128
+MAX_STR_CHARS = 4096
+MAX_JSON_DEPTH = 16
+MAX_ID_INT = 2**53
+
+CommandKind = Literal["quick", "job", "safety", "control"]
+
+
+class ProtocolError(Exception):
+    """A request that cannot be served; `code` is one of ERROR_CODES."""
+
+    def __init__(self, code: str, message: str, **details: Any) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+        self.details = details
+
+
+@dataclass(frozen=True)
+class Arg:
+    """One argument of a command: its JSON type and the checks applied to it."""
+
+    name: str
+    kind: Literal["bool", "int", "number", "str", "vector", "matrix4", "str_list"]
+    required: bool = False
+    default: Any = None
+    choices: tuple[str, ...] = ()
+    length: int | None = None
+    lo: float | None = None
+    hi: float | None = None
+    max_chars: int = MAX_STR_CHARS
+    help: str = ""
+
+
+@dataclass(frozen=True)
+class Command:
+    """A command: its arguments, how it runs, whether it needs the token off loopback."""
+
+    name: str
+    kind: CommandKind
+    args: tuple[Arg, ...] = ()
+    needs_token: bool = True
+    job_state: str | None = None
+    check: Callable[[dict[str, Any]], None] | None = None
+    help: str = ""
+
+    def arg(self, name: str) -> Arg | None:
+        return next((a for a in self.args if a.name == name), None)
+
+
+@dataclass(frozen=True)
+class Request:
+    """A validated request. `args` holds every declared argument (defaults filled in)."""
+
+    id: int | str | None
+    cmd: str
+    args: dict[str, Any] = field(default_factory=dict)
+    token: str | None = None
+
+    @property
+    def command(self) -> Command:
+        return COMMANDS[self.cmd]
+
+
+def _check_move(args: dict[str, Any]) -> None:
+    targets = [k for k in ("joints_deg", "pose", "matrix") if args.get(k) is not None]
+    if len(targets) != 1:
+        raise ProtocolError(
+            BAD_ARGUMENT,
+            "move needs exactly one target: joints_deg (6 numbers, deg), pose "
+            "([x, y, z mm, rx, ry, rz deg] rotation vector) or matrix (4x4, mm)",
+            field="joints_deg|pose|matrix",
+        )
+    if args.get("linear") and args.get("joints_deg") is not None:
+        raise ProtocolError(
+            BAD_ARGUMENT, "linear=true needs a Cartesian target (pose or matrix)", field="linear"
+        )
+
+
+def _check_calibrate(args: dict[str, Any]) -> None:
+    if args["what"] == "intrinsics" and not args.get("folder"):
+        raise ProtocolError(
+            BAD_ARGUMENT,
+            "calibrate what=intrinsics needs folder (a folder of images)",
+            field="folder",
+        )
+    if args["what"] == "extrinsics" and args.get("folder"):
+        raise ProtocolError(
+            BAD_ARGUMENT,
+            "calibrate what=extrinsics takes image (or none for a fresh capture), not folder",
+            field="folder",
+        )
+
+
+_IMAGE = Arg("image", "str", help="path of an image on the cell PC; omitted: a fresh capture")
+_SPEED = Arg("speed", "number", lo=0.01, hi=1.0, default=None, help="fraction of the set speed")
+
+COMMANDS: dict[str, Command] = {
+    c.name: c
+    for c in (
+        Command("status", "quick", needs_token=False, help="state, devices and calibration"),
+        Command(
+            "capture",
+            "quick",
+            (
+                Arg("encoding", "str", choices=("path", "base64"), default="path"),
+                Arg("format", "str", choices=("png", "jpg"), default="png"),
+                Arg("laser", "bool", help="switch the laser to this state before grabbing"),
+            ),
+            help="grab one image; returned as a file path or base64",
+        ),
+        Command(
+            "laser",
+            "quick",
+            (Arg("on", "bool", help="true: on, false: off, omitted: read the state"),),
+            help="switch or read the laser line",
+        ),
+        Command(
+            "calibrate",
+            "job",
+            (
+                Arg("what", "str", required=True, choices=("intrinsics", "extrinsics")),
+                Arg("folder", "str", help="intrinsics: folder of calibration images"),
+                _IMAGE,
+                Arg("method", "str", max_chars=64, help="extrinsics method (core's names)"),
+            ),
+            job_state="calibrating",
+            check=_check_calibrate,
+            help="intrinsics from a folder of images; extrinsics from a capture or an image",
+        ),
+        Command("map", "job", (_IMAGE,), job_state="mapping", help="laser map of the scene"),
+        Command(
+            "register_robot",
+            "job",
+            (_IMAGE,),
+            job_state="calibrating",
+            help="robot base pose from the floor checkerboard",
+        ),
+        Command(
+            "locate",
+            "job",
+            (_IMAGE, Arg("colors", "str_list", help="only these colours")),
+            job_state="mapping",
+            help="find the objects and their poses",
+        ),
+        Command(
+            "move",
+            "job",
+            (
+                Arg("joints_deg", "vector", length=6, lo=-360.0, hi=360.0),
+                Arg("pose", "vector", length=6, lo=-1e5, hi=1e5),
+                Arg("matrix", "matrix4", lo=-1e5, hi=1e5),
+                Arg("linear", "bool", default=False, help="straight TCP line (Cartesian only)"),
+                _SPEED,
+            ),
+            job_state="moving",
+            check=_check_move,
+            help="move the arm to a joint or Cartesian target",
+        ),
+        Command(
+            "sort",
+            "job",
+            (
+                Arg("max_objects", "int", lo=1, hi=1000),
+                Arg("colors", "str_list", help="only these colours"),
+                _SPEED,
+            ),
+            job_state="sorting",
+            help="locate, pick and place every object by colour",
+        ),
+        Command("stop", "safety", needs_token=False, help="stop the running job and the arm"),
+        Command(
+            "estop",
+            "safety",
+            needs_token=False,
+            help="stop everything, laser off, latch the fault state (not a safety function)",
+        ),
+        Command("reset", "control", help="leave the fault/stopped state when the arm is safe"),
+        Command("shutdown", "control", help="stop the cell and end the service (exit 0)"),
+    )
+}
+
+
+def _type_name(value: Any) -> str:
+    return {
+        bool: "boolean",
+        int: "integer",
+        float: "number",
+        str: "string",
+        list: "array",
+        dict: "object",
+    }.get(type(value), "null" if value is None else type(value).__name__)
+
+
+def _bad(arg: Arg, cmd: str, what: str) -> ProtocolError:
+    return ProtocolError(BAD_ARGUMENT, f"{cmd}: argument {arg.name!r} {what}", field=arg.name)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _check_number(arg: Arg, cmd: str, value: Any, where: str = "") -> float:
+    if not _is_number(value):
+        raise _bad(arg, cmd, f"{where}must be a number, got {_type_name(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise _bad(arg, cmd, f"{where}is out of range") from None
+    if not math.isfinite(number):
+        raise _bad(arg, cmd, f"{where}must be finite")
+    if arg.lo is not None and number < arg.lo:
+        raise _bad(arg, cmd, f"{where}must be >= {arg.lo:g}, got {number:g}")
+    if arg.hi is not None and number > arg.hi:
+        raise _bad(arg, cmd, f"{where}must be <= {arg.hi:g}, got {number:g}")
+    return number
+
+
+def _check_arg(arg: Arg, cmd: str, value: Any) -> Any:
+    """Return the validated value of one argument or raise ProtocolError(bad_argument)."""
+    if arg.kind == "bool":
+        if not isinstance(value, bool):
+            raise _bad(arg, cmd, f"must be true or false, got {_type_name(value)}")
+        return value
+    if arg.kind == "int":
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise _bad(arg, cmd, f"must be an integer, got {_type_name(value)}")
+        _check_number(arg, cmd, value)
+        return value
+    if arg.kind == "number":
+        return _check_number(arg, cmd, value)
+    if arg.kind == "str":
+        if not isinstance(value, str):
+            raise _bad(arg, cmd, f"must be a string, got {_type_name(value)}")
+        if not value or len(value) > arg.max_chars:
+            raise _bad(arg, cmd, f"must be 1..{arg.max_chars} characters")
+        if "\x00" in value:
+            raise _bad(arg, cmd, "must not contain NUL characters")
+        if arg.choices and value not in arg.choices:
+            raise _bad(arg, cmd, f"must be one of {', '.join(arg.choices)}, got {value[:40]!r}")
+        return value
+    if arg.kind == "str_list":
+        if not isinstance(value, list) or not 1 <= len(value) <= 64:
+            raise _bad(arg, cmd, "must be an array of 1..64 strings")
+        for item in value:
+            if not isinstance(item, str) or not 1 <= len(item) <= 64:
+                raise _bad(arg, cmd, "must hold strings of 1..64 characters")
+        return list(value)
+    if arg.kind == "vector":
+        if not isinstance(value, list) or len(value) != arg.length:
+            raise _bad(arg, cmd, f"must be an array of {arg.length} numbers")
+        return [_check_number(arg, cmd, v, f"element {i} ") for i, v in enumerate(value)]
+    if arg.kind == "matrix4":
+        if not isinstance(value, list) or len(value) != 4:
+            raise _bad(arg, cmd, "must be a 4x4 array of numbers (rows)")
+        rows = []
+        for r, row in enumerate(value):
+            if not isinstance(row, list) or len(row) != 4:
+                raise _bad(arg, cmd, "must be a 4x4 array of numbers (rows)")
+            rows.append([_check_number(arg, cmd, v, f"[{r}][{c}] ") for c, v in enumerate(row)])
+        return rows
+    raise AssertionError(f"unhandled argument kind {arg.kind}")
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def _depth(obj: Any, limit: int) -> int:
+    """Nesting depth of a parsed JSON value, stopping once past `limit`."""
+    stack: list[tuple[Any, int]] = [(obj, 1)]
+    deepest = 0
+    while stack:
+        node, d = stack.pop()
+        deepest = max(deepest, d)
+        if deepest > limit:
+            return deepest
+        if isinstance(node, dict):
+            stack.extend((v, d + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, d + 1) for v in node)
+    return deepest
+
+
+def peek_id(obj: Any) -> int | str | None:
+    """The request id if it is a valid one (so even an error reply can carry it)."""
+    if not isinstance(obj, dict):
+        return None
+    rid = obj.get("id")
+    if isinstance(rid, bool):
+        return None
+    if isinstance(rid, int) and abs(rid) <= MAX_ID_INT:
+        return rid
+    if isinstance(rid, str) and len(rid) <= MAX_ID_CHARS:
+        return rid
+    return None
+
+
+def decode_line(line: bytes) -> Any:
+    """Bytes of one line to a JSON value; ProtocolError(bad_json) for anything else."""
+    try:
+        text = line.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ProtocolError(BAD_JSON, f"request is not UTF-8 (byte {exc.start})") from None
+    if not text.strip():
+        raise ProtocolError(BAD_JSON, "empty request line")
+    try:
+        obj = json.loads(text, parse_constant=_reject_constant)
+    except RecursionError:
+        raise ProtocolError(BAD_JSON, f"request nested deeper than {MAX_JSON_DEPTH}") from None
+    except ValueError as exc:
+        raise ProtocolError(BAD_JSON, f"request is not valid JSON: {str(exc)[:160]}") from None
+    if _depth(obj, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+        raise ProtocolError(BAD_JSON, f"request nested deeper than {MAX_JSON_DEPTH}")
+    return obj
+
+
+def validate_request(obj: Any) -> Request:
+    """A decoded JSON value to a Request, checking every field; raises ProtocolError."""
+    if not isinstance(obj, dict):
+        raise ProtocolError(BAD_REQUEST, f"request must be a JSON object, got {_type_name(obj)}")
+    unknown = sorted(set(obj) - {"id", "cmd", "args", "token"})
+    if unknown:
+        shown = ", ".join(repr(k[:32]) for k in unknown[:5])
+        raise ProtocolError(
+            BAD_REQUEST, f"unknown request field(s) {shown}; allowed: id, cmd, args, token"
+        )
+    rid = obj.get("id")
+    if rid is not None and peek_id(obj) is None:
+        raise ProtocolError(
+            BAD_REQUEST,
+            f"id must be an integer (|id| <= 2^53) or a string of up to {MAX_ID_CHARS} chars",
+            field="id",
+        )
+    cmd = obj.get("cmd")
+    if cmd is None:
+        raise ProtocolError(BAD_REQUEST, "missing field 'cmd'", field="cmd")
+    if not isinstance(cmd, str):
+        raise ProtocolError(
+            BAD_REQUEST, f"'cmd' must be a string, got {_type_name(cmd)}", field="cmd"
+        )
+    spec = COMMANDS.get(cmd)
+    if spec is None:
+        raise ProtocolError(
+            UNKNOWN_COMMAND,
+            f"unknown command {cmd[:40]!r}; known: {', '.join(COMMANDS)}",
+            field="cmd",
+        )
+    token = obj.get("token")
+    if token is not None and (not isinstance(token, str) or len(token) > 1024):
+        raise ProtocolError(BAD_REQUEST, "'token' must be a string", field="token")
+    raw_args = obj.get("args", {})
+    if raw_args is None:
+        raw_args = {}
+    if not isinstance(raw_args, dict):
+        raise ProtocolError(
+            BAD_REQUEST, f"'args' must be an object, got {_type_name(raw_args)}", field="args"
+        )
+    args = validate_args(spec, raw_args)
+    return Request(id=rid, cmd=cmd, args=args, token=token)
+
+
+def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
+    """Check each argument of `spec` in `raw`; unknown or missing ones are bad_argument."""
+    unknown = sorted(set(raw) - {a.name for a in spec.args})
+    if unknown:
+        allowed = ", ".join(a.name for a in spec.args) or "none"
+        shown = ", ".join(repr(k[:32]) for k in unknown[:5])
+        raise ProtocolError(
+            BAD_ARGUMENT,
+            f"{spec.name}: unknown argument(s) {shown}; allowed: {allowed}",
+            field=unknown[0][:32],
+        )
+    args: dict[str, Any] = {}
+    for arg in spec.args:
+        value = raw.get(arg.name)
+        if value is None:
+            if arg.required:
+                raise _bad(arg, spec.name, "is required")
+            args[arg.name] = arg.default
+            continue
+        args[arg.name] = _check_arg(arg, spec.name, value)
+    if spec.check is not None:
+        spec.check(args)
+    return args
+
+
+def parse_request(line: bytes) -> Request:
+    """One line of bytes (without the newline) to a validated Request."""
+    obj = decode_line(line)
+    try:
+        return validate_request(obj)
+    except ProtocolError as exc:
+        exc.details.setdefault("id", peek_id(obj))
+        raise
+
+
+def _json_default(obj: Any) -> Any:
+    tolist = getattr(obj, "tolist", None)
+    if callable(tolist):
+        return tolist()
+    if isinstance(obj, set | frozenset | tuple):
+        return list(obj)
+    return str(obj)
+
+
+def encode(obj: Mapping[str, Any]) -> bytes:
+    """One reply line: compact JSON (numpy values converted, NaN as null) and a newline."""
+    try:
+        text = json.dumps(obj, separators=(",", ":"), default=_json_default, allow_nan=False)
+    except ValueError:
+        text = json.dumps(_denan(obj), separators=(",", ":"), default=_json_default)
+    return text.encode("utf-8") + b"\n"
+
+
+def _denan(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {str(k): _denan(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_denan(v) for v in obj]
+    tolist = getattr(obj, "tolist", None)
+    if callable(tolist):
+        return _denan(tolist())
+    return obj
+
+
+def ok_reply(rid: int | str | None, result: Mapping[str, Any]) -> dict[str, Any]:
+    return {"id": rid, "ok": True, "result": dict(result)}
+
+
+def error_reply(rid: int | str | None, code: str, message: str, **details: Any) -> dict[str, Any]:
+    error: dict[str, Any] = {"code": code, "message": message}
+    error.update({k: v for k, v in details.items() if k != "id" and v is not None})
+    return {"id": rid, "ok": False, "error": error}
+
+
+def reply_for(exc: ProtocolError, rid: int | str | None = None) -> dict[str, Any]:
+    """The error reply for a ProtocolError (its own id detail wins over `rid`)."""
+    the_id = exc.details.get("id", rid)
+    return error_reply(the_id, exc.code, exc.message, **exc.details)
