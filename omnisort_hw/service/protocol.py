@@ -28,6 +28,7 @@ BUSY = "busy"
 MOTION_REFUSED = "motion_refused"
 DEVICE_ERROR = "device_error"
 NOT_AVAILABLE = "not_available"
+STOPPED = "stopped"
 INTERNAL = "internal"
 ERROR_CODES: tuple[str, ...] = (
     BAD_JSON,
@@ -39,6 +40,7 @@ ERROR_CODES: tuple[str, ...] = (
     MOTION_REFUSED,
     DEVICE_ERROR,
     NOT_AVAILABLE,
+    STOPPED,
     INTERNAL,
     # Product errors passed through with their own code (omnisort_hw.errors).
     "bad_input",
@@ -121,9 +123,13 @@ def _check_move(args: dict[str, Any]) -> None:
             "([x, y, z mm, rx, ry, rz deg] rotation vector) or matrix (4x4, mm)",
             field="joints_deg|pose|matrix",
         )
-    if args.get("linear") and args.get("joints_deg") is not None:
+    if args.get("speed_mm_s") is not None and args.get("joints_deg") is not None:
         raise ProtocolError(
-            BAD_ARGUMENT, "linear=true needs a Cartesian target (pose or matrix)", field="linear"
+            BAD_ARGUMENT, "speed_mm_s is for Cartesian targets; use speed_deg_s", field="speed_mm_s"
+        )
+    if args.get("speed_deg_s") is not None and args.get("joints_deg") is None:
+        raise ProtocolError(
+            BAD_ARGUMENT, "speed_deg_s is for joint targets; use speed_mm_s", field="speed_deg_s"
         )
 
 
@@ -143,7 +149,6 @@ def _check_calibrate(args: dict[str, Any]) -> None:
 
 
 _IMAGE = Arg("image", "str", help="path of an image on the cell PC; omitted: a fresh capture")
-_SPEED = Arg("speed", "number", lo=0.01, hi=1.0, default=None, help="fraction of the set speed")
 
 COMMANDS: dict[str, Command] = {
     c.name: c
@@ -200,12 +205,12 @@ COMMANDS: dict[str, Command] = {
                 Arg("joints_deg", "vector", length=6, lo=-360.0, hi=360.0),
                 Arg("pose", "vector", length=6, lo=-1e5, hi=1e5),
                 Arg("matrix", "matrix4", lo=-1e5, hi=1e5),
-                Arg("linear", "bool", default=False, help="straight TCP line (Cartesian only)"),
-                _SPEED,
+                Arg("speed_deg_s", "number", lo=0.1, hi=180.0, help="joint moves"),
+                Arg("speed_mm_s", "number", lo=0.1, hi=1000.0, help="Cartesian moves"),
             ),
             job_state="moving",
             check=_check_move,
-            help="move the arm to a joint or Cartesian target",
+            help="joint target: move in joint space; Cartesian target: straight TCP line",
         ),
         Command(
             "sort",
@@ -213,7 +218,6 @@ COMMANDS: dict[str, Command] = {
             (
                 Arg("max_objects", "int", lo=1, hi=1000),
                 Arg("colors", "str_list", help="only these colours"),
-                _SPEED,
             ),
             job_state="sorting",
             help="locate, pick and place every object by colour",

@@ -1,0 +1,568 @@
+"""The cell: the configured devices wired to calibration storage, the run log and the core.
+
+The service calls one `Cell` from several threads: the job thread (one long command at a
+time), the quick-command pool (status, capture, laser) and the safety pool (stop, estop).
+Access to the camera and the laser switch is serialised with a lock each; `Arm.stop()` may
+always be called concurrently with a motion (the driver contract says it always passes).
+Status reads use short-lived caches so that many clients polling `status` never queue behind
+a device.
+
+Pipeline commands (calibrate, map, register_robot, locate, sort) call the core; until a core
+component exists they raise `NotAvailableError` naming it, never a made-up result.
+"""
+
+from __future__ import annotations
+
+import base64
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from omnisort_hw import fileio
+from omnisort_hw.errors import MotionRefusedError, OmnisortError
+from omnisort_hw.runlog import RunLog
+from omnisort_hw.storage import CalibrationStore
+
+if TYPE_CHECKING:
+    from drivers.base import Arm, Camera, LaserSwitch
+    from omnisort_hw.service.config import Settings
+    from omnisort_hw.service.rrd import RunLogRotator
+
+log = logging.getLogger(__name__)
+
+STATUS_CACHE_S = 0.2
+CALIBRATION_CACHE_S = 1.0
+LASER_CACHE_S = 1.0
+DEVICE_LOCK_TIMEOUT_S = 5.0
+
+
+class NotAvailableError(OmnisortError):
+    """A command needs a component that is not in this build (the message names it)."""
+
+    code = "not_available"
+
+
+class DeviceLockTimeoutError(OmnisortError):
+    """A device stayed busy with another command for longer than the lock timeout."""
+
+    code = "busy"
+
+
+@dataclass
+class CellDevices:
+    """The devices of one cell; a missing device is None (commands needing it say so)."""
+
+    camera: Camera | None = None
+    laser: LaserSwitch | None = None
+    arm: Arm | None = None
+
+    def items(self) -> list[tuple[str, Any]]:
+        return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
+
+
+@dataclass
+class _Cached:
+    value: Any = None
+    at: float = -1e18
+
+    def fresh(self, max_age_s: float) -> bool:
+        return time.monotonic() - self.at <= max_age_s
+
+
+@dataclass
+class _Caches:
+    arm: _Cached = field(default_factory=_Cached)
+    laser: _Cached = field(default_factory=_Cached)
+    calibration: _Cached = field(default_factory=_Cached)
+    calibration_key: Any = None
+
+
+def _iso(wall: float) -> str:
+    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
+
+
+def _error_text(exc: BaseException) -> dict[str, str]:
+    return {"error": str(exc), "code": str(getattr(exc, "code", type(exc).__name__))}
+
+
+class Cell:
+    """Devices + calibration store + run log + core functions, for one robot cell."""
+
+    def __init__(
+        self,
+        devices: CellDevices,
+        store: CalibrationStore,
+        runlog: RunLogRotator | RunLog | None = None,
+        capture_dir: Path | None = None,
+        capture_keep: int = 50,
+        config: dict[str, Any] | None = None,
+    ) -> None:
+        self.devices = devices
+        self.store = store
+        self._runlog = runlog if runlog is not None else RunLog(None)
+        self.capture_dir = capture_dir or Path(store.state_dir) / "captures"
+        self.capture_keep = capture_keep
+        self.config = dict(config or {})
+        self._camera_lock = threading.Lock()
+        self._laser_lock = threading.Lock()
+        self._cache_lock = threading.Lock()
+        self._caches = _Caches()
+        self._connected = False
+
+    # -- construction and life cycle -------------------------------------------------------
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> Cell:
+        """Build the cell of a configuration: devices from the device factory, store, run log."""
+        from omnisort_hw.service.rrd import RunLogRotator
+
+        devices = open_devices(settings.raw, settings.path)
+        lg = settings.logging
+        rotator = RunLogRotator(
+            lg.log_dir if lg.rerun else None,
+            keep=lg.rrd_keep,
+            max_total_bytes=int(lg.rrd_max_total_mb * 1e6),
+            max_file_bytes=int(lg.rrd_max_file_mb * 1e6),
+        )
+        store = CalibrationStore.from_config(settings.storage)
+        return cls(
+            devices,
+            store,
+            rotator,
+            capture_keep=settings.service.capture_keep,
+            config=settings.raw,
+        )
+
+    @property
+    def runlog(self) -> RunLog:
+        """The RunLog to write to now (the rotator may have started a new file)."""
+        rl = self._runlog
+        return rl if isinstance(rl, RunLog) else rl.log
+
+    @property
+    def runlog_path(self) -> Path | None:
+        return self.runlog.path
+
+    def roll_runlog(self) -> bool:
+        """Start a new `.rrd` file if the current one is over its size limit (between jobs)."""
+        rl = self._runlog
+        return False if isinstance(rl, RunLog) else rl.roll_if_needed()
+
+    def connect(self) -> None:
+        """Connect every device (a DeviceError propagates) and check the camera serial."""
+        for name, dev in self.devices.items():
+            if dev is not None:
+                log.info("connecting %s %s", name, dev.name)
+                dev.connect()
+        cam = self.devices.camera
+        if cam is not None and self.store.expected_serial is None:
+            self.store.expected_serial = cam.serial
+        self.store.remove_stale_temps()
+        self._connected = True
+        self.runlog.event("service/devices", f"connected: {self.device_names()}")
+
+    def device_names(self) -> dict[str, str | None]:
+        return {name: (dev.name if dev is not None else None) for name, dev in self.devices.items()}
+
+    def close(self) -> list[str]:
+        """Safe shutdown: arm stopped, laser off, devices closed, run log flushed; never raises.
+
+        Returns the problems met (also logged), so the caller can report them.
+        """
+        problems = self.make_safe()
+        for name, dev in self.devices.items():
+            if dev is None:
+                continue
+            try:
+                dev.close()
+            except Exception as exc:
+                problems.append(f"{name} close: {exc}")
+        for p in problems:
+            log.warning("shutdown: %s", p)
+        self.runlog.event("service/devices", "closed", level="INFO")
+        rl = self._runlog
+        rl.close()
+        self._connected = False
+        return problems
+
+    def make_safe(self) -> list[str]:
+        """Stop the arm and switch the laser off, trying both whatever fails; returns problems."""
+        problems: list[str] = []
+        arm = self.devices.arm
+        if arm is not None and arm.is_connected:
+            try:
+                arm.stop()
+            except Exception as exc:
+                problems.append(f"arm stop: {exc}")
+        laser = self.devices.laser
+        if laser is not None and laser.is_connected:
+            # The laser lock may be held by a command stuck on the device: switch off anyway.
+            got = self._laser_lock.acquire(timeout=1.0)
+            try:
+                laser.off()
+                self._cache_laser(False)
+            except Exception as exc:
+                problems.append(f"laser off: {exc}")
+            finally:
+                if got:
+                    self._laser_lock.release()
+        return problems
+
+    # -- helpers ---------------------------------------------------------------------------
+
+    def _need(self, name: str) -> Any:
+        dev = getattr(self.devices, name)
+        if dev is None:
+            raise NotAvailableError(f"no {name} in this cell's configuration ([{name}] section)")
+        return dev
+
+    @contextmanager
+    def _locked(self, lock: threading.Lock, what: str) -> Iterator[None]:
+        if not lock.acquire(timeout=DEVICE_LOCK_TIMEOUT_S):
+            raise DeviceLockTimeoutError(
+                f"the {what} has been busy with another command for {DEVICE_LOCK_TIMEOUT_S:g} s"
+            )
+        try:
+            yield
+        finally:
+            lock.release()
+
+    def _cache_laser(self, on: bool) -> None:
+        with self._cache_lock:
+            self._caches.laser = _Cached(bool(on), time.monotonic())
+
+    # -- status ----------------------------------------------------------------------------
+
+    def calibration_status(self) -> dict[str, Any]:
+        """`CalibrationStore.status()`, recomputed when a file changes or after one second."""
+        key = []
+        for kind in ("camera", "system"):
+            try:
+                st = self.store.path(kind).stat()
+                key.append((st.st_ino, st.st_mtime_ns, st.st_size))
+            except OSError:
+                key.append(None)
+        with self._cache_lock:
+            c = self._caches
+            if c.calibration_key == key and c.calibration.fresh(CALIBRATION_CACHE_S):
+                return dict(c.calibration.value)
+        value = self.store.status()
+        with self._cache_lock:
+            self._caches.calibration = _Cached(value, time.monotonic())
+            self._caches.calibration_key = key
+        return dict(value)
+
+    def _arm_status(self) -> dict[str, Any]:
+        arm = self.devices.arm
+        if arm is None:
+            return {"configured": False}
+        with self._cache_lock:
+            if self._caches.arm.fresh(STATUS_CACHE_S):
+                return dict(self._caches.arm.value)
+        out: dict[str, Any] = {"configured": True, "name": arm.name, "connected": arm.is_connected}
+        if arm.is_connected:
+            try:
+                st = arm.state()
+                out.update(
+                    joints_deg=np.round(np.asarray(st.joints_deg, float), 4).tolist(),
+                    tcp_pose=np.round(np.asarray(st.tcp_pose, float), 4).tolist(),
+                    safety={
+                        "ok": st.safety.ok,
+                        "protective_stop": st.safety.protective_stop,
+                        "emergency_stop": st.safety.emergency_stop,
+                        "robot_mode": st.safety.robot_mode,
+                        "safety_mode": getattr(st.safety, "safety_mode", None),
+                    },
+                )
+            except Exception as exc:
+                out.update(_error_text(exc))
+        with self._cache_lock:
+            self._caches.arm = _Cached(out, time.monotonic())
+        return out
+
+    def _laser_status(self) -> dict[str, Any]:
+        laser = self.devices.laser
+        if laser is None:
+            return {"configured": False}
+        out: dict[str, Any] = {
+            "configured": True,
+            "name": laser.name,
+            "connected": laser.is_connected,
+        }
+        with self._cache_lock:
+            cached = self._caches.laser
+            if cached.fresh(LASER_CACHE_S):
+                out["on"] = cached.value
+                return out
+        if laser.is_connected and self._laser_lock.acquire(timeout=0.05):
+            try:
+                on = laser.state()
+                self._cache_laser(on)
+                out["on"] = on
+            except Exception as exc:
+                out.update(_error_text(exc))
+            finally:
+                self._laser_lock.release()
+        else:
+            out["on"] = cached.value
+            out["cached"] = True
+        return out
+
+    def _camera_status(self) -> dict[str, Any]:
+        cam = self.devices.camera
+        if cam is None:
+            return {"configured": False}
+        out: dict[str, Any] = {"configured": True, "name": cam.name, "connected": cam.is_connected}
+        if cam.is_connected:
+            try:
+                out["serial"] = cam.serial
+                out["resolution"] = list(cam.resolution)
+            except Exception as exc:
+                out.update(_error_text(exc))
+        return out
+
+    def status(self) -> dict[str, Any]:
+        """Devices and calibration, cheap enough to poll many times a second."""
+        return {
+            "devices": {
+                "camera": self._camera_status(),
+                "laser": self._laser_status(),
+                "arm": self._arm_status(),
+            },
+            "calibration": self.calibration_status(),
+            "rrd": str(self.runlog_path) if self.runlog_path else None,
+        }
+
+    # -- quick commands --------------------------------------------------------------------
+
+    def grab(self, timeout_s: float | None = None) -> Any:
+        """One fresh frame (`drivers.base.Frame`), logged as `camera/raw`."""
+        cam = self._need("camera")
+        with self._locked(self._camera_lock, "camera"):
+            frame = cam.grab(timeout_s)
+        rl = self.runlog
+        rl.set_step("frame", int(frame.sequence))
+        rl.image("camera/raw", frame.image)
+        return frame
+
+    def set_laser(self, on: bool) -> bool:
+        """Switch the laser (confirmed by the driver's read-back) and return the state."""
+        laser = self._need("laser")
+        with self._locked(self._laser_lock, "laser"):
+            laser.set(bool(on))
+            state = bool(laser.state())
+        self._cache_laser(state)
+        self.runlog.event("laser/state", "on" if state else "off")
+        return state
+
+    def laser(self, on: bool | None = None) -> dict[str, Any]:
+        """Switch the laser when `on` is given; always read the state back."""
+        laser = self._need("laser")
+        if on is not None:
+            return {"on": self.set_laser(on)}
+        with self._locked(self._laser_lock, "laser"):
+            state = bool(laser.state())
+        self._cache_laser(state)
+        return {"on": state}
+
+    def capture(
+        self, encoding: str = "path", fmt: str = "png", laser: bool | None = None
+    ) -> dict[str, Any]:
+        """Grab one image; return it as a file under `capture_dir` or as base64."""
+        import cv2
+
+        if laser is not None:
+            self.set_laser(laser)
+        frame = self.grab()
+        ext = ".png" if fmt == "png" else ".jpg"
+        ok, buf = cv2.imencode(ext, frame.image)
+        if not ok:
+            raise OmnisortError(f"could not encode the image as {fmt}")
+        data = buf.tobytes()
+        h, w = frame.image.shape[:2]
+        result: dict[str, Any] = {
+            "sequence": int(frame.sequence),
+            "wall_time": _iso(frame.wall_time),
+            "width": int(w),
+            "height": int(h),
+            "format": fmt,
+            "bytes": len(data),
+        }
+        if encoding == "base64":
+            result["base64"] = base64.b64encode(data).decode("ascii")
+            return result
+        stamp = datetime.fromtimestamp(frame.wall_time, UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+        path = self.capture_dir / f"capture-{stamp}-{int(frame.sequence):06d}{ext}"
+        fileio.atomic_write_bytes(path, data, keep_history=False)
+        self._prune_captures()
+        result["path"] = str(path)
+        return result
+
+    def _prune_captures(self) -> None:
+        files = sorted(self.capture_dir.glob("capture-*"))
+        for old in files[: max(0, len(files) - self.capture_keep)]:
+            old.unlink(missing_ok=True)
+
+    # -- motion ----------------------------------------------------------------------------
+
+    def check_motion_allowed(self) -> None:
+        """Raise MotionRefusedError unless camera.json and system.json are usable."""
+        self.store.check_motion_allowed()
+
+    def move(
+        self,
+        joints_deg: Sequence[float] | None = None,
+        pose: Sequence[float] | None = None,
+        matrix: Sequence[Sequence[float]] | None = None,
+        speed_deg_s: float | None = None,
+        speed_mm_s: float | None = None,
+        cancel: threading.Event | None = None,
+    ) -> dict[str, Any]:
+        """Move to a joint target (joint space) or a Cartesian target (straight TCP line).
+
+        Refused before anything reaches the arm when the calibration is not usable or the arm
+        reports a safety stop; the driver checks its joint limits and workspace box itself.
+        """
+        from drivers.base import pose_matrix
+
+        arm = self._need("arm")
+        self.check_motion_allowed()
+        arm.safety_status().raise_if_stopped(arm.name)
+        if cancel is not None and cancel.is_set():
+            raise MotionRefusedError("move cancelled before it started")
+        rl = self.runlog
+        start = np.asarray(arm.joint_positions(), float)
+        if joints_deg is not None:
+            target = np.asarray(joints_deg, float)
+            rl.event("arm/command", f"move_joints to {np.round(target, 3).tolist()} deg")
+            rl.text("arm/planned/joints_deg", str(np.round(np.stack([start, target]), 3).tolist()))
+            arm.move_joints(target, speed_deg_s=speed_deg_s)
+        else:
+            T = np.asarray(matrix, float) if matrix is not None else None
+            if T is None:
+                p = np.asarray(pose, float)
+                T = pose_matrix(p[:3], p[3:])
+            rl.event("arm/command", f"move_linear to xyz {np.round(T[:3, 3], 2).tolist()} mm")
+            rl.pose("arm/planned/tcp", T)
+            arm.move_linear(T, speed_mm_s=speed_mm_s)
+        end = np.asarray(arm.joint_positions(), float)
+        tcp = np.asarray(arm.tcp_pose(), float)
+        rl.text("arm/executed/joints_deg", str(np.round(np.stack([start, end]), 3).tolist()))
+        rl.pose("arm/executed/tcp", tcp)
+        return {"joints_deg": np.round(end, 4).tolist(), "tcp_pose": np.round(tcp, 4).tolist()}
+
+    def stop_motion(self) -> list[str]:
+        """Stop the arm now (never refused); returns the problems met."""
+        arm = self.devices.arm
+        if arm is None or not arm.is_connected:
+            return []
+        try:
+            arm.stop()
+        except Exception as exc:
+            return [f"arm stop: {exc}"]
+        self.runlog.event("arm/command", "stop", level="WARN")
+        return []
+
+    def emergency_stop(self) -> list[str]:
+        """Software emergency stop: arm stopped, laser off. Not a substitute for the hardware
+        emergency stop chain, which acts on the robot controller directly."""
+        problems = self.make_safe()
+        self.runlog.event("arm/command", "emergency stop (software)", level="ERROR")
+        return problems
+
+    def check_safe_to_resume(self) -> dict[str, Any]:
+        """Raise the driver's SafetyStopError if the arm is still in a stop; else its safety."""
+        arm = self.devices.arm
+        if arm is None or not arm.is_connected:
+            return {"arm": None}
+        st = arm.safety_status()
+        st.raise_if_stopped(arm.name)
+        return {"arm": {"robot_mode": st.robot_mode, "ok": st.ok}}
+
+    # -- pipeline (core) -------------------------------------------------------------------
+
+    def calibrate_intrinsics(self, folder: str, cancel: threading.Event) -> dict[str, Any]:
+        """Intrinsic calibration from a folder of images, saved as camera.json."""
+        raise NotAvailableError(
+            "calibrate what=intrinsics: the intrinsic calibration of omnisort_hw.core "
+            "(board detection + OCam fit) is not in this build yet"
+        )
+
+    def calibrate_extrinsics(
+        self, image: str | None, method: str | None, cancel: threading.Event
+    ) -> dict[str, Any]:
+        """Camera-laser system calibration from a fresh capture or an image, saved as
+        system.json."""
+        raise NotAvailableError(
+            "calibrate what=extrinsics: the extrinsic calibration of omnisort_hw.core "
+            "(target and laser-stripe extraction, plane fit) is not in this build yet"
+        )
+
+    def map_scene(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
+        """Laser map of the scene (obstacles and objects on the laser plane)."""
+        raise NotAvailableError(
+            "map: the laser mapping of omnisort_hw.core is not in this build yet"
+        )
+
+    def register_robot(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
+        """Robot base pose from the floor checkerboard, stored in system.json."""
+        raise NotAvailableError(
+            "register_robot: the robot registration of omnisort_hw.core (floor checkerboard) "
+            "is not in this build yet"
+        )
+
+    def locate(
+        self, image: str | None, colors: list[str] | None, cancel: threading.Event
+    ) -> dict[str, Any]:
+        """Objects and their poses in the robot base frame."""
+        raise NotAvailableError(
+            "locate: the colour-blob detection and mapping of omnisort_hw.core are not in this "
+            "build yet"
+        )
+
+    def sort(
+        self,
+        max_objects: int | None,
+        colors: list[str] | None,
+        cancel: threading.Event,
+        progress: Callable[[dict[str, Any]], None] | None = None,
+    ) -> dict[str, Any]:
+        """Locate, pick and place every object by colour until done, `max_objects` or cancel."""
+        raise NotAvailableError(
+            "sort: the sorting pipeline of omnisort_hw.core (locate, motion planning, pick and "
+            "place) is not in this build yet"
+        )
+
+
+def open_devices(config: dict[str, Any], config_path: Path | None = None) -> CellDevices:
+    """The devices of the `[camera]`, `[laser]` and `[arm]` sections, from the device factory.
+
+    The factory (`omnisort_hw.devices`) picks the real driver or the simulated cell per
+    section's `backend`; until it exists the service cannot open devices and says so.
+    """
+    try:
+        from omnisort_hw import devices as factory  # type: ignore[attr-defined]
+    except ImportError:
+        raise NotAvailableError(
+            "the device factory omnisort_hw.devices is not in this build yet, so the [camera], "
+            "[laser] and [arm] sections cannot be opened"
+        ) from None
+    build = getattr(factory, "open_devices", None) or getattr(factory, "make_devices", None)
+    if build is None:
+        raise NotAvailableError("omnisort_hw.devices has no open_devices() factory")
+    made = build(config) if config_path is None else build(config, config_path)
+    if isinstance(made, CellDevices):
+        return made
+    return CellDevices(
+        camera=getattr(made, "camera", None),
+        laser=getattr(made, "laser", None),
+        arm=getattr(made, "arm", None),
+    )

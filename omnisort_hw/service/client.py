@@ -1,0 +1,104 @@
+"""A small blocking client of the control protocol (used by `omnisort ctl`, tests, benchmarks).
+
+Every call has a timeout: connecting, sending and waiting for the reply.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import socket
+from typing import Any
+
+from omnisort_hw.service.config import DEFAULT_PORT
+
+MAX_REPLY_BYTES = 256 * 1024 * 1024
+
+
+class ClientError(Exception):
+    """The service could not be reached or did not answer in time."""
+
+    code = "client_error"
+
+
+class Client:
+    """One TCP connection; `call()` sends a request and returns its reply as a dict."""
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        port: int = DEFAULT_PORT,
+        token: str | None = None,
+        timeout_s: float = 10.0,
+        connect_timeout_s: float = 5.0,
+    ) -> None:
+        self.host, self.port, self.token, self.timeout_s = host, port, token, timeout_s
+        try:
+            self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
+        except OSError as exc:
+            raise ClientError(f"cannot connect to {host}:{port}: {exc}") from None
+        self._sock.settimeout(timeout_s)
+        self._buf = bytearray()
+        self._ids = itertools.count(1)
+
+    def send_raw(self, data: bytes) -> None:
+        """Send bytes as they are (tests send malformed lines with this)."""
+        try:
+            self._sock.sendall(data)
+        except OSError as exc:
+            raise ClientError(f"send to {self.host}:{self.port} failed: {exc}") from None
+
+    def read_reply(self, timeout_s: float | None = None) -> dict[str, Any]:
+        """The next reply line as a dict."""
+        self._sock.settimeout(timeout_s if timeout_s is not None else self.timeout_s)
+        while True:
+            nl = self._buf.find(b"\n")
+            if nl >= 0:
+                line = bytes(self._buf[:nl])
+                del self._buf[: nl + 1]
+                return json.loads(line)
+            if len(self._buf) > MAX_REPLY_BYTES:
+                raise ClientError("reply larger than the client accepts")
+            try:
+                chunk = self._sock.recv(1 << 16)
+            except TimeoutError:
+                raise ClientError(
+                    f"no reply from {self.host}:{self.port} within {self._sock.gettimeout()} s"
+                ) from None
+            except OSError as exc:
+                raise ClientError(f"receive from {self.host}:{self.port} failed: {exc}") from None
+            if not chunk:
+                raise ClientError(f"{self.host}:{self.port} closed the connection")
+            self._buf += chunk
+
+    def send(self, cmd: str, args: dict[str, Any] | None = None, **extra: Any) -> int:
+        """Send one request without waiting; returns its id."""
+        rid = next(self._ids)
+        req: dict[str, Any] = {"id": rid, "cmd": cmd}
+        if args:
+            req["args"] = args
+        token = extra.pop("token", self.token)
+        if token is not None:
+            req["token"] = token
+        req.update(extra)
+        self.send_raw(json.dumps(req).encode() + b"\n")
+        return rid
+
+    def call(
+        self, cmd: str, args: dict[str, Any] | None = None, timeout_s: float | None = None
+    ) -> dict[str, Any]:
+        """Send a request and wait for the reply with the same id (others are skipped)."""
+        rid = self.send(cmd, args)
+        while True:
+            reply = self.read_reply(timeout_s)
+            if reply.get("id") == rid:
+                return reply
+
+    def close(self) -> None:
+        self._sock.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,90 @@
+"""Each protocol command as a function of the cell: `handler(ctx, args) -> result dict`.
+
+Handlers run in worker threads (never in the event loop) and may block on devices; the
+server bounds them with timeouts. Commands that act on the service itself (stop, estop,
+reset, shutdown) live in the server, which owns the state machine.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from omnisort_hw.cell import Cell
+
+
+@dataclass
+class Context:
+    """What a handler gets besides its arguments."""
+
+    cell: Cell
+    cancel: threading.Event
+    service_status: Callable[[], dict[str, Any]]
+
+
+Handler = Callable[[Context, dict[str, Any]], dict[str, Any]]
+
+
+def status(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    """Service state, job, devices and calibration health."""
+    result = ctx.service_status()
+    result.update(ctx.cell.status())
+    cal = result["calibration"]
+    result["motion_allowed"] = bool(cal["motion_allowed"]) and result["state"] != "fault"
+    return result
+
+
+def capture(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.capture(args["encoding"], args["format"], args["laser"])
+
+
+def laser(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.laser(args["on"])
+
+
+def calibrate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    if args["what"] == "intrinsics":
+        return ctx.cell.calibrate_intrinsics(args["folder"], ctx.cancel)
+    return ctx.cell.calibrate_extrinsics(args["image"], args["method"], ctx.cancel)
+
+
+def map_scene(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.map_scene(args["image"], ctx.cancel)
+
+
+def register_robot(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.register_robot(args["image"], ctx.cancel)
+
+
+def locate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.locate(args["image"], args["colors"], ctx.cancel)
+
+
+def move(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.move(
+        joints_deg=args["joints_deg"],
+        pose=args["pose"],
+        matrix=args["matrix"],
+        speed_deg_s=args["speed_deg_s"],
+        speed_mm_s=args["speed_mm_s"],
+        cancel=ctx.cancel,
+    )
+
+
+def sort(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.sort(args["max_objects"], args["colors"], ctx.cancel)
+
+
+HANDLERS: dict[str, Handler] = {
+    "status": status,
+    "capture": capture,
+    "laser": laser,
+    "calibrate": calibrate,
+    "map": map_scene,
+    "register_robot": register_robot,
+    "locate": locate,
+    "move": move,
+    "sort": sort,
+}

@@ -1,0 +1,729 @@
+"""The service: an asyncio TCP server, the state machine, one job at a time, clean shutdown.
+
+Threads and what runs where:
+- the event loop reads and writes every connection, validates requests, checks tokens, keeps
+  the state machine, pings the systemd watchdog and never touches a device;
+- `quick` pool (status, capture, laser) and `safety` pool (stop, estop) run device calls, so
+  `status`, `stop` and `estop` are answered while a long command runs;
+- one daemon thread per job (calibrate, map, register_robot, locate, move, sort); a second job
+  while one runs is refused with `busy`.
+
+Replies carry the request's id; a connection may have several requests in flight, so the reply
+to a long command arrives when it ends while other requests on the same connection are answered
+meanwhile.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import hmac
+import logging
+import os
+import queue
+import signal
+import threading
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import Any
+
+from omnisort_hw import __version__
+from omnisort_hw.cell import Cell
+from omnisort_hw.errors import ConfigError, OmnisortError
+from omnisort_hw.service import protocol as proto
+from omnisort_hw.service.config import ServiceConfig, Settings, is_loopback
+from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.systemd import Notifier
+
+log = logging.getLogger("omnisort.service")
+
+TOO_LONG = object()
+WRITE_TIMEOUT_S = 30.0
+READ_CHUNK = 65536
+
+
+class State(StrEnum):
+    """The service's explicit state. `moving` is a single `move` command."""
+
+    IDLE = "idle"
+    CALIBRATING = "calibrating"
+    MAPPING = "mapping"
+    SORTING = "sorting"
+    MOVING = "moving"
+    STOPPED = "stopped"
+    FAULT = "fault"
+
+
+RESTING = frozenset({State.IDLE, State.STOPPED})
+
+
+@dataclass(frozen=True)
+class Transition:
+    """One state change, as logged and reported by `status`."""
+
+    at: str
+    old: str
+    new: str
+    reason: str
+
+
+class StateMachine:
+    """The current state with its reason; every change is logged and passed to `on_change`."""
+
+    def __init__(self, on_change: Callable[[Transition], None] | None = None) -> None:
+        self._lock = threading.Lock()
+        self._state = State.IDLE
+        self._reason = "started"
+        self._since = time.time()
+        self._history: deque[Transition] = deque(maxlen=50)
+        self._on_change = on_change
+
+    @property
+    def state(self) -> State:
+        return self._state
+
+    @property
+    def reason(self) -> str:
+        return self._reason
+
+    def set(self, new: State, reason: str) -> Transition:
+        with self._lock:
+            old = self._state
+            self._state, self._reason, self._since = new, reason, time.time()
+            tr = Transition(_iso(self._since), old.value, new.value, reason)
+            self._history.append(tr)
+        log.info("state %s -> %s (%s)", tr.old, tr.new, reason)
+        if self._on_change is not None:
+            try:
+                self._on_change(tr)
+            except Exception:
+                log.exception("state change hook failed")
+        return tr
+
+    def snapshot(self) -> dict[str, Any]:
+        with self._lock:
+            return {
+                "state": self._state.value,
+                "reason": self._reason,
+                "since": _iso(self._since),
+                "transitions": [t.__dict__ for t in list(self._history)[-10:]],
+            }
+
+
+def _iso(wall: float) -> str:
+    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
+
+
+class DaemonPool:
+    """A fixed pool of daemon worker threads (a hung device call never blocks the exit)."""
+
+    def __init__(self, name: str, workers: int) -> None:
+        self._q: queue.SimpleQueue[tuple[Callable[[], Any], Future[Any]] | None] = (
+            queue.SimpleQueue()
+        )
+        self._threads = [
+            threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
+            for i in range(workers)
+        ]
+        for t in self._threads:
+            t.start()
+
+    def _work(self) -> None:
+        while True:
+            item = self._q.get()
+            if item is None:
+                return
+            fn, fut = item
+            if not fut.set_running_or_notify_cancel():
+                continue
+            try:
+                fut.set_result(fn())
+            except BaseException as exc:
+                fut.set_exception(exc)
+
+    def submit(self, fn: Callable[[], Any]) -> Future[Any]:
+        fut: Future[Any] = Future()
+        self._q.put((fn, fut))
+        return fut
+
+    def shutdown(self) -> None:
+        for _ in self._threads:
+            self._q.put(None)
+
+
+@dataclass
+class Job:
+    """The one long command running now."""
+
+    cmd: str
+    request_id: int | str | None
+    state: State
+    cancel: threading.Event = field(default_factory=threading.Event)
+    started: float = field(default_factory=time.monotonic)
+    stopped_by: str | None = None
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "cmd": self.cmd,
+            "request_id": self.request_id,
+            "running_s": round(time.monotonic() - self.started, 3),
+            "cancelled": self.cancel.is_set(),
+        }
+
+
+def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
+    """Map any exception to (protocol code, message, details); unknown ones are `internal`."""
+    if isinstance(exc, proto.ProtocolError):
+        return exc.code, exc.message, dict(exc.details)
+    if isinstance(exc, OmnisortError):
+        return exc.code, str(exc), {}
+    code = getattr(exc, "code", None)
+    if _is_device_error(exc) and isinstance(code, str):
+        details: dict[str, Any] = {"device_code": code}
+        if getattr(exc, "device", None):
+            details["device"] = exc.device  # type: ignore[attr-defined]
+        if code == "motion_refused":
+            return proto.MOTION_REFUSED, str(exc), details
+        return proto.DEVICE_ERROR, str(exc), details
+    return proto.INTERNAL, f"internal error ({type(exc).__name__}): {exc}", {}
+
+
+def _is_device_error(exc: BaseException) -> bool:
+    try:
+        from drivers.errors import DeviceError
+    except ImportError:
+        return isinstance(getattr(exc, "code", None), str)
+    return isinstance(exc, DeviceError)
+
+
+class Service:
+    """One cell behind the line-delimited JSON protocol."""
+
+    def __init__(
+        self,
+        cell: Cell,
+        config: ServiceConfig,
+        notifier: Notifier | None = None,
+    ) -> None:
+        if not is_loopback(config.host) and config.token is None:
+            raise ConfigError(
+                f"refusing to listen on {config.host!r} without a token; set [service] token"
+            )
+        self.cell = cell
+        self.config = config
+        self.notifier = notifier or Notifier({})
+        self.states = StateMachine(self._on_transition)
+        self._job: Job | None = None
+        self._job_lock = threading.Lock()
+        self._quick = DaemonPool("quick", 6)
+        self._safety = DaemonPool("safety", 2)
+        self._server: asyncio.base_events.Server | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop_requested: asyncio.Event | None = None
+        self._stop_reason = ""
+        self._clients: set[asyncio.StreamWriter] = set()
+        self._started = time.monotonic()
+        self.address: tuple[str, int] | None = None
+        self.counters = {"requests": 0, "errors": 0, "connections": 0}
+        self.exit_problems: list[str] = []
+
+    # -- state -----------------------------------------------------------------------------
+
+    def _on_transition(self, tr: Transition) -> None:
+        self.cell.runlog.event("service/state", f"{tr.old} -> {tr.new}: {tr.reason}")
+        self.notifier.status(f"{tr.new}: {tr.reason}")
+
+    def service_status(self) -> dict[str, Any]:
+        """The service's part of the `status` reply."""
+        out = self.states.snapshot()
+        job = self._job
+        out["job"] = job.describe() if job is not None else None
+        out["service"] = {
+            "version": __version__,
+            "pid": os.getpid(),
+            "host": self.address[0] if self.address else self.config.host,
+            "port": self.address[1] if self.address else self.config.port,
+            "token_required": self.config.token_required,
+            "clients": len(self._clients),
+            "uptime_s": round(time.monotonic() - self._started, 3),
+            **self.counters,
+        }
+        return out
+
+    # -- life cycle ------------------------------------------------------------------------
+
+    async def start(self) -> tuple[str, int]:
+        """Bind the listening socket; returns the (host, port) actually bound."""
+        self._loop = asyncio.get_running_loop()
+        self._stop_requested = asyncio.Event()
+        self._server = await asyncio.start_server(
+            self._client,
+            host=self.config.host,
+            port=self.config.port,
+            limit=READ_CHUNK,
+            reuse_address=True,
+        )
+        sock = self._server.sockets[0].getsockname()
+        self.address = (str(sock[0]), int(sock[1]))
+        log.info("listening on %s:%d", *self.address)
+        return self.address
+
+    def request_shutdown(self, reason: str) -> None:
+        """Ask the main loop to stop (thread-safe; SIGTERM, SIGINT and `shutdown` call it)."""
+        loop, ev = self._loop, self._stop_requested
+        if loop is None or ev is None:
+            return
+        self._stop_reason = self._stop_reason or reason
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(ev.set)
+
+    async def run(self, install_signals: bool = True) -> int:
+        """Serve until shutdown is requested, then stop cleanly; returns the exit code (0)."""
+        if self._server is None:
+            await self.start()
+        assert self._stop_requested is not None and self._loop is not None
+        if install_signals:
+            for sig in (signal.SIGTERM, signal.SIGINT):
+                self._loop.add_signal_handler(sig, self.request_shutdown, sig.name)
+        host, port = self.address or ("?", 0)
+        self.notifier.ready(f"idle; listening on {host}:{port}")
+        self.cell.runlog.event("service/state", f"ready on {host}:{port}")
+        tasks = [asyncio.create_task(self._housekeeping())]
+        try:
+            await self._stop_requested.wait()
+        finally:
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            if install_signals:
+                for sig in (signal.SIGTERM, signal.SIGINT):
+                    self._loop.remove_signal_handler(sig)
+            await self._shutdown()
+        return 0
+
+    async def _housekeeping(self) -> None:
+        """Watchdog pings from the main loop and run-log rolling between jobs."""
+        interval = self.notifier.watchdog_interval_s
+        period = min(interval, 5.0) if interval else 5.0
+        next_roll = time.monotonic() + 30.0
+        while True:
+            self.notifier.watchdog()
+            if time.monotonic() >= next_roll:
+                next_roll = time.monotonic() + 30.0
+                if self._job is None:
+                    await asyncio.to_thread(self.cell.roll_runlog)
+            await asyncio.sleep(period)
+
+    async def _shutdown(self) -> None:
+        reason = self._stop_reason or "shutdown"
+        log.info("stopping: %s", reason)
+        self.notifier.stopping(f"stopping: {reason}")
+        if self._server is not None:
+            self._server.close()
+        job = self._job
+        if job is not None:
+            job.cancel.set()
+            job.stopped_by = reason
+        await asyncio.to_thread(self.cell.stop_motion)
+        deadline = time.monotonic() + self.config.shutdown_timeout_s
+        while self._job is not None and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+        if self._job is not None:
+            log.error(
+                "job %s did not end within %.1f s", self._job.cmd, self.config.shutdown_timeout_s
+            )
+        for w in list(self._clients):
+            w.close()
+        self.states.set(State.STOPPED, f"service stopping: {reason}")
+        self.exit_problems = await asyncio.to_thread(self.cell.close)
+        self._quick.shutdown()
+        self._safety.shutdown()
+        log.info("stopped cleanly")
+
+    # -- connections -----------------------------------------------------------------------
+
+    async def _lines(self, reader: asyncio.StreamReader) -> AsyncIterator[bytes | object]:
+        """Lines without their newline; TOO_LONG once for each over-long line (then skipped)."""
+        limit = self.config.max_line_bytes
+        buf = bytearray()
+        skipping = False
+        while True:
+            chunk = await reader.read(READ_CHUNK)
+            if not chunk:
+                if buf and not skipping:
+                    yield bytes(buf)
+                return
+            start = 0
+            while True:
+                nl = chunk.find(b"\n", start)
+                if nl < 0:
+                    if not skipping:
+                        buf += chunk[start:]
+                        if len(buf) > limit:
+                            buf.clear()
+                            skipping = True
+                            yield TOO_LONG
+                    break
+                if skipping:
+                    skipping = False
+                else:
+                    buf += chunk[start:nl]
+                    if len(buf) > limit:
+                        yield TOO_LONG
+                    else:
+                        yield bytes(buf[:-1] if buf.endswith(b"\r") else buf)
+                    buf.clear()
+                start = nl + 1
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        peer = writer.get_extra_info("peername")
+        self.counters["connections"] += 1
+        write_lock = asyncio.Lock()
+        if len(self._clients) >= self.config.max_clients:
+            msg = f"too many clients ({self.config.max_clients}); try again later"
+            await self._send(writer, write_lock, proto.error_reply(None, proto.BUSY, msg))
+            writer.close()
+            return
+        self._clients.add(writer)
+        slots = asyncio.Semaphore(self.config.max_inflight_per_client)
+        tasks: set[asyncio.Task[None]] = set()
+        try:
+            async for line in self._lines(reader):
+                self.counters["requests"] += 1
+                if line is TOO_LONG:
+                    msg = f"request line longer than {self.config.max_line_bytes} bytes; discarded"
+                    await self._send(
+                        writer, write_lock, proto.error_reply(None, proto.BAD_REQUEST, msg)
+                    )
+                    continue
+                assert isinstance(line, bytes)
+                try:
+                    req = proto.parse_request(line)
+                    self._authorize(req)
+                except proto.ProtocolError as exc:
+                    await self._send(writer, write_lock, proto.reply_for(exc))
+                    continue
+                await slots.acquire()
+                task = asyncio.create_task(self._serve(req, writer, write_lock, slots))
+                tasks.add(task)
+                task.add_done_callback(tasks.discard)
+        except (ConnectionError, asyncio.IncompleteReadError):
+            pass
+        except Exception:
+            log.exception("connection %s failed", peer)
+        finally:
+            if tasks:
+                await asyncio.wait(tasks, timeout=WRITE_TIMEOUT_S)
+            self._clients.discard(writer)
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 2.0)
+
+    async def _send(
+        self, writer: asyncio.StreamWriter, lock: asyncio.Lock, reply: dict[str, Any]
+    ) -> None:
+        if not reply["ok"]:
+            self.counters["errors"] += 1
+        data = proto.encode(reply)
+        async with lock:
+            if writer.is_closing():
+                return
+            writer.write(data)
+            try:
+                await asyncio.wait_for(writer.drain(), WRITE_TIMEOUT_S)
+            except (TimeoutError, ConnectionError):
+                writer.close()
+
+    async def _serve(
+        self,
+        req: proto.Request,
+        writer: asyncio.StreamWriter,
+        lock: asyncio.Lock,
+        slots: asyncio.Semaphore,
+    ) -> None:
+        try:
+            reply = await self.dispatch(req)
+        except proto.ProtocolError as exc:
+            reply = proto.reply_for(exc, req.id)
+        except Exception as exc:
+            log.exception("request %r failed", req.cmd)
+            code, msg, details = error_from_exception(exc)
+            reply = proto.error_reply(req.id, code, msg, **details)
+        finally:
+            slots.release()
+        await self._send(writer, lock, reply)
+
+    def _authorize(self, req: proto.Request) -> None:
+        """Commands that move, write or change state need the token when one is required."""
+        if not (self.config.token_required and req.command.needs_token):
+            return
+        if req.token is None:
+            raise proto.ProtocolError(
+                proto.UNAUTHORIZED,
+                f"{req.cmd} needs the service token (field 'token'); only status, stop and estop "
+                "pass without it",
+                id=req.id,
+            )
+        expected = (self.config.token or "").encode()
+        if not expected or not hmac.compare_digest(req.token.encode(), expected):
+            raise proto.ProtocolError(proto.UNAUTHORIZED, "wrong token", id=req.id)
+
+    # -- dispatch --------------------------------------------------------------------------
+
+    async def dispatch(self, req: proto.Request) -> dict[str, Any]:
+        """Run one validated, authorised request and build its reply."""
+        spec = req.command
+        if spec.kind == "job":
+            return await self._run_job(req)
+        if spec.kind == "safety":
+            fn = self._stop if req.cmd == "stop" else self._estop
+            return await self._in_pool(self._safety, req, fn, self.config.quick_timeout_s)
+        if req.cmd == "reset":
+            return await self._in_pool(self._quick, req, self._reset, self.config.quick_timeout_s)
+        if req.cmd == "shutdown":
+            self.request_shutdown(f"shutdown requested (request {req.id})")
+            return proto.ok_reply(req.id, {"shutting_down": True})
+        if req.cmd == "laser" and self._job is not None:
+            raise proto.ProtocolError(
+                proto.BUSY, f"laser is in use by the running {self._job.cmd}; send stop first"
+            )
+        handler = HANDLERS[req.cmd]
+        ctx = Context(self.cell, threading.Event(), self.service_status)
+        return await self._in_pool(
+            self._quick, req, lambda: handler(ctx, req.args), self.config.quick_timeout_s
+        )
+
+    async def _in_pool(
+        self, pool: DaemonPool, req: proto.Request, fn: Callable[[], dict[str, Any]], timeout: float
+    ) -> dict[str, Any]:
+        fut = asyncio.wrap_future(pool.submit(fn))
+        try:
+            result = await asyncio.wait_for(fut, timeout)
+        except TimeoutError:
+            return proto.error_reply(
+                req.id,
+                proto.DEVICE_ERROR,
+                f"{req.cmd} did not finish within {timeout:g} s",
+                device_code="device_timeout",
+            )
+        except Exception as exc:
+            code, msg, details = error_from_exception(exc)
+            return proto.error_reply(req.id, code, msg, **details)
+        return proto.ok_reply(req.id, result)
+
+    def _stop(self) -> dict[str, Any]:
+        job = self._job
+        if job is not None:
+            job.stopped_by = "stop"
+            job.cancel.set()
+        problems = self.cell.stop_motion()
+        if self.states.state != State.FAULT:
+            what = f"{job.cmd} stopped" if job is not None else "stop requested"
+            self.states.set(State.STOPPED, what)
+        return {
+            "stopped_job": job.cmd if job is not None else None,
+            "state": self.states.state.value,
+            "problems": problems,
+        }
+
+    def _estop(self) -> dict[str, Any]:
+        job = self._job
+        if job is not None:
+            job.stopped_by = "estop"
+            job.cancel.set()
+        problems = self.cell.emergency_stop()
+        self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
+        return {
+            "stopped_job": job.cmd if job is not None else None,
+            "state": self.states.state.value,
+            "problems": problems,
+        }
+
+    def _reset(self) -> dict[str, Any]:
+        with self._job_lock:
+            if self._job is not None:
+                raise proto.ProtocolError(
+                    proto.BUSY, f"{self._job.cmd} is running; send stop first"
+                )
+            safety = self.cell.check_safe_to_resume()
+            old = self.states.state
+            self.states.set(State.IDLE, f"reset from {old.value}")
+        return {"state": State.IDLE.value, "previous": old.value, **safety}
+
+    async def _run_job(self, req: proto.Request) -> dict[str, Any]:
+        spec = req.command
+        with self._job_lock:
+            if self._job is not None:
+                running = self._job
+                raise proto.ProtocolError(
+                    proto.BUSY,
+                    f"{running.cmd} (request {running.request_id}) is running for "
+                    f"{time.monotonic() - running.started:.1f} s; one motion or job at a time: "
+                    "wait for it or send stop",
+                    running=running.cmd,
+                )
+            if self.states.state == State.FAULT:
+                raise proto.ProtocolError(
+                    proto.MOTION_REFUSED,
+                    f"the cell is in fault ({self.states.reason}); clear the cause and send reset",
+                )
+            job = Job(req.cmd, req.id, State(spec.job_state or State.MOVING))
+            self._job = job
+            resting = self.states.state
+            self.states.set(job.state, f"{req.cmd} (request {req.id})")
+        self.cell.runlog.event("service/requests", f"{req.cmd} {req.args}")
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[dict[str, Any]] = loop.create_future()
+        ctx = Context(self.cell, job.cancel, self.service_status)
+        thread = threading.Thread(
+            target=self._job_thread,
+            args=(job, req, ctx, resting, loop, done),
+            name=f"job-{req.cmd}",
+            daemon=True,
+        )
+        thread.start()
+        try:
+            return await asyncio.wait_for(asyncio.shield(done), self.config.job_timeout_s)
+        except TimeoutError:
+            job.stopped_by = "timeout"
+            job.cancel.set()
+            await asyncio.to_thread(self.cell.stop_motion)
+            return proto.error_reply(
+                req.id,
+                proto.DEVICE_ERROR,
+                f"{req.cmd} did not finish within {self.config.job_timeout_s:g} s; arm stopped",
+                device_code="device_timeout",
+            )
+
+    def _job_thread(
+        self,
+        job: Job,
+        req: proto.Request,
+        ctx: Context,
+        resting: State,
+        loop: asyncio.AbstractEventLoop,
+        done: asyncio.Future[dict[str, Any]],
+    ) -> None:
+        reply: dict[str, Any]
+        try:
+            result = HANDLERS[req.cmd](ctx, req.args)
+            if job.cancel.is_set():
+                reply = self._stopped_reply(job, req)
+            else:
+                reply = proto.ok_reply(req.id, result)
+                self._end_job(job, State.IDLE, f"{req.cmd} done")
+        except BaseException as exc:
+            code, msg, details = error_from_exception(exc)
+            if job.cancel.is_set():
+                reply = self._stopped_reply(job, req, msg)
+            elif code in (proto.DEVICE_ERROR, proto.INTERNAL):
+                if code == proto.INTERNAL:
+                    log.error("%s failed", req.cmd, exc_info=exc)
+                reply = proto.error_reply(req.id, code, msg, **details)
+                self._end_job(job, State.FAULT, f"{req.cmd} failed: {msg}")
+            else:
+                reply = proto.error_reply(req.id, code, msg, **details)
+                self._end_job(job, resting, f"{req.cmd} refused: {code}")
+        finally:
+            with self._job_lock:
+                if self._job is job:
+                    self._job = None
+        with contextlib.suppress(RuntimeError):
+            loop.call_soon_threadsafe(_set_if_pending, done, reply)
+
+    def _stopped_reply(self, job: Job, req: proto.Request, detail: str = "") -> dict[str, Any]:
+        by = job.stopped_by or "stop"
+        msg = f"{req.cmd} was stopped by {by}" + (f" ({detail})" if detail else "")
+        return proto.error_reply(req.id, proto.STOPPED, msg, stopped_by=by)
+
+    def _end_job(self, job: Job, new: State, reason: str) -> None:
+        with self._job_lock:
+            if self.states.state == job.state and not job.cancel.is_set():
+                self.states.set(new, reason)
+
+
+def _set_if_pending(fut: asyncio.Future[dict[str, Any]], value: dict[str, Any]) -> None:
+    if not fut.done():
+        fut.set_result(value)
+
+
+@dataclass
+class RunningService:
+    """A service running in a background thread (tests and benchmarks)."""
+
+    service: Service
+    thread: threading.Thread
+    loop: asyncio.AbstractEventLoop
+    host: str
+    port: int
+    exit_code: list[int]
+
+    def stop(self, timeout_s: float = 20.0) -> int | None:
+        self.service.request_shutdown("stopped by the test harness")
+        self.thread.join(timeout_s)
+        return self.exit_code[0] if self.exit_code else None
+
+
+def start_in_thread(service: Service, timeout_s: float = 10.0) -> RunningService:
+    """Run `service` on its own event loop in a daemon thread; returns once it listens."""
+    ready = threading.Event()
+    box: dict[str, Any] = {}
+    exit_code: list[int] = []
+
+    def main() -> None:
+        loop = asyncio.new_event_loop()
+        box["loop"] = loop
+        try:
+            box["addr"] = loop.run_until_complete(service.start())
+        except BaseException as exc:
+            box["error"] = exc
+            ready.set()
+            return
+        ready.set()
+        exit_code.append(loop.run_until_complete(service.run(install_signals=False)))
+        loop.close()
+
+    thread = threading.Thread(target=main, name="omnisort-service", daemon=True)
+    thread.start()
+    if not ready.wait(timeout_s):
+        raise TimeoutError("service did not start listening in time")
+    if "error" in box:
+        raise box["error"]
+    host, port = box["addr"]
+    return RunningService(service, thread, box["loop"], host, port, exit_code)
+
+
+def serve(
+    settings: Settings,
+    host: str | None = None,
+    port: int | None = None,
+    cell: Cell | None = None,
+) -> int:
+    """`omnisort serve`: open the cell, listen, notify systemd, run until SIGTERM; exit code."""
+    cfg = dataclasses.replace(
+        settings.service,
+        host=host if host is not None else settings.service.host,
+        port=port if port is not None else settings.service.port,
+    )
+    notifier = Notifier()
+    notifier.status("opening devices")
+    cell = cell or Cell.from_settings(settings)
+    try:
+        cell.connect()
+        service = Service(cell, cfg, notifier)
+    except BaseException:
+        cell.close()
+        raise
+    try:
+        code = asyncio.run(service.run())
+    finally:
+        notifier.close()
+    if service.exit_problems:
+        log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
+    return code
