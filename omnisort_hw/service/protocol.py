@@ -369,8 +369,15 @@ def decode_line(line: bytes) -> Any:
     return obj
 
 
-def validate_request(obj: Any) -> Request:
-    """A decoded JSON value to a Request, checking every field; raises ProtocolError."""
+Authorizer = Callable[[Command, "str | None", "int | str | None"], None]
+
+
+def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
+    """A decoded JSON value to a Request, checking every field; raises ProtocolError.
+
+    `authorize(command, token, id)` runs once the command is known and before its arguments
+    are looked at, so a client without the token learns nothing about them.
+    """
     if not isinstance(obj, dict):
         raise ProtocolError(BAD_REQUEST, f"request must be a JSON object, got {_type_name(obj)}")
     unknown = sorted(set(obj) - {"id", "cmd", "args", "token"})
@@ -403,6 +410,8 @@ def validate_request(obj: Any) -> Request:
     token = obj.get("token")
     if token is not None and (not isinstance(token, str) or len(token) > 1024):
         raise ProtocolError(BAD_REQUEST, "'token' must be a string", field="token")
+    if authorize is not None:
+        authorize(spec, token, rid)
     raw_args = obj.get("args", {})
     if raw_args is None:
         raw_args = {}
@@ -439,11 +448,11 @@ def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
     return args
 
 
-def parse_request(line: bytes) -> Request:
-    """One line of bytes (without the newline) to a validated Request."""
+def parse_request(line: bytes, authorize: Authorizer | None = None) -> Request:
+    """One line of bytes (without the newline) to a validated (and authorised) Request."""
     obj = decode_line(line)
     try:
-        return validate_request(obj)
+        return validate_request(obj, authorize)
     except ProtocolError as exc:
         exc.details.setdefault("id", peek_id(obj))
         raise

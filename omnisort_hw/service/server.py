@@ -404,8 +404,7 @@ class Service:
                     continue
                 assert isinstance(line, bytes)
                 try:
-                    req = proto.parse_request(line)
-                    self._authorize(req)
+                    req = proto.parse_request(line, self._authorize)
                 except proto.ProtocolError as exc:
                     await self._send(writer, write_lock, proto.reply_for(exc))
                     continue
@@ -459,20 +458,20 @@ class Service:
             slots.release()
         await self._send(writer, lock, reply)
 
-    def _authorize(self, req: proto.Request) -> None:
+    def _authorize(self, spec: proto.Command, token: str | None, rid: int | str | None) -> None:
         """Commands that move, write or change state need the token when one is required."""
-        if not (self.config.token_required and req.command.needs_token):
+        if not (self.config.token_required and spec.needs_token):
             return
-        if req.token is None:
+        if token is None:
             raise proto.ProtocolError(
                 proto.UNAUTHORIZED,
-                f"{req.cmd} needs the service token (field 'token'); only status, stop and estop "
-                "pass without it",
-                id=req.id,
+                f"{spec.name} needs the service token (field 'token'); only status, stop and "
+                "estop pass without it",
+                id=rid,
             )
         expected = (self.config.token or "").encode()
-        if not expected or not hmac.compare_digest(req.token.encode(), expected):
-            raise proto.ProtocolError(proto.UNAUTHORIZED, "wrong token", id=req.id)
+        if not expected or not hmac.compare_digest(token.encode(), expected):
+            raise proto.ProtocolError(proto.UNAUTHORIZED, "wrong token", id=rid)
 
     # -- dispatch --------------------------------------------------------------------------
 
