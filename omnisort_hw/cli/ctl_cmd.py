@@ -1,0 +1,91 @@
+"""`omnisort ctl [--host H --port P --token T] COMMAND [key=value ...]`: talk to the service.
+
+Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0]`,
+`max_objects=3`) and as plain strings otherwise (`folder=/data/calib`). The reply is printed as
+JSON; the exit code is 0 for an ok reply, 1 for an error reply, 3 when the service cannot be
+reached or does not answer in time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from typing import Any
+
+EXIT_ERROR_REPLY = 1
+EXIT_UNREACHABLE = 3
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "ctl",
+        help="send one command to the running service and print the reply",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--config", default=None, help="read host, port and token from this file")
+    p.add_argument("--host", default=None, help="service address (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=None, help="service port")
+    p.add_argument(
+        "--token", default=None, help="service token (default: $OMNISORT_TOKEN or --config)"
+    )
+    p.add_argument("--timeout", type=float, default=None, help="reply timeout, s")
+    p.add_argument("--connect-timeout", type=float, default=5.0, help="connect timeout, s")
+    p.add_argument("--compact", action="store_true", help="print the reply on one line")
+    p.add_argument("command", help="status, capture, laser, calibrate, move, sort, stop, ...")
+    p.add_argument("args", nargs="*", metavar="key=value", help="command arguments")
+    p.set_defaults(func=run)
+
+
+def parse_kv(items: list[str]) -> dict[str, Any]:
+    """`key=value` pairs to an args dict; values are JSON when they parse, else strings."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key:
+            from omnisort_hw.errors import InputError
+
+            raise InputError(f"argument {item!r} is not key=value")
+        try:
+            out[key] = json.loads(raw)
+        except ValueError:
+            out[key] = raw
+    return out
+
+
+def default_timeout(command: str) -> float:
+    """Long commands may take minutes; quick ones answer in seconds."""
+    from omnisort_hw.service.protocol import COMMANDS
+
+    spec = COMMANDS.get(command)
+    return 3600.0 if spec is not None and spec.kind == "job" else 30.0
+
+
+def run(args: argparse.Namespace) -> int:
+    from omnisort_hw.service.client import Client, ClientError
+    from omnisort_hw.service.config import DEFAULT_PORT
+
+    host, port, token = "127.0.0.1", DEFAULT_PORT, None
+    if args.config:
+        from omnisort_hw.service.config import load_settings
+
+        svc = load_settings(args.config).service
+        host = "127.0.0.1" if svc.host in ("0.0.0.0", "::") else svc.host
+        port, token = svc.port, svc.token
+    host = args.host or host
+    port = args.port if args.port is not None else port
+    token = args.token or os.environ.get("OMNISORT_TOKEN") or token
+    cmd_args = parse_kv(args.args)
+    timeout = args.timeout if args.timeout is not None else default_timeout(args.command)
+    try:
+        with Client(
+            host, port, token, timeout_s=timeout, connect_timeout_s=args.connect_timeout
+        ) as c:
+            reply = c.call(args.command, cmd_args or None)
+    except ClientError as exc:
+        print(f"omnisort ctl: {exc}", file=sys.stderr)
+        return EXIT_UNREACHABLE
+    print(json.dumps(reply, indent=None if args.compact else 2))
+    return 0 if reply.get("ok") else EXIT_ERROR_REPLY

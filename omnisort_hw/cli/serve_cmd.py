@@ -1,0 +1,37 @@
+"""`omnisort serve --config cell.toml [--host H] [--port P]`: run the cell service."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="run the cell service (TCP line-delimited JSON; systemd Type=notify)",
+        description=(
+            "Open the devices of the cell configuration and serve the control protocol until "
+            "SIGTERM. Binds 127.0.0.1 unless configured or told otherwise; off loopback a "
+            "token ([service] token or token_file) is required."
+        ),
+    )
+    p.add_argument("--config", required=True, help="cell configuration (TOML)")
+    p.add_argument("--host", default=None, help="listen address (default: [service] host)")
+    p.add_argument("--port", type=int, default=None, help="TCP port (default: [service] port)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from omnisort_hw.service.config import load_settings
+    from omnisort_hw.service.server import serve
+
+    settings = load_settings(args.config)
+    logging.basicConfig(
+        level=settings.logging.level,
+        stream=sys.stderr,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    return serve(settings, host=args.host, port=args.port)

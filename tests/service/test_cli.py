@@ -1,0 +1,75 @@
+"""`omnisort ctl`, `omnisort review` and `omnisort serve` from the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from omnisort_hw.cli import main
+from omnisort_hw.cli.ctl_cmd import parse_kv
+from omnisort_hw.runlog import RunLog
+from tests.service.conftest import TOKEN, Harness
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_parse_kv() -> None:
+    assert parse_kv(["on=true", "joints_deg=[0,-90,90,0,90,0]", "folder=/data/x", "n=3"]) == {
+        "on": True,
+        "joints_deg": [0, -90, 90, 0, 90, 0],
+        "folder": "/data/x",
+        "n": 3,
+    }
+
+
+def test_ctl_prints_the_reply_and_sets_the_exit_code(make_service, capsys) -> None:
+    h: Harness = make_service(token=TOKEN)
+    port = str(h.running.port)
+    assert main(["ctl", "--port", port, "--compact", "status"]) == 0
+    reply = json.loads(capsys.readouterr().out)
+    assert reply["ok"] and reply["result"]["state"] == "idle"
+    assert main(["ctl", "--port", port, "laser", "on=true"]) == 1
+    assert json.loads(capsys.readouterr().out)["error"]["code"] == "unauthorized"
+    assert main(["ctl", "--port", port, "--token", TOKEN, "laser", "on=true"]) == 0
+    assert json.loads(capsys.readouterr().out)["result"] == {"on": True}
+    assert main(["ctl", "--port", port, "--token", TOKEN, "move", "joints_deg=[1,2]"]) == 1
+    assert json.loads(capsys.readouterr().out)["error"]["code"] == "bad_argument"
+
+
+def test_ctl_reads_host_port_token_from_the_config(make_service, tmp_path, capsys) -> None:
+    h: Harness = make_service(token=TOKEN)
+    cfg = tmp_path / "cell.toml"
+    cfg.write_text(f'[service]\nport = {h.running.port}\ntoken = "{TOKEN}"\n')
+    assert main(["ctl", "--config", str(cfg), "capture"]) == 0
+    assert Path(json.loads(capsys.readouterr().out)["result"]["path"]).is_file()
+
+
+def test_ctl_unreachable(capsys) -> None:
+    assert main(["ctl", "--port", "1", "--connect-timeout", "1", "status"]) == 3
+    assert "cannot connect" in capsys.readouterr().err
+
+
+def test_review_lists_entities_and_spawns_the_viewer(tmp_path, capsys, monkeypatch) -> None:
+    rrd = tmp_path / "run.rrd"
+    with RunLog(rrd) as rl:
+        rl.event("service/state", "idle -> sorting")
+        rl.scalar("calibration/rms_px", 0.2)
+    assert main(["review", str(rrd), "--list"]) == 0
+    out = capsys.readouterr().out.split()
+    assert "/service/state" in out and "/calibration/rms_px" in out
+    monkeypatch.setenv("OMNISORT_RERUN", "echo viewer")
+    assert main(["review", str(rrd)]) == 0
+    assert main(["review", str(tmp_path / "missing.rrd")]) == 2
+    (tmp_path / "bad.rrd").write_bytes(b"not rerun")
+    assert main(["review", str(tmp_path / "bad.rrd"), "--list"]) == 2
+
+
+def test_serve_reports_a_bad_configuration(tmp_path, capsys) -> None:
+    cfg = tmp_path / "cell.toml"
+    cfg.write_text('[service]\nhost = "0.0.0.0"\n')
+    assert main(["serve", "--config", str(cfg)]) == 2
+    assert "not loopback" in capsys.readouterr().err
+    assert main(["serve", "--config", str(tmp_path / "nope.toml")]) == 2
+    assert "not found" in capsys.readouterr().err
