@@ -187,6 +187,24 @@ def test_linear_move_stays_on_line_and_within_limits(
     assert np.all(chosen[np.arange(len(nearest)), nearest] < 1e-6)
 
 
+def test_linear_move_of_a_tool_centre_point() -> None:
+    tool = np.eye(4)
+    tool[:3, 3] = (0.0, 40.0, 150.0)  # an offset gripper tip
+    T0 = forward(UR5E, HOME, tool)
+    T1 = T0.copy()
+    T1[:3, 3] += (-100.0, 150.0, -100.0)
+    T1[:3, :3] = T1[:3, :3] @ Rotation.from_euler("z", 40.0, degrees=True).as_matrix()
+    tr = plan_linear_move(UR5E, HOME, T1, tool=tool)
+    tcp = forward(UR5E, tr.q, tool)
+    np.testing.assert_allclose(tcp[-1], T1, atol=1e-9)
+    u = (T1[:3, 3] - T0[:3, 3]) / np.linalg.norm(T1[:3, 3] - T0[:3, 3])
+    rel = tcp[:, :3, 3] - T0[:3, 3]
+    assert np.linalg.norm(rel - (rel @ u)[:, None] * u, axis=1).max() < 1e-6
+    # The flange itself does not move on a straight line when the tool turns.
+    flange = forward(UR5E, tr.q)[:, :3, 3] - forward(UR5E, HOME)[:3, 3]
+    assert np.linalg.norm(flange - (flange @ u)[:, None] * u, axis=1).max() > 1.0
+
+
 def test_linear_move_is_limited_by_joints_when_they_bind() -> None:
     T1 = line_target((-250.0, 200.0, -150.0), (20.0, -10.0, 30.0))
     fast = plan_linear_move(

@@ -95,7 +95,10 @@ class MotionLimits:
         ):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"MotionLimits.{name} must be positive")
-        for arr, name in ((self.joint_speed, "joint_speed_deg_s"), (self.joint_acc, "joint_acc")):
+        for arr, name in (
+            (self.joint_speed, "joint_speed_deg_s"),
+            (self.joint_acc, "joint_acc_deg_s2"),
+        ):
             if not np.all(arr > 0.0):
                 raise ValueError(f"MotionLimits.{name} must be positive (one or six values)")
 
