@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# Install or update the omnisort cell service on the cell PC (Debian/Ubuntu with systemd).
+#
+#   sudo deploy/install.sh [--start]
+#
+# Idempotent: run it again after pulling a new version. It creates the system user `omnisort`
+# (groups video and dialout for the camera and the serial laser), /etc/omnisort (config,
+# never overwritten), /var/lib/omnisort (calibration) and /var/log/omnisort (.rrd run logs),
+# a virtual environment in /opt/omnisort/venv with this checkout installed, a random service
+# token in /etc/omnisort/token, and the systemd unit. Paths can be changed with PREFIX,
+# CONF_DIR, STATE_DIR, LOG_DIR and UNIT_DIR; PYTHON picks the interpreter (>= 3.11).
+set -euo pipefail
+
+SRC=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+PREFIX=${PREFIX:-/opt/omnisort}
+CONF_DIR=${CONF_DIR:-/etc/omnisort}
+STATE_DIR=${STATE_DIR:-/var/lib/omnisort}
+LOG_DIR=${LOG_DIR:-/var/log/omnisort}
+UNIT_DIR=${UNIT_DIR:-/etc/systemd/system}
+PYTHON=${PYTHON:-python3}
+SERVICE_USER=omnisort
+START=0
+
+for arg in "$@"; do
+    case "$arg" in
+        --start) START=1 ;;
+        -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
+        *) echo "install.sh: unknown argument $arg" >&2; exit 2 ;;
+    esac
+done
+
+log() { printf 'install.sh: %s\n' "$*"; }
+
+if [[ $(id -u) -ne 0 ]]; then
+    echo "install.sh: run as root (sudo $0)" >&2
+    exit 1
+fi
+if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+    echo "install.sh: $PYTHON is older than 3.11; set PYTHON=/path/to/python3.11" >&2
+    exit 1
+fi
+
+# User and groups: video for /dev/video*, dialout for serial ports; no login, no home of its own.
+for group in video dialout; do
+    getent group "$group" >/dev/null || groupadd --system "$group"
+done
+if ! getent group "$SERVICE_USER" >/dev/null; then
+    groupadd --system "$SERVICE_USER"
+    log "created group $SERVICE_USER"
+fi
+if ! id -u "$SERVICE_USER" >/dev/null 2>&1; then
+    useradd --system --gid "$SERVICE_USER" --home-dir "$STATE_DIR" --no-create-home \
+        --shell /usr/sbin/nologin --comment "omnisort cell service" "$SERVICE_USER"
+    log "created user $SERVICE_USER"
+fi
+usermod --append --groups video,dialout "$SERVICE_USER"
+
+# Directories: config readable by the service only; state and logs writable by it only.
+install -d -m 0755 "$PREFIX" "$PREFIX/share"
+install -d -o root -g "$SERVICE_USER" -m 0750 "$CONF_DIR"
+install -d -o "$SERVICE_USER" -g "$SERVICE_USER" -m 0750 "$STATE_DIR" "$LOG_DIR"
+
+# Virtual environment with this checkout installed (not editable: /opt stays read-only).
+if [[ ! -x "$PREFIX/venv/bin/python" ]]; then
+    "$PYTHON" -m venv "$PREFIX/venv"
+    log "created $PREFIX/venv"
+fi
+"$PREFIX/venv/bin/python" -m pip install --quiet --upgrade pip
+"$PREFIX/venv/bin/python" -m pip install --quiet --upgrade "$SRC"
+"$PREFIX/venv/bin/python" -m compileall -q "$PREFIX/venv" >/dev/null || true
+rm -rf "$PREFIX/share/deploy"
+cp -r "$SRC/deploy" "$PREFIX/share/deploy"
+log "installed omnisort $("$PREFIX/venv/bin/python" -c 'import omnisort_hw; print(omnisort_hw.__version__)')"
+
+# Configuration and token: created once, never overwritten.
+if [[ ! -f "$CONF_DIR/cell.toml" ]]; then
+    install -o root -g "$SERVICE_USER" -m 0640 "$SRC/deploy/cell.example.toml" "$CONF_DIR/cell.toml"
+    log "wrote $CONF_DIR/cell.toml from the example: edit it for this cell"
+fi
+if [[ ! -f "$CONF_DIR/token" ]]; then
+    (umask 077 && "$PYTHON" -c 'import secrets; print(secrets.token_urlsafe(32))' >"$CONF_DIR/token")
+    chown root:"$SERVICE_USER" "$CONF_DIR/token"
+    chmod 0640 "$CONF_DIR/token"
+    log "wrote a random token to $CONF_DIR/token (use token_file = \"$CONF_DIR/token\")"
+fi
+
+# systemd unit.
+install -m 0644 "$SRC/deploy/omnisort.service" "$UNIT_DIR/omnisort.service"
+if [[ -d /run/systemd/system ]]; then
+    systemctl daemon-reload
+    systemctl enable omnisort.service >/dev/null
+    if [[ $START -eq 1 ]]; then
+        systemctl restart omnisort.service
+        log "started: systemctl status omnisort; journalctl -u omnisort -f"
+    else
+        log "enabled; start with: systemctl start omnisort"
+    fi
+else
+    log "systemd is not running here: unit installed in $UNIT_DIR but not enabled"
+fi
