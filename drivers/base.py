@@ -90,7 +90,7 @@ class SafetyStatus:
 def _vec(values: object, n: int, what: str) -> np.ndarray:
     arr = np.asarray(values, dtype=float).reshape(-1)
     if arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise MotionLimitError(f"{what} must be {n} finite numbers, got {values!r}")
+        raise MotionLimitError(f"{what} must be {n} finite numbers, got {values!r}; nothing sent")
     return arr
 
 
@@ -142,7 +142,9 @@ def as_pose_matrix(pose: object) -> np.ndarray:
     """Return `pose` as a proper 4x4 rigid transform, or raise `MotionLimitError`."""
     T = np.asarray(pose, dtype=float)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise MotionLimitError(f"pose must be a finite 4x4 matrix (mm), got shape {T.shape}")
+        raise MotionLimitError(
+            f"pose must be a finite 4x4 matrix (mm), got shape {T.shape}; nothing sent"
+        )
     R = T[:3, :3]
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
         raise MotionLimitError("pose rotation is not a proper rotation matrix; nothing sent")
