@@ -12,6 +12,7 @@ from omnisort_hw.errors import OmnisortError
 # Each module defines `register(subparsers)` and sets `func` on its parsers; `func(args)`
 # returns the exit code. Heavy imports stay inside the command functions.
 COMMAND_MODULES: tuple[str, ...] = (
+    "omnisort_hw.cli.intrinsics_cmd",
     "omnisort_hw.cli.serve_cmd",
     "omnisort_hw.cli.ctl_cmd",
     "omnisort_hw.cli.review_cmd",

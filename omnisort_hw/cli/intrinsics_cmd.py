@@ -1,0 +1,129 @@
+"""`omnisort intrinsics calibrate|export|import`: the camera's OCamCalib model."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from omnisort_hw.errors import InputError
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser("intrinsics", help="calibrate the fisheye camera's intrinsics")
+    isub = parser.add_subparsers(dest="intrinsics_command", required=True, metavar="ACTION")
+
+    cal = isub.add_parser("calibrate", help="calibrate from checkerboard images")
+    cal.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
+    cal.add_argument("--board", default="9x6", help="inner corners, COLSxROWS (default 9x6)")
+    cal.add_argument("--square", type=float, required=True, help="square size in mm")
+    cal.add_argument("--out", type=Path, required=True, help="camera.json to write")
+    cal.add_argument("--degree", type=int, default=None, help="polynomial degree (default: auto)")
+    cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    cal.set_defaults(func=cmd_calibrate)
+
+    exp = isub.add_parser("export", help="camera.json -> OCamCalib calib_results.txt")
+    exp.add_argument("camera", type=Path)
+    exp.add_argument("--out", type=Path, required=True)
+    exp.set_defaults(func=cmd_export)
+
+    imp = isub.add_parser("import", help="OCamCalib calib_results.txt -> camera.json")
+    imp.add_argument("ocam_txt", type=Path)
+    imp.add_argument("--out", type=Path, required=True)
+    imp.set_defaults(func=cmd_import)
+
+
+def read_images(paths: list[Path]) -> list[tuple[str, Any]]:
+    """Read every image or fail naming the first unreadable one (nothing is written then)."""
+    import cv2
+
+    images = []
+    for path in paths:
+        if not path.is_file():
+            raise InputError(f"{path}: no such image file")
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise InputError(f"{path}: not a readable image (unknown format or corrupt)")
+        images.append((str(path), image))
+    return images
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from omnisort_hw.core.camera_io import save_camera_json
+    from omnisort_hw.core.checkerboard import BoardSpec
+    from omnisort_hw.core.intrinsics import calibrate_images
+    from omnisort_hw.runlog import RunLog
+
+    try:
+        board = BoardSpec.parse(args.board, args.square)
+    except ValueError as exc:
+        raise InputError(f"--board/--square: {exc}") from exc
+    images = read_images(args.images)
+    with (
+        tqdm(
+            total=len(images), desc="detecting boards", unit="img", file=sys.stderr, disable=None
+        ) as bar,
+        RunLog(args.log) as log,
+    ):
+        result = calibrate_images(
+            images, board, degree=args.degree, on_detected=lambda _n: bar.update(1), log=log
+        )
+    record = {
+        **result.record(),
+        "board": {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm},
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    save_camera_json(args.out, result.model, **record)
+    summary = {"out": str(args.out), **record, "model": result.model.to_dict()}
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        model = result.model
+        print(f"camera model written to {args.out}")
+        print(f"  RMS reprojection error  {result.rms_px:.3f} px, {len(result.images_used)} images")
+        print(f"  centre (u, v)           {model.center_uv[0]:.2f}, {model.center_uv[1]:.2f}")
+        print(f"  polynomial degree       {result.degree}")
+        print(f"  horizontal field        {horizontal_fov_deg(model):.1f} deg")
+        for name, rms in result.per_image_rms_px.items():
+            print(f"    {rms:6.3f} px  {name}")
+        for rej in result.images_rejected:
+            print(f"  rejected {rej.name}: {rej.reason}")
+    return 0
+
+
+def horizontal_fov_deg(model: Any) -> float:
+    """Angle spanned by the leftmost and rightmost pixels of the centre row (may exceed 180)."""
+    import numpy as np
+
+    w = model.image_size[0]
+    rays = model.pixel_to_ray(np.array([[0.0, model.center_uv[1]], [w - 1.0, model.center_uv[1]]]))
+    return float(np.degrees(np.sum(model.angle_from_axis(rays))))
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from omnisort_hw.core.camera_io import export_ocamcalib, load_camera_json
+
+    model, _ = load_camera_json(args.camera)
+    export_ocamcalib(args.out, model)
+    print(f"OCamCalib calib_results written to {args.out}")
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from omnisort_hw.core.camera_io import import_ocamcalib, save_camera_json
+
+    model = import_ocamcalib(args.ocam_txt)
+    save_camera_json(
+        args.out,
+        model,
+        source=str(args.ocam_txt),
+        created=datetime.now(UTC).isoformat(timespec="seconds"),
+    )
+    print(f"camera model written to {args.out} (fov {model.fov_deg:.1f} deg)")
+    return 0
