@@ -16,6 +16,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.serve_cmd",
     "omnisort_hw.cli.ctl_cmd",
     "omnisort_hw.cli.review_cmd",
+    "omnisort_hw.cli.devices_cmd",
 )
 
 

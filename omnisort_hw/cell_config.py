@@ -1,0 +1,231 @@
+"""The device sections `[camera]`, `[laser]` and `[arm]` of the cell configuration (TOML).
+
+Each section names its `backend` and the backend's settings:
+
+    [camera]  backend = "v4l2"     -> drivers.v4l2_camera.V4L2CameraConfig
+    [laser]   backend = "serial"   -> drivers.serial_laser.SerialLaserConfig
+              backend = "modbus"   -> drivers.modbus_laser.ModbusLaserConfig
+    [arm]     backend = "ur_rtde"  -> drivers.ur_arm.URArmConfig
+    any       backend = "sim"      -> the other keys are passed as a dict to sim_backend
+
+Real backends are checked key by key against their config dataclass: an unknown key, a missing
+required key, a value of the wrong type or out of range raises `ConfigError` whose message
+starts with the key (`[laser].baudrate: ...`) and which carries it as `.key`. A section left
+out means the cell has no such device (None). Other sections ([service], ...) are ignored here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal, get_args, get_origin
+
+from drivers.errors import DeviceConfigError
+from drivers.modbus_laser import ModbusLaserConfig
+from drivers.serial_laser import SerialLaserConfig
+from drivers.ur_arm import URArmConfig
+from drivers.v4l2_camera import V4L2CameraConfig
+from omnisort_hw.errors import ConfigError
+
+DeviceKind = Literal["camera", "laser", "arm"]
+DEVICE_SECTIONS: tuple[DeviceKind, ...] = ("camera", "laser", "arm")
+SIM_BACKEND = "sim"
+
+BACKENDS: dict[str, dict[str, type]] = {
+    "camera": {"v4l2": V4L2CameraConfig},
+    "laser": {"serial": SerialLaserConfig, "modbus": ModbusLaserConfig},
+    "arm": {"ur_rtde": URArmConfig},
+}
+
+
+def config_error(key: str, message: str) -> ConfigError:
+    """A `ConfigError` whose message starts with `key` and which carries it as `.key`."""
+    err = ConfigError(f"{key}: {message}")
+    err.key = key  # type: ignore[attr-defined]
+    return err
+
+
+@dataclass(frozen=True)
+class DeviceSection:
+    """One device section: which backend, and its settings.
+
+    `settings` is the backend's typed config dataclass for a real backend, and a plain dict
+    (every key but `backend`) for `backend = "sim"`.
+    """
+
+    kind: DeviceKind
+    backend: str
+    settings: Any
+
+    @property
+    def is_sim(self) -> bool:
+        return self.backend == SIM_BACKEND
+
+
+@dataclass(frozen=True)
+class CellDeviceConfig:
+    """The device sections of one cell file; a section that is absent is None."""
+
+    camera: DeviceSection | None = None
+    laser: DeviceSection | None = None
+    arm: DeviceSection | None = None
+    base_dir: Path | None = None
+
+    def sections(self) -> list[tuple[DeviceKind, DeviceSection | None]]:
+        return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
+
+
+def _type_name(tp: Any) -> str:
+    if tp is bool:
+        return "true or false"
+    if tp is int:
+        return "an integer"
+    if tp is float:
+        return "a number"
+    if tp is str:
+        return "a string"
+    if get_origin(tp) is Literal:
+        return "one of " + ", ".join(repr(a) for a in get_args(tp))
+    if get_origin(tp) is tuple:
+        return "a list of numbers"
+    return str(tp)
+
+
+def _convert(tp: Any, value: Any, key: str) -> Any:
+    """`value` checked against the annotation `tp` (TOML types), converted where lossless."""
+    origin = get_origin(tp)
+    if origin in (types.UnionType, typing.Union):
+        for option in get_args(tp):
+            try:
+                return _convert(option, value, key)
+            except ConfigError:
+                continue
+        raise config_error(key, f"must be {' or '.join(_type_name(a) for a in get_args(tp))}")
+    if origin is Literal:
+        if value not in get_args(tp):
+            raise config_error(key, f"must be {_type_name(tp)}, got {value!r}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise config_error(key, f"must be a list of numbers, got {value!r}")
+        item_type = get_args(tp)[0]
+        return tuple(_convert(item_type, v, f"{key}[{i}]") for i, v in enumerate(value))
+    bad = f"must be {_type_name(tp)}, got {value!r} ({type(value).__name__})"
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise config_error(key, bad)
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise config_error(key, bad)
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise config_error(key, bad)
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise config_error(key, bad)
+        return value
+    raise config_error(key, f"unsupported setting type {tp}")
+
+
+def build_config(cls: type, section: str, data: Mapping[str, Any]) -> Any:
+    """Instantiate the config dataclass `cls` from `data`, naming `[section].key` on any error."""
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise config_error(
+            f"[{section}].{unknown[0]}",
+            f"unknown key for this backend (known: {', '.join(sorted(fields))})",
+        )
+    kwargs: dict[str, Any] = {}
+    for name, f in fields.items():
+        key = f"[{section}].{name}"
+        if name not in data:
+            no_default = f.default is dataclasses.MISSING
+            if no_default and f.default_factory is dataclasses.MISSING:
+                raise config_error(key, "missing (this backend requires it)")
+            continue
+        kwargs[name] = _convert(hints[name], data[name], key)
+    try:
+        return cls(**kwargs)
+    except DeviceConfigError as exc:
+        message = str(exc).removeprefix(f"{exc.key}: ")
+        raise config_error(exc.key, message) from None
+
+
+def parse_device_section(
+    kind: DeviceKind, data: Mapping[str, Any], base_dir: Path | None = None
+) -> DeviceSection:
+    """One `[camera]` / `[laser]` / `[arm]` table -> `DeviceSection`."""
+    if not isinstance(data, Mapping):
+        raise config_error(f"[{kind}]", "must be a table")
+    backend = data.get("backend")
+    known = sorted([*BACKENDS[kind], SIM_BACKEND])
+    if backend is None:
+        raise config_error(f"[{kind}].backend", f"missing; one of {', '.join(known)}")
+    if backend not in known:
+        raise config_error(
+            f"[{kind}].backend", f"unknown backend {backend!r}; one of {', '.join(known)}"
+        )
+    settings = {k: v for k, v in data.items() if k != "backend"}
+    if backend == SIM_BACKEND:
+        return DeviceSection(kind, backend, settings)
+    if kind == "camera" and base_dir is not None:
+        settings = _resolve_camera_file(settings, base_dir)
+    return DeviceSection(kind, backend, build_config(BACKENDS[kind][backend], kind, settings))
+
+
+def _resolve_camera_file(settings: dict[str, Any], base_dir: Path) -> dict[str, Any]:
+    """A recorded source (api ffmpeg/images) given relative to the config file's folder."""
+    device = settings.get("device")
+    if settings.get("api") in ("ffmpeg", "images") and isinstance(device, str):
+        path = Path(device).expanduser()
+        if not path.is_absolute():
+            return {**settings, "device": str(base_dir / path)}
+    return settings
+
+
+def parse_device_config(doc: Mapping[str, Any], base_dir: Path | None = None) -> CellDeviceConfig:
+    """The device sections of an already parsed cell document (other sections are ignored)."""
+    found: dict[str, DeviceSection] = {}
+    for kind in DEVICE_SECTIONS:
+        if kind in doc:
+            found[kind] = parse_device_section(kind, doc[kind], base_dir)
+    return CellDeviceConfig(**found, base_dir=base_dir)
+
+
+def load_device_config(path: str | Path) -> CellDeviceConfig:
+    """Read a cell TOML file and return its device sections."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: cell configuration file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the cell configuration ({exc.strerror})") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+    return parse_device_config(doc, p.resolve().parent)
+
+
+__all__ = [
+    "BACKENDS",
+    "DEVICE_SECTIONS",
+    "CellDeviceConfig",
+    "DeviceSection",
+    "build_config",
+    "config_error",
+    "load_device_config",
+    "parse_device_config",
+    "parse_device_section",
+]

@@ -1,0 +1,147 @@
+"""Device factory: the cell configuration's `backend` picks the driver class.
+
+`open_camera`, `open_laser` and `open_arm` build the device for one `DeviceSection` and return
+it NOT yet connected (use `with device:` or `device.connect()`), so building never blocks and
+the caller decides when to touch the hardware. `open_devices` builds all three from a parsed
+cell document (what `omnisort_hw.cell.open_devices` calls).
+
+`backend = "sim"` is delegated to the simulated cell, imported lazily because it pulls in
+pybullet. Its contract (implemented in `sim_backend/devices.py`):
+
+    def open_devices(
+        sections: dict[str, dict[str, Any]], base_dir: Path | None
+    ) -> dict[str, Device]: ...
+
+`sections` maps "camera" / "laser" / "arm" (only those whose backend is "sim") to their settings
+(every key of the section but `backend`); the result maps the same names to unconnected
+`drivers.base` devices. All sim devices of a cell are requested in one call so they can share
+one simulated world.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from drivers.base import Arm, Camera, Device, LaserSwitch
+from omnisort_hw.cell_config import (
+    CellDeviceConfig,
+    DeviceSection,
+    config_error,
+    parse_device_config,
+)
+
+
+@dataclass
+class Devices:
+    """The cell's devices, unconnected; a device without a section is None."""
+
+    camera: Camera | None = None
+    laser: LaserSwitch | None = None
+    arm: Arm | None = None
+
+    def items(self) -> list[tuple[str, Device | None]]:
+        return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
+
+
+def _open_sim(sections: dict[str, DeviceSection], base_dir: Path | None) -> dict[str, Any]:
+    """Build the `backend = "sim"` devices through `sim_backend.devices.open_devices`."""
+    first = next(iter(sections))
+    key = f"[{first}].backend"
+    try:
+        from sim_backend import devices as sim_devices  # type: ignore[attr-defined]
+    except ImportError as exc:
+        raise config_error(
+            key,
+            f'"sim" needs the simulated cell (sim_backend.devices), which cannot be imported '
+            f"here ({exc}); use a real backend or install the full build",
+        ) from None
+    factory = getattr(sim_devices, "open_devices", None)
+    if factory is None:
+        raise config_error(key, "sim_backend.devices has no open_devices() in this build")
+    made = factory({k: dict(s.settings) for k, s in sections.items()}, base_dir)
+    missing = sorted(set(sections) - set(made))
+    if missing:
+        raise config_error(f"[{missing[0]}].backend", "the simulated cell did not provide it")
+    return dict(made)
+
+
+def _open_real(section: DeviceSection) -> Device:
+    kind, backend, cfg = section.kind, section.backend, section.settings
+    if kind == "camera" and backend == "v4l2":
+        from drivers.v4l2_camera import V4L2Camera
+
+        return V4L2Camera(cfg)
+    if kind == "laser" and backend == "serial":
+        from drivers.serial_laser import SerialLaser
+
+        return SerialLaser(cfg)
+    if kind == "laser" and backend == "modbus":
+        from drivers.modbus_laser import ModbusLaser
+
+        return ModbusLaser(cfg)
+    if kind == "arm" and backend == "ur_rtde":
+        from drivers.ur_arm import URArm
+
+        return URArm(cfg)
+    raise config_error(f"[{kind}].backend", f"no driver for backend {backend!r}")
+
+
+def _open_one(section: DeviceSection, base_dir: Path | None) -> Device:
+    if section.is_sim:
+        return _open_sim({section.kind: section}, base_dir)[section.kind]
+    return _open_real(section)
+
+
+def open_camera(section: DeviceSection, base_dir: Path | None = None) -> Camera:
+    """The camera of a `[camera]` section (unconnected)."""
+    device = _open_one(section, base_dir)
+    if not isinstance(device, Camera):
+        raise config_error("[camera].backend", f"{type(device).__name__} is not a Camera")
+    return device
+
+
+def open_laser(section: DeviceSection, base_dir: Path | None = None) -> LaserSwitch:
+    """The laser switch of a `[laser]` section (unconnected)."""
+    device = _open_one(section, base_dir)
+    if not isinstance(device, LaserSwitch):
+        raise config_error("[laser].backend", f"{type(device).__name__} is not a LaserSwitch")
+    return device
+
+
+def open_arm(section: DeviceSection, base_dir: Path | None = None) -> Arm:
+    """The arm of an `[arm]` section (unconnected)."""
+    device = _open_one(section, base_dir)
+    if not isinstance(device, Arm):
+        raise config_error("[arm].backend", f"{type(device).__name__} is not an Arm")
+    return device
+
+
+def open_devices(
+    config: Mapping[str, Any] | CellDeviceConfig, config_path: Path | None = None
+) -> Devices:
+    """All devices of a cell (unconnected). `config` is the parsed TOML document or its
+    device sections; relative paths resolve against `config_path`'s folder."""
+    if isinstance(config, CellDeviceConfig):
+        cell = config
+    else:
+        base = config_path.resolve().parent if config_path is not None else None
+        cell = parse_device_config(config, base)
+    present = {k: s for k, s in cell.sections() if s is not None}
+    sim = {k: s for k, s in present.items() if s.is_sim}
+    made: dict[str, Any] = _open_sim(sim, cell.base_dir) if sim else {}
+    for kind, section in present.items():
+        if not section.is_sim:
+            made[kind] = _open_real(section)
+    expected = {"camera": Camera, "laser": LaserSwitch, "arm": Arm}
+    for kind, device in made.items():
+        if not isinstance(device, expected[kind]):
+            raise config_error(
+                f"[{kind}].backend", f"{type(device).__name__} is not a {expected[kind].__name__}"
+            )
+    return Devices(camera=made.get("camera"), laser=made.get("laser"), arm=made.get("arm"))
+
+
+__all__ = ["Devices", "open_arm", "open_camera", "open_devices", "open_laser"]
