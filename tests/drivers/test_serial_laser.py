@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Iterator
 
@@ -154,3 +155,27 @@ def test_bad_settings_name_the_key(key: str, value: object) -> None:
         SerialLaserConfig(**settings)  # type: ignore[arg-type]
     assert info.value.key == f"[laser].{key}"
     assert f"[laser].{key}" in str(info.value)
+
+
+def test_replugged_device_at_a_stable_link_is_reopened(tmp_path, caplog) -> None:
+    """Like /dev/serial/by-id/...: the link is re-created by udev when the adapter comes back."""
+    caplog.set_level(logging.INFO, logger="drivers")
+    link = tmp_path / "usb-laser-if00"
+    first = SerialDeviceEmulator()
+    link.symlink_to(first.path)
+    laser = SerialLaser(SerialLaserConfig(port=str(link), timeout_s=TIMEOUT, retries=0))
+    laser.connect()
+    laser.on()
+    first.unplug()
+    with pytest.raises(DeviceDisconnectedError):
+        laser.off()
+    with SerialDeviceEmulator() as second:
+        link.unlink()
+        link.symlink_to(second.path)
+        laser.on()
+        assert second.laser_on is True
+        assert laser.state() is True
+        laser.close()
+    messages = [r.getMessage() for r in caplog.records]
+    assert any("reopening the port" in m for m in messages)
+    assert any("port reopened" in m for m in messages)

@@ -1,0 +1,118 @@
+"""The fresh-frame policy of the V4L2 path, on a scripted capture (no camera can run here).
+
+`FakeV4L2Capture` behaves like OpenCV's V4L2 capture with a camera streaming at `fps`: frames
+are produced continuously and queued in the driver's buffers; `grab()` dequeues the oldest at
+once when one is waiting and blocks until the next one otherwise; `get(CAP_PROP_POS_MSEC)` is
+the dequeued frame's kernel timestamp on CLOCK_MONOTONIC (or 0 when `monotonic_stamps` is
+False, as some drivers report). The V4L2Camera must return a frame exposed after grab() began.
+"""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from drivers.errors import DeviceTimeoutError
+from drivers.v4l2_camera import V4L2Camera, V4L2CameraConfig
+
+pytestmark = pytest.mark.timeout(10)
+
+FPS = 50.0
+
+
+class FakeV4L2Capture:
+    def __init__(self, buffers: int = 4, monotonic_stamps: bool = True) -> None:
+        self.period = 1.0 / FPS
+        self.buffers = buffers
+        self.monotonic_stamps = monotonic_stamps
+        self.start = time.monotonic()
+        self.next_index = 0  # index of the oldest frame not yet dequeued
+        self.stamp = 0.0
+        self.exposure = -1.0
+
+    def _produced(self, now: float) -> int:
+        return int((now - self.start) / self.period)
+
+    def grab(self) -> bool:
+        now = time.monotonic()
+        produced = self._produced(now)
+        # The driver keeps only the newest `buffers` frames; older ones were overwritten.
+        self.next_index = max(self.next_index, produced - self.buffers)
+        if self.next_index >= produced:
+            time.sleep(self.start + (self.next_index + 1) * self.period - now)
+        self.stamp = self.start + (self.next_index + 1) * self.period
+        self.next_index += 1
+        return True
+
+    def retrieve(self) -> tuple[bool, np.ndarray]:
+        return True, np.zeros((4, 4, 3), np.uint8)
+
+    def get(self, prop: int) -> float:
+        if prop == cv2.CAP_PROP_POS_MSEC:
+            return self.stamp * 1000.0 if self.monotonic_stamps else 0.0
+        if prop == cv2.CAP_PROP_EXPOSURE:
+            return self.exposure
+        return 0.0
+
+    def set(self, prop: int, value: float) -> bool:
+        if prop == cv2.CAP_PROP_EXPOSURE:
+            self.exposure = value
+        return True
+
+    def release(self) -> None:
+        pass
+
+
+def camera_on(fake: FakeV4L2Capture, **settings: object) -> V4L2Camera:
+    cfg = V4L2CameraConfig(device="/dev/video0", api="v4l2", fps=FPS, **settings)  # type: ignore[arg-type]
+    cam = V4L2Camera(cfg)
+    cam._cap = fake  # as if connect() had opened the device
+    return cam
+
+
+@pytest.mark.parametrize("monotonic_stamps", [True, False])
+def test_stale_buffered_frames_are_skipped(monotonic_stamps: bool) -> None:
+    fake = FakeV4L2Capture(buffers=4, monotonic_stamps=monotonic_stamps)
+    cam = camera_on(fake, settle_frames=0)
+    time.sleep(0.2)  # the buffers fill with frames older than the next grab() call
+    t_call = time.monotonic()
+    frame = cam.grab(timeout_s=1.0)
+    assert frame.timestamp >= t_call
+    assert fake.stamp >= t_call, "the frame returned was captured before grab() was called"
+
+
+def test_exposure_time_counts_into_freshness() -> None:
+    fake = FakeV4L2Capture()
+    cam = camera_on(fake, settle_frames=0)
+    cam.set_exposure_ms(30.0)  # 1.5 frame periods
+    assert fake.exposure == pytest.approx(300.0)  # V4L2 exposure_absolute counts 100 us
+    time.sleep(0.1)
+    t_call = time.monotonic()
+    frame = cam.grab(timeout_s=1.0)
+    assert frame.timestamp >= t_call + 0.030
+
+
+def test_settle_frames_are_discarded_after_an_exposure_change() -> None:
+    fake = FakeV4L2Capture()
+    cam = camera_on(fake, settle_frames=3)
+    cam._discard = 0
+    t0 = time.monotonic()
+    cam.grab(timeout_s=1.0)
+    plain = time.monotonic() - t0
+    cam.set_exposure_ms(1.0)
+    t0 = time.monotonic()
+    cam.grab(timeout_s=1.0)
+    settled = time.monotonic() - t0
+    assert settled >= plain + 2.5 / FPS  # three more frame periods
+
+
+def test_a_source_that_only_gives_stale_frames_times_out() -> None:
+    fake = FakeV4L2Capture()
+    # A driver that keeps handing out a frame stamped one second ago.
+    fake.get = lambda prop: (time.monotonic() - 1.0) * 1000.0  # type: ignore[method-assign]
+    cam = camera_on(fake, settle_frames=0)
+    with pytest.raises(DeviceTimeoutError, match="stale"):
+        cam.grab(timeout_s=1.0)
