@@ -116,6 +116,7 @@ class Cell:
         self._cache_lock = threading.Lock()
         self._caches = _Caches()
         self._connected = False
+        self._motion_count = 0
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -436,15 +437,20 @@ class Cell:
         arm = self._need("arm")
         self.check_motion_allowed()
         arm.safety_status().raise_if_stopped(arm.name)
-        if cancel is not None and cancel.is_set():
-            raise MotionRefusedError("move cancelled before it started")
+        _raise_if_cancelled(cancel)
         rl = self.runlog
         start = np.asarray(arm.joint_positions(), float)
+        sampler = _JointSampler(arm)
         if joints_deg is not None:
             target = np.asarray(joints_deg, float)
             rl.event("arm/command", f"move_joints to {np.round(target, 3).tolist()} deg")
-            rl.text("arm/planned/joints_deg", str(np.round(np.stack([start, target]), 3).tolist()))
-            arm.move_joints(target, speed_deg_s=speed_deg_s)
+            try:
+                self._log_planned_joint_move(start, target, speed_deg_s)
+            except Exception as exc:
+                log.warning("could not log the planned trajectory: %s", exc)
+            _raise_if_cancelled(cancel)
+            with sampler:
+                arm.move_joints(target, speed_deg_s=speed_deg_s)
         else:
             T = np.asarray(matrix, float) if matrix is not None else None
             if T is None:
@@ -452,12 +458,41 @@ class Cell:
                 T = pose_matrix(p[:3], p[3:])
             rl.event("arm/command", f"move_linear to xyz {np.round(T[:3, 3], 2).tolist()} mm")
             rl.pose("arm/planned/tcp", T)
-            arm.move_linear(T, speed_mm_s=speed_mm_s)
+            _raise_if_cancelled(cancel)
+            with sampler:
+                arm.move_linear(T, speed_mm_s=speed_mm_s)
         end = np.asarray(arm.joint_positions(), float)
         tcp = np.asarray(arm.tcp_pose(), float)
-        rl.text("arm/executed/joints_deg", str(np.round(np.stack([start, end]), 3).tolist()))
+        self._log_joint_series("arm/executed", sampler.times, sampler.samples)
         rl.pose("arm/executed/tcp", tcp)
         return {"joints_deg": np.round(end, 4).tolist(), "tcp_pose": np.round(tcp, 4).tolist()}
+
+    def _log_planned_joint_move(
+        self, start: np.ndarray, target: np.ndarray, speed_deg_s: float | None
+    ) -> None:
+        """Log the joint trajectory the core's planner expects for this move (for review)."""
+        from omnisort_hw.core.motion import MotionLimits as PlanLimits
+        from omnisort_hw.core.motion import plan_joint_move
+
+        limits = PlanLimits(joint_speed_deg_s=speed_deg_s) if speed_deg_s else PlanLimits()
+        traj = plan_joint_move(start, target, limits)
+        self._log_joint_series("arm/planned", traj.t, traj.q)
+
+    def _log_joint_series(self, prefix: str, t: Sequence[float], q: np.ndarray) -> None:
+        """Joint angles as scalars `PREFIX/q1..q6` on the `motion_ms` timeline, which counts
+        milliseconds since the move began plus 10^6 times the move's number (one segment per
+        move, planned and executed side by side)."""
+        rl = self.runlog
+        if not rl.enabled or len(t) == 0:
+            return
+        q = np.asarray(q, float).reshape(-1, 6)
+        base = self._motion_count * 1_000_000
+        for ti, qi in zip(t, q, strict=True):
+            rl.set_step("motion_ms", base + round(float(ti) * 1000))
+            for j in range(6):
+                rl.scalar(f"{prefix}/q{j + 1}", float(qi[j]))
+        if prefix.endswith("executed"):
+            self._motion_count += 1
 
     def stop_motion(self) -> list[str]:
         """Stop the arm now (never refused); returns the problems met."""
@@ -540,6 +575,51 @@ class Cell:
             "sort: the sorting pipeline of omnisort_hw.core (locate, motion planning, pick and "
             "place) is not in this build yet"
         )
+
+
+def _raise_if_cancelled(cancel: threading.Event | None) -> None:
+    if cancel is not None and cancel.is_set():
+        raise MotionRefusedError("move cancelled before it started")
+
+
+class _JointSampler:
+    """Samples the arm's joint positions every `period_s` while a motion runs (executed path)."""
+
+    def __init__(self, arm: Arm, period_s: float = 0.05) -> None:
+        self.arm = arm
+        self.period_s = period_s
+        self.times: list[float] = []
+        self.samples: list[np.ndarray] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="joint-sampler", daemon=True)
+        self._t0 = 0.0
+
+    def _run(self) -> None:
+        while True:
+            try:
+                q = np.asarray(self.arm.joint_positions(), float)
+            except Exception:
+                q = None
+            if q is not None and q.shape == (6,):
+                self.times.append(time.monotonic() - self._t0)
+                self.samples.append(q)
+            if self._stop.wait(self.period_s):
+                return
+
+    def __enter__(self) -> _JointSampler:
+        self._t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        try:
+            q = np.asarray(self.arm.joint_positions(), float)
+            self.times.append(time.monotonic() - self._t0)
+            self.samples.append(q)
+        except Exception:
+            return
 
 
 def open_devices(config: dict[str, Any], config_path: Path | None = None) -> CellDevices:

@@ -333,7 +333,11 @@ class Service:
         await asyncio.to_thread(self.cell.stop_motion)
         deadline = time.monotonic() + self.config.shutdown_timeout_s
         while self._job is not None and time.monotonic() < deadline:
-            await asyncio.sleep(0.05)
+            # A job between its cancel check and the start of its motion may still start one:
+            # keep stopping the arm until the job has ended.
+            await asyncio.sleep(0.1)
+            if self._job is not None:
+                await asyncio.to_thread(self.cell.stop_motion)
         if self._job is not None:
             log.error(
                 "job %s did not end within %.1f s", self._job.cmd, self.config.shutdown_timeout_s
@@ -522,6 +526,8 @@ class Service:
             job.stopped_by = "stop"
             job.cancel.set()
         problems = self.cell.stop_motion()
+        if job is not None:
+            self._keep_stopping(job)
         if self.states.state != State.FAULT:
             what = f"{job.cmd} stopped" if job is not None else "stop requested"
             self.states.set(State.STOPPED, what)
@@ -537,12 +543,27 @@ class Service:
             job.stopped_by = "estop"
             job.cancel.set()
         problems = self.cell.emergency_stop()
+        if job is not None:
+            self._keep_stopping(job)
         self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
         return {
             "stopped_job": job.cmd if job is not None else None,
             "state": self.states.state.value,
             "problems": problems,
         }
+
+    def _keep_stopping(self, job: Job, period_s: float = 0.1, limit_s: float = 10.0) -> None:
+        """Stop the arm again every `period_s` until `job` ends (closes the window in which a
+        cancelled job could still start a motion); runs in its own daemon thread."""
+
+        def loop() -> None:
+            deadline = time.monotonic() + limit_s
+            while self._job is job and time.monotonic() < deadline:
+                time.sleep(period_s)
+                if self._job is job:
+                    self.cell.stop_motion()
+
+        threading.Thread(target=loop, name="keep-stopping", daemon=True).start()
 
     def _reset(self) -> dict[str, Any]:
         with self._job_lock:

@@ -227,6 +227,7 @@ def test_shutdown_makes_the_cell_safe_and_flushes_the_log(make_service) -> None:
     assert ev.index("laser off") > ev.index("laser on")
     paths = entity_paths(h.cell.runlog_path or "")
     assert {"/service/state", "/camera/raw", "/arm/command", "/laser/state"} <= paths
+    assert {"/arm/planned/q1", "/arm/executed/q6", "/arm/executed/tcp"} <= paths
 
 
 def test_many_connections_are_limited(make_service) -> None:
@@ -275,3 +276,22 @@ def test_concurrent_status_clients_all_answered(make_service) -> None:
             t.join(30)
         assert mover.read_reply(timeout_s=10)["ok"]
     assert errors == []
+
+
+def test_stop_right_after_a_move_request_leaves_the_arm_still(make_service) -> None:
+    """However stop and the job's start interleave, the arm ends up not moving."""
+    h = make_service(move_seconds=20.0)
+    with h.client() as a, h.client() as b:
+        for delay in (0.0, 0.001, 0.005, 0.02):
+            rid = a.send("move", {"joints_deg": [4, 0, 0, 0, 0, 0]})
+            deadline = time.monotonic() + 5
+            while b.call("status")["result"]["job"] is None:
+                assert time.monotonic() < deadline
+            time.sleep(delay)
+            assert b.call("stop")["ok"]
+            reply = a.read_reply(timeout_s=5)
+            assert reply["id"] == rid
+            assert reply["error"]["code"] == "stopped", reply
+            time.sleep(0.3)
+            assert not h.devices.arm.moving.is_set()
+            assert b.call("status")["result"]["job"] is None
