@@ -623,26 +623,12 @@ class _JointSampler:
 
 
 def open_devices(config: dict[str, Any], config_path: Path | None = None) -> CellDevices:
-    """The devices of the `[camera]`, `[laser]` and `[arm]` sections, from the device factory.
+    """The (unconnected) devices of the `[camera]`, `[laser]` and `[arm]` sections.
 
-    The factory (`omnisort_hw.devices`) picks the real driver or the simulated cell per
-    section's `backend`; until it exists the service cannot open devices and says so.
+    `omnisort_hw.devices` picks the real driver or the simulated cell per section's `backend`
+    and raises ConfigError naming the key when a section is wrong.
     """
-    try:
-        from omnisort_hw import devices as factory  # type: ignore[attr-defined]
-    except ImportError:
-        raise NotAvailableError(
-            "the device factory omnisort_hw.devices is not in this build yet, so the [camera], "
-            "[laser] and [arm] sections cannot be opened"
-        ) from None
-    build = getattr(factory, "open_devices", None) or getattr(factory, "make_devices", None)
-    if build is None:
-        raise NotAvailableError("omnisort_hw.devices has no open_devices() factory")
-    made = build(config) if config_path is None else build(config, config_path)
-    if isinstance(made, CellDevices):
-        return made
-    return CellDevices(
-        camera=getattr(made, "camera", None),
-        laser=getattr(made, "laser", None),
-        arm=getattr(made, "arm", None),
-    )
+    from omnisort_hw.devices import open_devices as build
+
+    made = build(config, config_path)
+    return CellDevices(camera=made.camera, laser=made.laser, arm=made.arm)

@@ -73,3 +73,15 @@ def test_serve_reports_a_bad_configuration(tmp_path, capsys) -> None:
     assert "not loopback" in capsys.readouterr().err
     assert main(["serve", "--config", str(tmp_path / "nope.toml")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_serve_names_a_device_that_cannot_be_opened(tmp_path, capsys) -> None:
+    cfg = tmp_path / "cell.toml"
+    cfg.write_text(
+        '[camera]\nbackend = "v4l2"\ndevice = "/dev/video-omnisort-missing"\n'
+        f'[storage]\nstate_dir = "{tmp_path / "state"}"\n'
+        f'[logging]\nlog_dir = "{tmp_path / "logs"}"\n'
+    )
+    assert main(["serve", "--config", str(cfg), "--port", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "/dev/video-omnisort-missing" in err
