@@ -1,0 +1,579 @@
+"""Fisheye rendering: pybullet cube-map faces remapped through the camera model, with analytic
+shading of the patterned planes, the laser stripe from per-sample 3D points, and adaptive
+supersampling.
+
+How a frame is made:
+
+1. `FisheyeGeometry` (cached per camera model, R_SC, face size and lens circle): the ray of every
+   pixel centre inside the lens circle, in S; which cube-map face each ray falls in; the
+   tightest frustum per face (a 185 degree lens needs the front face and the front half of
+   four side faces); the faces' places in one atlas image; the atlas coordinate of each ray.
+2. pybullet's CPU renderer (`ER_TINY_RENDERER`) draws each face with an explicit view and
+   off-centre projection: colour, segmentation (body ids) and depth (linearised, stored as
+   inverse distance along the ray so bilinear interpolation is exact on planes).
+3. `shade()` takes any set of rays: the atlas gives the body each ray hits; target walls and
+   checkerboards are intersected analytically with their plane and shaded from the exact
+   point (patterns, markers, borders); the floor is analytic too; other bodies use pybullet's
+   colour and depth. The laser intensity comes from the signed distance of the 3D point to the
+   laser plane, a Gaussian across the plane, the range fall-off and a shadow test.
+4. Pixel centres are shaded first; pixels whose neighbours differ (body, pattern class, colour),
+   that carry laser light or straddle the lens circle are re-shaded with k x k sub-samples
+   and box-averaged (`render.adaptive = false` supersamples every pixel).
+
+The result keeps the laser light separate from the scene colour, so the "real camera" mode can
+make it uneven and speckled before it is composited.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import pybullet as p
+
+from omnisort_hw.core.camera_model import OcamModel
+from sim_backend.laser import HALL_RADIUS_MM, LaserFan, LaserPlane
+from sim_backend.world import AnalyticBox, Panel, SimWorld
+
+NEAR_M = 0.01
+FAR_M = 40.0
+GUARD_PX = 3
+_REMAP_COLS = 4096
+_CHUNK = 400_000
+
+# forward and up of each cube-map face in the camera frame C; right = forward x up.
+_FACES: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]], ...] = (
+    ("front", (0.0, 0.0, 1.0), (0.0, -1.0, 0.0)),
+    ("+x", (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    ("-x", (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
+    ("+y", (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
+    ("-y", (0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+    ("back", (0.0, 0.0, -1.0), (0.0, 1.0, 0.0)),
+)
+
+
+def remap_flat(src: np.ndarray, xy: np.ndarray, interpolation: int) -> np.ndarray:
+    """cv2.remap for a flat list of sample coordinates (n, 2) -> (n,) or (n, channels).
+
+    OpenCV limits map sides to < 32767, so the list is folded into rows of 4096.
+    """
+    n = xy.shape[0]
+    rows = -(-n // _REMAP_COLS) if n else 0
+    pad = rows * _REMAP_COLS - n
+    mx = np.pad(xy[:, 0].astype(np.float32, copy=False), (0, pad)).reshape(rows, _REMAP_COLS)
+    my = np.pad(xy[:, 1].astype(np.float32, copy=False), (0, pad)).reshape(rows, _REMAP_COLS)
+    if n == 0:
+        return np.zeros((0, *src.shape[2:]), src.dtype)
+    out = cv2.remap(src, mx, my, interpolation, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(rows * _REMAP_COLS, *src.shape[2:])[:n]
+
+
+@dataclass(frozen=True)
+class FaceSpec:
+    """One cube-map face: basis in C, frustum in tangent units, pixel size and atlas row."""
+
+    name: str
+    forward: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    x0: float
+    y0: float
+    pitch: float
+    width: int
+    height: int
+    row: int
+
+
+class FisheyeGeometry:
+    """Per-camera-configuration tables: pixel rays, faces, atlas coordinates (built once)."""
+
+    def __init__(
+        self, model: OcamModel, R_SC: np.ndarray, face_px: int, circle_fov_deg: float
+    ) -> None:
+        t0 = time.perf_counter()
+        self.model = model
+        self.R_SC = np.asarray(R_SC, float)
+        self.face_px = int(face_px)
+        self.width, self.height = model.image_size
+        self.theta_circle = min(np.deg2rad(circle_fov_deg) / 2.0, model.theta_max)
+        uu, vv = np.meshgrid(
+            np.arange(self.width, dtype=float), np.arange(self.height, dtype=float)
+        )
+        rays_c = model.pixel_to_ray(np.stack([uu, vv], axis=-1))
+        theta = np.arccos(np.clip(rays_c[..., 2], -1.0, 1.0))
+        # Angular size of a pixel (for the lens-circle ring that is always supersampled).
+        gy, gx = np.gradient(theta)
+        px_angle = np.hypot(gx, gy)
+        self.domain = theta <= self.theta_circle + 1.5 * px_angle
+        self.inside = theta <= self.theta_circle
+        self.ring = self.domain & (np.abs(theta - self.theta_circle) <= 1.5 * px_angle)
+        self.pixel_index = np.flatnonzero(self.domain).astype(np.int64)
+        rays_dom = rays_c.reshape(-1, 3)[self.pixel_index]
+        self.rays_S = (rays_dom @ self.R_SC.T).astype(np.float32)
+        self.inside_dom = self.inside.reshape(-1)[self.pixel_index]
+        self.pixel_angle = float(np.median(px_angle[self.inside]))
+        self.faces = self._layout(rays_dom)
+        self.atlas_shape = (
+            max(f.row + f.height for f in self.faces),
+            max(f.width for f in self.faces),
+        )
+        self.atlas_xy = self.rays_to_atlas(rays_dom)
+        self.build_seconds = time.perf_counter() - t0
+
+    def _layout(self, rays: np.ndarray) -> list[FaceSpec]:
+        """Faces that some ray needs, each with the smallest frustum covering its rays."""
+        pitch = 2.0 / self.face_px
+        guard = GUARD_PX * pitch
+        forwards = np.array([f[1] for f in _FACES])
+        owner = np.argmax(rays @ forwards.T, axis=1)
+        faces = []
+        row = 0
+        for k, (name, fwd, up) in enumerate(_FACES):
+            sel = rays[owner == k]
+            if sel.shape[0] == 0:
+                continue
+            f, u = np.array(fwd), np.array(up)
+            r = np.cross(f, u)
+            depth = sel @ f
+            x = (sel @ r) / depth
+            y = (sel @ u) / depth
+            x0 = max(float(x.min()), -1.0) - guard
+            x1 = min(float(x.max()), 1.0) + guard
+            y0 = max(float(y.min()), -1.0) - guard
+            y1 = min(float(y.max()), 1.0) + guard
+            width = int(np.ceil((x1 - x0) / pitch))
+            height = int(np.ceil((y1 - y0) / pitch))
+            faces.append(FaceSpec(name, f, r, u, x0, y0, pitch, width, height, row))
+            row += height
+        return faces
+
+    def rays_to_atlas(self, rays_c: np.ndarray) -> np.ndarray:
+        """Atlas coordinates (n, 2) float32 of rays in C.
+
+        pybullet's TINY renderer samples column c at x0 + c * pitch and image row r at
+        y0 + (height - 1 - r) * pitch (its rows run top-down, its samples sit on pixel corners).
+        """
+        forwards = np.array([f.forward for f in self.faces])
+        owner = np.argmax(rays_c @ forwards.T, axis=1)
+        out = np.empty((rays_c.shape[0], 2), np.float32)
+        for k, f in enumerate(self.faces):
+            idx = np.flatnonzero(owner == k)
+            if idx.size == 0:
+                continue
+            sel = rays_c[idx]
+            depth = sel @ f.forward
+            x = (sel @ f.right) / depth
+            y = (sel @ f.up) / depth
+            col = (x - f.x0) / f.pitch
+            rw = (f.height - 1) - (y - f.y0) / f.pitch
+            out[idx, 0] = np.clip(col, 0.0, f.width - 1)
+            out[idx, 1] = np.clip(rw, 0.0, f.height - 1) + f.row
+        return out
+
+    def subsample(self, pixels: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """k x k sub-sample rays (S), atlas coordinates and in-circle flags of flat pixels."""
+        offs = (np.arange(k) + 0.5) / k - 0.5
+        ou, ov = np.meshgrid(offs, offs)
+        u = (pixels % self.width)[:, None] + ou.ravel()[None, :]
+        v = (pixels // self.width)[:, None] + ov.ravel()[None, :]
+        rays_c = self.model.pixel_to_ray(np.stack([u.ravel(), v.ravel()], axis=-1))
+        inside = rays_c[:, 2] >= np.cos(self.theta_circle)
+        return (
+            (rays_c @ self.R_SC.T).astype(np.float32),
+            self.rays_to_atlas(rays_c),
+            inside,
+        )
+
+
+_GEOMETRY_CACHE: OrderedDict[str, FisheyeGeometry] = OrderedDict()
+_GEOMETRY_CACHE_SIZE = 2
+
+
+def geometry_for(
+    model: OcamModel, R_SC: np.ndarray, face_px: int, circle_fov_deg: float
+) -> FisheyeGeometry:
+    """The cached `FisheyeGeometry` for this camera configuration (LRU of two)."""
+    key_src = json.dumps(model.to_dict(), sort_keys=True) + np.round(R_SC, 12).tobytes().hex()
+    key = hashlib.sha1(f"{key_src}|{face_px}|{circle_fov_deg}".encode()).hexdigest()
+    geo = _GEOMETRY_CACHE.get(key)
+    if geo is None:
+        geo = FisheyeGeometry(model, R_SC, face_px, circle_fov_deg)
+        _GEOMETRY_CACHE[key] = geo
+        while len(_GEOMETRY_CACHE) > _GEOMETRY_CACHE_SIZE:
+            _GEOMETRY_CACHE.popitem(last=False)
+    else:
+        _GEOMETRY_CACHE.move_to_end(key)
+    return geo
+
+
+@dataclass
+class Atlas:
+    """The rendered cube-map faces in one image: RGB, body ids and inverse ray distance (1/mm)."""
+
+    rgb: np.ndarray
+    seg: np.ndarray
+    inv_dist: np.ndarray
+
+
+def render_atlas(world: SimWorld, geo: FisheyeGeometry) -> Atlas:
+    """Draw every needed face with pybullet's CPU renderer into the atlas."""
+    h, w = geo.atlas_shape
+    rgb = np.zeros((h, w, 3), np.uint8)
+    seg = np.full((h, w), -1.0, np.float32)
+    inv = np.zeros((h, w), np.float32)
+    ren = world.scene.render
+    light = np.asarray(ren.light_direction, float)
+    light = light / np.linalg.norm(light)
+    for f in geo.faces:
+        fwd = world.R_SC @ f.forward
+        up = world.R_SC @ f.up
+        view = p.computeViewMatrix([0.0, 0.0, 0.0], list(fwd), list(up))
+        x1 = f.x0 + f.width * f.pitch
+        y1 = f.y0 + f.height * f.pitch
+        proj = p.computeProjectionMatrix(
+            f.x0 * NEAR_M, x1 * NEAR_M, f.y0 * NEAR_M, y1 * NEAR_M, NEAR_M, FAR_M
+        )
+        _, _, img, zbuf, ids = p.getCameraImage(
+            f.width,
+            f.height,
+            view,
+            proj,
+            renderer=p.ER_TINY_RENDERER,
+            lightDirection=list(light * 10.0),
+            lightColor=[1.0, 1.0, 1.0],
+            lightAmbientCoeff=ren.ambient,
+            lightDiffuseCoeff=ren.diffuse,
+            lightSpecularCoeff=0.0,
+            shadow=0,
+            physicsClientId=world.client,
+        )
+        img = np.asarray(img, np.uint8).reshape(f.height, f.width, 4)
+        zbuf = np.asarray(zbuf, np.float32).reshape(f.height, f.width)
+        ids = np.asarray(ids, np.int32).reshape(f.height, f.width)
+        z_m = FAR_M * NEAR_M / (FAR_M - (FAR_M - NEAR_M) * zbuf)
+        xs = f.x0 + np.arange(f.width) * f.pitch
+        ys = f.y0 + (f.height - 1 - np.arange(f.height)) * f.pitch
+        stretch = np.sqrt(1.0 + xs[None, :] ** 2 + ys[:, None] ** 2)
+        dist_mm = z_m * stretch * 1000.0
+        hit = ids >= 0
+        rows = slice(f.row, f.row + f.height)
+        cols = slice(0, f.width)
+        rgb[rows, cols] = img[..., :3]
+        seg[rows, cols] = np.where(hit, ids, -1).astype(np.float32)
+        inv[rows, cols] = np.where(hit, 1.0 / dist_mm, 0.0).astype(np.float32)
+    return Atlas(rgb, seg, inv)
+
+
+@dataclass
+class Shaded:
+    """Shading of a set of samples: colour (n, 3) RGB in [0, 1], laser intensity, class key."""
+
+    rgb: np.ndarray
+    laser: np.ndarray
+    key: np.ndarray
+
+
+@dataclass(frozen=True)
+class _BoxTables:
+    """Per-frame constants of an analytic box: frame, bounding cone, face shading, pattern."""
+
+    body: int
+    R: np.ndarray
+    origin_local: np.ndarray
+    half: np.ndarray
+    axis_dir: np.ndarray
+    cos_cone: float
+    face_rgb: np.ndarray
+    panel: Panel | None
+    panel_face: tuple[int, float]
+
+
+class Shader:
+    """Shades rays of one frame from the atlas, the analytic surfaces and the laser."""
+
+    def __init__(self, world: SimWorld, atlas: Atlas, laser_on: bool) -> None:
+        self.world = world
+        self.atlas = atlas
+        self.laser_on = laser_on
+        scene = world.scene
+        ren = scene.render
+        light = np.asarray(ren.light_direction, float)
+        self.light = light / np.linalg.norm(light)
+        self.ambient, self.diffuse = ren.ambient, ren.diffuse
+        self.hall = np.asarray(ren.hall_color.rgb, np.float32)
+        self.sky = np.asarray(ren.sky_color.rgb, np.float32)
+        self.plane = LaserPlane(world.laser_normal, world.laser_distance)
+        self.fan = LaserFan.compute(world, self.plane) if laser_on else None
+        las = scene.laser
+        self.sigma = las.width_mm / (2.0 * np.sqrt(2.0 * np.log(2.0)))
+        self.no_laser = np.array(sorted(world.info.no_laser), np.int64)
+        self.boxes = [self._tables(b) for b in world.analytic_boxes()]
+        top = max([b.body for b in self.boxes] + [0])
+        self.box_lut = np.full(top + 2, -1, np.int32)
+        for k, b in enumerate(self.boxes):
+            self.box_lut[b.body + 1] = k
+
+    def _lambert(self, normal: np.ndarray) -> float:
+        return float(self.ambient + self.diffuse * max(0.0, float(normal @ self.light)))
+
+    def _tables(self, box: AnalyticBox) -> _BoxTables:
+        R = box.R
+        faces = np.empty((6, 3), np.float32)
+        for axis in range(3):
+            for j, sign in enumerate((1.0, -1.0)):
+                faces[2 * axis + j] = np.asarray(box.color) * self._lambert(R[:, axis] * sign)
+        dist = float(np.linalg.norm(box.center))
+        radius = float(np.linalg.norm(box.half)) + 1.0
+        cos_cone = -2.0 if dist <= radius else float(np.cos(np.arcsin(radius / dist)))
+        panel = self.world.info.panels.get(box.body)
+        panel_face = (-1, 0.0)
+        if panel is not None:
+            dots = R.T @ panel.rect.normal
+            axis = int(np.argmax(np.abs(dots)))
+            panel_face = (axis, float(np.sign(dots[axis])))
+        return _BoxTables(
+            box.body,
+            R.astype(np.float32),
+            (-R.T @ box.center).astype(np.float32),
+            box.half.astype(np.float32),
+            (box.center / max(dist, 1e-9)).astype(np.float32),
+            cos_cone,
+            faces,
+            panel,
+            panel_face,
+        )
+
+    @staticmethod
+    def _slab(b: _BoxTables, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Ray/box entry: (hit, distance, entry face index 2*axis + (sign < 0)) for rays from 0."""
+        tn_list, d_list = [], []
+        tf = None
+        for axis in range(3):
+            d = rays @ b.R[:, axis]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = np.float32(1.0) / d
+                t1 = (-b.half[axis] - b.origin_local[axis]) * inv
+                t2 = (b.half[axis] - b.origin_local[axis]) * inv
+            tn_list.append(np.minimum(t1, t2))
+            far = np.maximum(t1, t2)
+            tf = far if tf is None else np.minimum(tf, far)
+            d_list.append(d)
+        tn = np.stack(tn_list, axis=1)
+        axis_idx = np.argmax(tn, axis=1)
+        tmin = np.take_along_axis(tn, axis_idx[:, None], axis=1)[:, 0]
+        hit = (tmin <= tf) & (tmin > 0)
+        d_axis = np.choose(axis_idx, d_list)
+        face = 2 * axis_idx + (d_axis > 0)
+        return hit, tmin, face
+
+    def _shade_box(
+        self,
+        b: _BoxTables,
+        idx: np.ndarray,
+        rays: np.ndarray,
+        tt: np.ndarray,
+        face: np.ndarray,
+        out: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> None:
+        """Write colour, key and distance of box hits (face colours, pattern on the panel face)."""
+        rgb, key, t = out
+        rgb[idx] = b.face_rgb[face]
+        key[idx] = b.body * 8 + 4 + face // 2
+        t[idx] = tt
+        if b.panel is None:
+            return
+        axis, sign = b.panel_face
+        on = face == 2 * axis + (1 if sign < 0 else 0)
+        if not on.any():
+            return
+        rect = b.panel.rect
+        sel = idx[on]
+        pts = rays[on].astype(np.float64) * tt[on, None].astype(np.float64)
+        a = (pts - rect.origin) @ rect.axis_u
+        bb = (pts - rect.origin) @ rect.axis_v
+        albedo, cls = b.panel.pattern.shade(a, bb)
+        rgb[sel] = albedo * self._lambert(rect.normal)
+        key[sel] = b.body * 8 + 1 + cls.astype(np.int32)
+
+    def shade(self, rays: np.ndarray, axy: np.ndarray, exact: bool = False) -> Shaded:
+        """Shade rays (n, 3) in S whose atlas coordinates are `axy` (n, 2).
+
+        The rasterised body ids decide what each ray sees; boxes are then intersected exactly.
+        With `exact` (sub-samples of edge pixels), every box whose bounding cone holds a ray is
+        tested too, so box silhouettes are exact rather than quantised to the face pixels.
+        """
+        n = rays.shape[0]
+        seg = remap_flat(self.atlas.seg, axy, cv2.INTER_NEAREST).astype(np.int32)
+        rgb = remap_flat(self.atlas.rgb, axy, cv2.INTER_LINEAR).astype(np.float32)
+        rgb *= np.float32(1.0 / 255.0)
+        key = seg * 8
+        t = np.full(n, np.inf, np.float32)
+        box_k = self.box_lut[np.clip(seg + 1, 0, self.box_lut.size - 1)]
+        box_k[seg + 1 >= self.box_lut.size] = -1
+        background = seg < 0
+        for k, b in enumerate(self.boxes):
+            idx = np.flatnonzero(box_k == k)
+            if idx.size == 0:
+                continue
+            hit, tt, face = self._slab(b, rays[idx])
+            background[idx[~hit]] = True
+            self._shade_box(b, idx[hit], rays[idx[hit]], tt[hit], face[hit], (rgb, key, t))
+        self._shade_background(rays, np.flatnonzero(background), rgb, key, t)
+        solid = np.flatnonzero((box_k < 0) & (seg >= 0))
+        if solid.size:
+            lin = remap_flat(self.atlas.inv_dist, axy[solid], cv2.INTER_LINEAR)
+            near = remap_flat(self.atlas.inv_dist, axy[solid], cv2.INTER_NEAREST)
+            use = np.where(np.abs(lin - near) > 0.02 * near, near, lin)
+            with np.errstate(divide="ignore"):
+                t[solid] = np.where(use > 0, 1.0 / use, np.inf)
+        if exact:
+            for b in self.boxes:
+                cand = np.flatnonzero(rays @ b.axis_dir >= b.cos_cone)
+                if cand.size == 0:
+                    continue
+                hit, tt, face = self._slab(b, rays[cand])
+                closer = hit & (tt < t[cand])
+                sel = cand[closer]
+                self._shade_box(b, sel, rays[sel], tt[closer], face[closer], (rgb, key, t))
+                seg[sel] = b.body
+        laser = np.zeros(n, np.float32)
+        if self.laser_on:
+            self._laser(rays, seg, t, laser)
+        return Shaded(rgb, laser, key)
+
+    def _shade_background(
+        self, rays: np.ndarray, bg: np.ndarray, rgb: np.ndarray, key: np.ndarray, t: np.ndarray
+    ) -> None:
+        """Rays that hit no body: the analytic floor, else the hall around the cell."""
+        if bg.size == 0:
+            return
+        rb = rays[bg]
+        rz = rb[:, 2]
+        floor = self.world.floor
+        down = rz < -1e-6
+        tz = np.full(bg.size, np.inf, np.float32)
+        tz[down] = np.float32(floor.z) / rz[down]
+        x = tz * rb[:, 0]
+        y = tz * rb[:, 1]
+        on_floor = down & (x * x + y * y < np.float32(HALL_RADIUS_MM**2))
+        fi = bg[on_floor]
+        albedo, cls = floor.shade(x[on_floor], y[on_floor])
+        rgb[fi] = albedo * self._lambert(np.array([0.0, 0.0, 1.0]))
+        key[fi] = -8 + cls.astype(np.int32)
+        t[fi] = tz[on_floor]
+        hi = bg[~on_floor]
+        w = np.clip(rb[~on_floor, 2] * 2.0 + 0.3, 0.0, 1.0)[:, None]
+        rgb[hi] = self.hall * (1.0 - w) + self.sky * w
+        key[hi] = -16
+        t[hi] = np.inf
+
+    def _laser(self, rays: np.ndarray, seg: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
+        """Stripe intensity: Gaussian in the signed distance to the plane, fall-off, shadows."""
+        assert self.fan is not None
+        las = self.world.scene.laser
+        ok = np.isfinite(t)
+        if self.no_laser.size:
+            ok &= ~np.isin(seg, self.no_laser)
+        idx = np.flatnonzero(ok)
+        s = t[idx] * (rays[idx] @ self.plane.normal.astype(np.float32)) + self.plane.distance
+        near = np.abs(s) < 5.0 * self.sigma
+        idx, s = idx[near], s[near]
+        if idx.size == 0:
+            return
+        pts = rays[idx].astype(np.float64) * t[idx, None].astype(np.float64)
+        lit, rng = self.fan.lit(pts)
+        falloff = np.minimum(1.0, (las.reference_range_mm / np.maximum(rng, 1.0)) ** las.falloff)
+        gauss = np.exp(-0.5 * (s / self.sigma) ** 2)
+        out[idx] = (las.intensity * falloff * gauss * lit).astype(np.float32)
+
+
+@dataclass
+class RenderResult:
+    """A rendered frame before compositing: scene colour (H, W, 3) RGB in [0, 1], laser light
+    (H, W) and timings/statistics."""
+
+    base: np.ndarray
+    laser: np.ndarray
+    stats: dict[str, float] = field(default_factory=dict)
+
+
+def _flag_pixels(
+    key: np.ndarray, rgb: np.ndarray, laser: np.ndarray, geo: FisheyeGeometry
+) -> np.ndarray:
+    """Pixels to supersample: neighbours differ in class or brightness, laser light, lens ring."""
+    lum = rgb.reshape(-1, 3) @ np.array([0.3, 0.59, 0.11], np.float32)
+    lum = lum.reshape(key.shape)
+    flag = np.zeros(key.shape, bool)
+    for axis in (0, 1):
+        a = (slice(None), slice(1, None)) if axis else (slice(1, None), slice(None))
+        b = (slice(None), slice(None, -1)) if axis else (slice(None, -1), slice(None))
+        d = (key[a] != key[b]) | (np.abs(lum[a] - lum[b]) > 0.04)
+        flag[a] |= d
+        flag[b] |= d
+    lit = laser > 1e-4
+    if lit.any():
+        flag |= cv2.dilate(lit.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    flag |= geo.ring
+    return flag & geo.domain
+
+
+def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None) -> RenderResult:
+    """Render the world's current state through `model` (laser as the switch says, or as given)."""
+    scene = world.scene
+    t0 = time.perf_counter()
+    geo = geometry_for(model, world.R_SC, scene.render.face_px, scene.camera.image_circle_fov_deg)
+    t1 = time.perf_counter()
+    atlas = render_atlas(world, geo)
+    t2 = time.perf_counter()
+    on = world.laser_on if laser_on is None else laser_on
+    shader = Shader(world, atlas, on)
+    h, w = geo.height, geo.width
+    npx = h * w
+    key = np.full(npx, -32, np.int32)
+    rgb = np.zeros((npx, 3), np.float32)
+    laser = np.zeros(npx, np.float32)
+    for start in range(0, geo.pixel_index.size, _CHUNK):
+        sl = slice(start, start + _CHUNK)
+        out = shader.shade(geo.rays_S[sl], geo.atlas_xy[sl])
+        inside = geo.inside_dom[sl]
+        pix = geo.pixel_index[sl]
+        rgb[pix] = out.rgb * inside[:, None]
+        laser[pix] = out.laser * inside
+        key[pix] = np.where(inside, out.key, -32)
+    t3 = time.perf_counter()
+    k = scene.render.supersampling
+    rgb_img = rgb.reshape(h, w, 3)
+    laser_img = laser.reshape(h, w)
+    if k > 1:
+        if scene.render.adaptive:
+            flags = _flag_pixels(key.reshape(h, w), rgb_img, laser_img, geo)
+            todo = np.flatnonzero(flags)
+        else:
+            todo = geo.pixel_index
+        per_chunk = max(1, _CHUNK // (k * k))
+        for start in range(0, todo.size, per_chunk):
+            pix = todo[start : start + per_chunk]
+            rays, axy, inside = geo.subsample(pix, k)
+            out = shader.shade(rays, axy, exact=True)
+            col = (out.rgb * inside[:, None]).reshape(pix.size, k * k, 3).mean(axis=1)
+            las = (out.laser * inside).reshape(pix.size, k * k).mean(axis=1)
+            rgb[pix] = col
+            laser[pix] = las
+        n_super = int(todo.size)
+    else:
+        n_super = 0
+    t4 = time.perf_counter()
+    stats = {
+        "geometry_s": t1 - t0,
+        "raster_s": t2 - t1,
+        "shade_s": t3 - t2,
+        "supersample_s": t4 - t3,
+        "supersampled_pixels": float(n_super),
+        "atlas_pixels": float(geo.atlas_shape[0] * geo.atlas_shape[1]),
+    }
+    return RenderResult(rgb_img, laser_img, stats)
