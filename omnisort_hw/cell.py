@@ -14,6 +14,7 @@ component exists they raise `NotAvailableError` naming it, never a made-up resul
 from __future__ import annotations
 
 import base64
+import json
 import logging
 import threading
 import time
@@ -524,12 +525,63 @@ class Cell:
 
     # -- pipeline (core) -------------------------------------------------------------------
 
-    def calibrate_intrinsics(self, folder: str, cancel: threading.Event) -> dict[str, Any]:
-        """Intrinsic calibration from a folder of images, saved as camera.json."""
-        raise NotAvailableError(
-            "calibrate what=intrinsics: the intrinsic calibration of omnisort_hw.core "
-            "(board detection + OCam fit) is not in this build yet"
+    def calibrate_intrinsics(
+        self,
+        folder: str,
+        board: str = "9x6",
+        square_mm: float = 0.0,
+        degree: int | None = None,
+        cancel: threading.Event | None = None,
+    ) -> dict[str, Any]:
+        """Intrinsic calibration from the checkerboard images of `folder`, saved as camera.json.
+
+        The images are taken to come from the camera attached now (its serial is stored).
+        """
+        import cv2
+
+        from omnisort_hw.core.camera_io import camera_record
+        from omnisort_hw.core.checkerboard import BoardSpec
+        from omnisort_hw.core.intrinsics import calibrate_images
+        from omnisort_hw.errors import InputError
+
+        try:
+            spec = BoardSpec.parse(board, square_mm)
+        except ValueError as exc:
+            raise InputError(f"calibrate: board/square_mm: {exc}") from None
+        paths = image_files(folder)
+        images = []
+        for path in paths:
+            _raise_if_cancelled(cancel, "calibration")
+            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            if image is None:
+                raise InputError(f"{path}: not a readable image (unknown format or corrupt)")
+            images.append((str(path), image))
+        rl = self.runlog
+        rl.event("calibration/intrinsics", f"{len(images)} images from {folder}, board {board}")
+        result = calibrate_images(images, spec, degree=degree, log=rl)
+        _raise_if_cancelled(cancel, "calibration")
+        record = {
+            **result.record(),
+            "board": {"inner_corners": [spec.cols, spec.rows], "square_mm": spec.square_mm},
+            "images_folder": str(folder),
+            "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        saved = self.store.save_camera(camera_record(result.model, **record))
+        model = result.model
+        rl.scalar("calibration/intrinsics/rms_px", result.rms_px)
+        rl.text(
+            "calibration/intrinsics/parameters",
+            json.dumps({"model": model.to_dict(), "std": result.std}, indent=1, default=str),
         )
+        return {
+            "path": str(saved),
+            "rms_px": result.rms_px,
+            "images_used": len(result.images_used),
+            "images_rejected": record["images_rejected"],
+            "center_uv": list(model.center_uv),
+            "poly_degree": result.degree,
+            "camera_serial": self.store.expected_serial,
+        }
 
     def calibrate_extrinsics(
         self, image: str | None, method: str | None, cancel: threading.Event
@@ -577,9 +629,25 @@ class Cell:
         )
 
 
-def _raise_if_cancelled(cancel: threading.Event | None) -> None:
+def _raise_if_cancelled(cancel: threading.Event | None, what: str = "move") -> None:
     if cancel is not None and cancel.is_set():
-        raise MotionRefusedError("move cancelled before it started")
+        raise MotionRefusedError(f"{what} cancelled")
+
+
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
+
+
+def image_files(folder: str | Path) -> list[Path]:
+    """The image files of `folder`, sorted by name; InputError when there are none."""
+    from omnisort_hw.errors import InputError
+
+    path = Path(folder)
+    if not path.is_dir():
+        raise InputError(f"{path}: no such folder")
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    if not files:
+        raise InputError(f"{path}: no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+    return files
 
 
 class _JointSampler:

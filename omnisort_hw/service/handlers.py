@@ -46,7 +46,13 @@ def laser(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
 
 def calibrate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
     if args["what"] == "intrinsics":
-        return ctx.cell.calibrate_intrinsics(args["folder"], ctx.cancel)
+        return ctx.cell.calibrate_intrinsics(
+            args["folder"],
+            board=args["board"] or "9x6",
+            square_mm=args["square_mm"],
+            degree=args["degree"],
+            cancel=ctx.cancel,
+        )
     return ctx.cell.calibrate_extrinsics(args["image"], args["method"], ctx.cancel)
 
 

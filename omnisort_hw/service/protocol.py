@@ -134,12 +134,16 @@ def _check_move(args: dict[str, Any]) -> None:
 
 
 def _check_calibrate(args: dict[str, Any]) -> None:
-    if args["what"] == "intrinsics" and not args.get("folder"):
-        raise ProtocolError(
-            BAD_ARGUMENT,
-            "calibrate what=intrinsics needs folder (a folder of images)",
-            field="folder",
-        )
+    if args["what"] == "intrinsics":
+        for key, what in (("folder", "a folder of images"), ("square_mm", "the square size")):
+            if args.get(key) is None:
+                raise ProtocolError(
+                    BAD_ARGUMENT, f"calibrate what=intrinsics needs {key} ({what})", field=key
+                )
+        return
+    for key in ("board", "square_mm", "degree"):
+        if args.get(key) is not None:
+            raise ProtocolError(BAD_ARGUMENT, f"{key} is for what=intrinsics only", field=key)
     if args["what"] == "extrinsics" and args.get("folder"):
         raise ProtocolError(
             BAD_ARGUMENT,
@@ -176,6 +180,9 @@ COMMANDS: dict[str, Command] = {
             (
                 Arg("what", "str", required=True, choices=("intrinsics", "extrinsics")),
                 Arg("folder", "str", help="intrinsics: folder of calibration images"),
+                Arg("board", "str", max_chars=16, help="intrinsics: inner corners COLSxROWS"),
+                Arg("square_mm", "number", lo=0.1, hi=10000.0, help="intrinsics: square size"),
+                Arg("degree", "int", lo=2, hi=12, help="intrinsics: polynomial degree"),
                 _IMAGE,
                 Arg("method", "str", max_chars=64, help="extrinsics method (core's names)"),
             ),

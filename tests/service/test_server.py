@@ -157,7 +157,6 @@ def test_missing_or_corrupt_calibration_blocks_motion(make_service) -> None:
 @pytest.mark.parametrize(
     ("cmd", "args", "component"),
     [
-        ("calibrate", {"what": "intrinsics", "folder": "/tmp"}, "intrinsic calibration"),
         ("calibrate", {"what": "extrinsics"}, "extrinsic calibration"),
         ("map", None, "laser mapping"),
         ("register_robot", None, "robot registration"),
@@ -295,3 +294,47 @@ def test_stop_right_after_a_move_request_leaves_the_arm_still(make_service) -> N
             time.sleep(0.3)
             assert not h.devices.arm.moving.is_set()
             assert b.call("status")["result"]["job"] is None
+
+
+def test_calibrate_intrinsics_errors_are_typed(service: Harness, tmp_path) -> None:
+    with service.client() as c:
+        args = {"what": "intrinsics", "folder": str(tmp_path / "none"), "square_mm": 20}
+        r = c.call("calibrate", args)
+        assert r["error"]["code"] == "bad_input" and "no such folder" in r["error"]["message"]
+        (tmp_path / "imgs").mkdir()
+        import cv2
+        import numpy as np
+
+        for i in range(3):
+            cv2.imwrite(str(tmp_path / "imgs" / f"{i}.png"), np.full((60, 80, 3), 128, np.uint8))
+        args["folder"] = str(tmp_path / "imgs")
+        r = c.call("calibrate", args, timeout_s=60)
+        assert r["error"]["code"] == "calibration_failed", r
+        assert "at least" in r["error"]["message"]
+        st = c.call("status")["result"]
+        assert st["state"] == "idle"
+        assert st["calibration"]["files"]["camera"]["health"] == "ok"
+
+
+@pytest.mark.reference
+def test_calibrate_intrinsics_through_the_service(make_service, reference_dir, tmp_path) -> None:
+    """The reference checkerboard set, calibrated through the protocol, lands in camera.json."""
+    h = make_service(calibrated=False)
+    folder = reference_dir / "intrinsics"
+    with h.client(timeout_s=120) as c:
+        r = c.call("calibrate", {"what": "intrinsics", "folder": str(folder), "square_mm": 116.0})
+        assert r["ok"], r
+        res = r["result"]
+        assert res["images_used"] == 9 and res["rms_px"] < 0.3
+        assert res["camera_serial"] == "FAKE-CAM-1"
+        st = c.call("status")["result"]
+        cam = st["calibration"]["files"]["camera"]
+        assert cam["health"] == "ok" and cam["camera_serial"] == "FAKE-CAM-1"
+        assert st["calibration"]["files"]["system"]["health"] == "missing"
+        assert st["motion_allowed"] is False
+    model = h.cell.store.camera_model()
+    assert model.image_size == (1920, 1920)
+    h.running.stop()
+    paths = entity_paths(h.cell.runlog_path or "")
+    assert {"/calibration/intrinsics/rms_px", "/calibration/intrinsics/parameters"} <= paths
+    assert "/intrinsics/image" in paths
