@@ -68,14 +68,21 @@ def finish_image(
     result: RenderResult,
     seed: int,
     degraded: bool,
+    brightness: float = 1.0,
 ) -> tuple[np.ndarray, dict[str, Any] | None]:
-    """Composite (and optionally degrade) a rendered frame; returns BGR uint8 and the settings."""
+    """Composite (and optionally degrade) a rendered frame; returns BGR uint8 and the settings.
+
+    `brightness` scales the light reaching the sensor (the sim camera's exposure x gain).
+    """
     spec = world.scene.laser
+    base, laser = result.base, result.laser
+    if brightness != 1.0:
+        base, laser = base * np.float32(brightness), laser * np.float32(brightness)
     if not degraded:
-        return to_bgr8(compose(result.base, result.laser, spec)), None
+        return to_bgr8(compose(base, laser, spec)), None
     rng = np.random.default_rng(seed)
     params = DegradeParams.draw(world.scene.degrade, rng)
-    return degrade(result.base, result.laser, spec, params, rng), params.to_dict()
+    return degrade(base, laser, spec, params, rng), params.to_dict()
 
 
 def render_world(
@@ -85,12 +92,13 @@ def render_world(
     degraded: bool | None = None,
     laser_on: bool | None = None,
     with_truth: bool = True,
+    brightness: float = 1.0,
 ) -> tuple[np.ndarray, dict[str, Any] | None]:
     """Render the world's current state: (BGR uint8 image, truth dict or None)."""
     on = world.laser_on if laser_on is None else laser_on
     deg = world.scene.degrade.enabled if degraded is None else degraded
     result = render_frame(world, model, laser_on=on)
-    image, settings = finish_image(world, result, seed, deg)
+    image, settings = finish_image(world, result, seed, deg, brightness)
     truth = build_truth(world, model, on, seed=seed, degraded=settings) if with_truth else None
     if truth is not None:
         truth["render"] = {

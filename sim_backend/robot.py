@@ -1,6 +1,6 @@
-"""The simulated UR arm: UR's published DH parameters, forward kinematics, a damped least-squares
-inverse kinematics for the simulator's own linear moves, and a pybullet multibody with simple
-geometry (cylinders along the DH offsets) plus a parallel gripper.
+"""The simulated UR arm: a pybullet multibody whose link frames follow UR's published DH chain
+(taken from the core's kinematics, `omnisort_hw.core.kinematics`), with simple geometry
+(cylinders along the DH offsets) and a parallel gripper.
 
 Frames: B is DH frame 0 (the controller's base frame); the flange is DH frame 6; the TCP is
 `tcp_offset_mm` along the flange's z. Millimetres and degrees at the interface, metres inside
@@ -16,107 +16,33 @@ import numpy as np
 import pybullet as p
 from scipy.spatial.transform import Rotation
 
-from sim_backend.geometry import homogeneous, rot_x, rot_z
+from omnisort_hw.core.kinematics import URModel, forward, get_model
+from sim_backend.geometry import homogeneous, rot_x
 from sim_backend.scene import GripperSpec
 
 MM = 1e-3
 
 
-@dataclass(frozen=True)
-class DHTable:
-    """Standard DH parameters of a UR model (UR's published table): d and a in mm, alpha in deg."""
-
-    d: tuple[float, ...]
-    a: tuple[float, ...]
-    alpha_deg: tuple[float, ...]
-    link_radius_mm: tuple[float, ...]
-
-
-_ALPHA = (90.0, 0.0, 0.0, 90.0, -90.0, 0.0)
-UR_DH: dict[str, DHTable] = {
-    "UR3e": DHTable(
-        (151.85, 0.0, 0.0, 131.05, 85.35, 92.1),
-        (0.0, -243.55, -213.2, 0.0, 0.0, 0.0),
-        _ALPHA,
-        (50.0, 45.0, 38.0, 32.0, 32.0, 30.0),
-    ),
-    "UR5e": DHTable(
-        (162.5, 0.0, 0.0, 133.3, 99.7, 99.6),
-        (0.0, -425.0, -392.2, 0.0, 0.0, 0.0),
-        _ALPHA,
-        (68.0, 60.0, 48.0, 40.0, 40.0, 36.0),
-    ),
-    "UR10e": DHTable(
-        (180.7, 0.0, 0.0, 174.15, 119.85, 116.55),
-        (0.0, -612.7, -571.55, 0.0, 0.0, 0.0),
-        _ALPHA,
-        (85.0, 78.0, 60.0, 48.0, 48.0, 44.0),
-    ),
+LINK_RADIUS_MM: dict[str, tuple[float, ...]] = {
+    "ur3e": (50.0, 45.0, 38.0, 32.0, 32.0, 30.0),
+    "ur5e": (68.0, 60.0, 48.0, 40.0, 40.0, 36.0),
+    "ur10e": (85.0, 78.0, 60.0, 48.0, 48.0, 44.0),
 }
 
 
-def dh_step(d: float, a: float, alpha_deg: float, theta_deg: float) -> np.ndarray:
-    """Rz(theta) Tz(d) Tx(a) Rx(alpha) as a 4x4 (mm)."""
-    T = homogeneous(rot_z(theta_deg), np.zeros(3))
-    F = homogeneous(rot_x(alpha_deg), np.array([a, 0.0, d]))
-    return T @ F
+def ur_model(name: str) -> URModel:
+    """The core's UR model (DH table, joint limits) for a scene's `robot.model`."""
+    return get_model(name)
 
 
-def forward_frames(dh: DHTable, q_deg: np.ndarray) -> list[np.ndarray]:
-    """Frames 0..6 in B (4x4, mm) for joints `q_deg`."""
-    frames = [np.eye(4)]
-    for i in range(6):
-        frames.append(frames[-1] @ dh_step(dh.d[i], dh.a[i], dh.alpha_deg[i], float(q_deg[i])))
-    return frames
+def tcp_tool(tcp_offset_mm: float) -> np.ndarray:
+    """The flange-to-TCP transform: `tcp_offset_mm` along the flange's z."""
+    return homogeneous(np.eye(3), np.array([0.0, 0.0, tcp_offset_mm]))
 
 
-def forward(dh: DHTable, q_deg: np.ndarray, tcp_offset_mm: float = 0.0) -> np.ndarray:
-    """T_B_tcp (4x4, mm): the flange pose moved `tcp_offset_mm` along its z."""
-    T = forward_frames(dh, q_deg)[-1]
-    out = T.copy()
-    out[:3, 3] = T[:3, 3] + T[:3, 2] * tcp_offset_mm
-    return out
-
-
-def _pose_error(T: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """6-vector (position mm, rotation vector rad) taking T to target, in B."""
-    dp = target[:3, 3] - T[:3, 3]
-    dr = Rotation.from_matrix(target[:3, :3] @ T[:3, :3].T).as_rotvec()
-    return np.concatenate([dp, dr])
-
-
-def inverse_numeric(
-    dh: DHTable,
-    target: np.ndarray,
-    q_seed_deg: np.ndarray,
-    tcp_offset_mm: float = 0.0,
-    tol_mm: float = 1e-3,
-    tol_rad: float = 1e-6,
-    max_iter: int = 200,
-) -> np.ndarray | None:
-    """Joints (deg) near `q_seed_deg` reaching `target` (T_B_tcp, mm), or None.
-
-    Damped least squares on a numerical Jacobian; used for the small steps of a linear move,
-    where the seed is the previous waypoint so the solution stays on the same branch.
-    """
-    q = np.deg2rad(np.asarray(q_seed_deg, float)).copy()
-    scale = np.array([1.0, 1.0, 1.0, 500.0, 500.0, 500.0])
-    for _ in range(max_iter):
-        err = _pose_error(forward(dh, np.rad2deg(q), tcp_offset_mm), target)
-        if np.all(np.abs(err[:3]) < tol_mm) and np.all(np.abs(err[3:]) < tol_rad):
-            return np.rad2deg(q)
-        J = np.empty((6, 6))
-        h = 1e-6
-        for k in range(6):
-            dq = q.copy()
-            dq[k] += h
-            J[:, k] = -_pose_error(forward(dh, np.rad2deg(dq), tcp_offset_mm), target) / h
-        J_s = J * scale[:, None]
-        e_s = err * scale
-        lam = 1e-2
-        step = np.linalg.solve(J_s.T @ J_s + lam * np.eye(6), -J_s.T @ e_s)
-        q += np.clip(step, -0.2, 0.2)
-    return None
+def tcp_pose(model: URModel, q_deg: np.ndarray, tcp_offset_mm: float) -> np.ndarray:
+    """T_B_tcp (4x4, mm) for joints `q_deg`, through the core's forward kinematics."""
+    return forward(model, np.asarray(q_deg, float), tcp_tool(tcp_offset_mm))
 
 
 def _cyl_frame(start: np.ndarray, end: np.ndarray) -> tuple[np.ndarray, list[float], float]:
@@ -196,14 +122,16 @@ class ArmBodies:
 
 def build_arm(
     client: int,
-    dh: DHTable,
+    model: URModel,
     T_S_B: np.ndarray,
     gripper: GripperSpec,
     pedestal_mm: float,
     rgba: list[float],
 ) -> ArmBodies:
     """Create the arm as one kinematic multibody whose link frames follow the DH chain."""
-    r = dh.link_radius_mm
+    r = LINK_RADIUS_MM[model.name]
+    d, a = model.d_mm, model.a_mm
+    alpha = np.rad2deg(model.alpha)
     base = _ShapeList()
     base.cylinder(np.array([0.0, 0.0, -pedestal_mm - 1.0]), np.array([0.0, 0.0, 40.0]), r[0] * 1.2)
     base_col, base_vis = base.build(client, [0.35, 0.36, 0.38, 1.0])
@@ -212,11 +140,11 @@ def build_arm(
         shapes = _ShapeList()
         ri = r[i]
         shapes.cylinder(np.array([0.0, 0.0, -1.2 * ri]), np.array([0.0, 0.0, 1.2 * ri]), ri)
-        top = np.array([0.0, 0.0, dh.d[i]])
-        if abs(dh.d[i]) > 1.0:
+        top = np.array([0.0, 0.0, d[i]])
+        if abs(d[i]) > 1.0:
             shapes.cylinder(np.zeros(3), top, 0.85 * ri)
-        if abs(dh.a[i]) > 1.0:
-            shapes.cylinder(top, top + np.array([dh.a[i], 0.0, 0.0]), 0.85 * ri)
+        if abs(a[i]) > 1.0:
+            shapes.cylinder(top, top + np.array([a[i], 0.0, 0.0]), 0.85 * ri)
         col, vis = shapes.build(client, rgba)
         cols.append(col)
         viss.append(vis)
@@ -224,8 +152,8 @@ def build_arm(
             positions.append([0.0, 0.0, 0.0])
             orns.append([0.0, 0.0, 0.0, 1.0])
         else:
-            positions.append([dh.a[i - 1] * MM, 0.0, dh.d[i - 1] * MM])
-            orns.append(list(Rotation.from_matrix(rot_x(dh.alpha_deg[i - 1])).as_quat()))
+            positions.append([a[i - 1] * MM, 0.0, d[i - 1] * MM])
+            orns.append(list(Rotation.from_matrix(rot_x(alpha[i - 1])).as_quat()))
         parents.append(i)
         jtypes.append(p.JOINT_REVOLUTE)
         axes.append([0.0, 0.0, 1.0])
@@ -240,8 +168,8 @@ def build_arm(
     col, vis = body.build(client, [0.20, 0.20, 0.22, 1.0])
     cols.append(col)
     viss.append(vis)
-    positions.append([dh.a[5] * MM, 0.0, dh.d[5] * MM])
-    orns.append(list(Rotation.from_matrix(rot_x(dh.alpha_deg[5])).as_quat()))
+    positions.append([a[5] * MM, 0.0, d[5] * MM])
+    orns.append(list(Rotation.from_matrix(rot_x(alpha[5])).as_quat()))
     parents.append(6)
     jtypes.append(p.JOINT_FIXED)
     axes.append([0.0, 0.0, 1.0])

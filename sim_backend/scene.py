@@ -616,10 +616,12 @@ def validate_scene(scene: Scene) -> None:
 
 
 def _check_robot(robot: RobotSpec) -> None:
-    from sim_backend.robot import UR_DH
+    from omnisort_hw.core.kinematics import UR_MODELS
 
-    if robot.model not in UR_DH:
-        raise ConfigError(f"robot.model: unknown model {robot.model!r} (known: {sorted(UR_DH)})")
+    if robot.model.lower() not in UR_MODELS:
+        raise ConfigError(
+            f"robot.model: unknown model {robot.model!r} (known: {', '.join(UR_MODELS)})"
+        )
     _positive(robot.pedestal_mm, "robot.pedestal_mm", strict=False)
     _positive(robot.joint_speed_deg_s, "robot.joint_speed_deg_s")
     _positive(robot.linear_speed_mm_s, "robot.linear_speed_mm_s")

@@ -24,7 +24,7 @@ from sim_backend.geometry import (
     rot_z,
 )
 from sim_backend.patterns import CheckerPattern, FloorPattern, Marker, WallPattern
-from sim_backend.robot import UR_DH, ArmBodies, build_arm, forward
+from sim_backend.robot import ArmBodies, build_arm, tcp_pose, ur_model
 from sim_backend.scene import BoardSpec, CubeSpec, Scene, TargetSpec
 
 MM = 1e-3
@@ -458,9 +458,10 @@ class SimWorld:
             np.array([robot.base_mm[0], robot.base_mm[1], self.floor_z + robot.pedestal_mm]),
         )
         self.T_S_B = T
+        self.ur = ur_model(robot.model)
         self.arm = build_arm(
             self.client,
-            UR_DH[robot.model],
+            self.ur,
             T,
             robot.gripper,
             robot.pedestal_mm,
@@ -514,7 +515,7 @@ class SimWorld:
         """T_B_tcp (mm) from the DH chain."""
         robot = self.scene.robot
         assert robot is not None
-        return forward(UR_DH[robot.model], self.joints(), robot.gripper.tcp_offset_mm)
+        return tcp_pose(self.ur, self.joints(), robot.gripper.tcp_offset_mm)
 
     def body_pose(self, body: int) -> np.ndarray:
         """4x4 pose of a body's base in S (mm)."""
