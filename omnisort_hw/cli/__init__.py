@@ -13,6 +13,7 @@ from omnisort_hw.errors import OmnisortError
 # returns the exit code. Heavy imports stay inside the command functions.
 COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.intrinsics_cmd",
+    "omnisort_hw.cli.extrinsics_cmd",
     "omnisort_hw.cli.serve_cmd",
     "omnisort_hw.cli.ctl_cmd",
     "omnisort_hw.cli.review_cmd",

@@ -1,0 +1,139 @@
+"""`omnisort extrinsics calibrate` and `omnisort map`: the camera-laser system from one image."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from omnisort_hw.errors import InputError
+
+
+def register(sub: Any) -> None:
+    ext = sub.add_parser("extrinsics", help="calibrate camera rotation and laser plane")
+    esub = ext.add_subparsers(dest="extrinsics_command", required=True, metavar="ACTION")
+    cal = esub.add_parser("calibrate", help="from one image of a calibration target")
+    cal.add_argument("image", type=Path)
+    cal.add_argument("--camera", type=Path, required=True, help="camera.json (intrinsics)")
+    cal.add_argument(
+        "--target", required=True, choices=("two-sided", "three-sided", "checkerboards")
+    )
+    cal.add_argument(
+        "--separation",
+        type=float,
+        default=None,
+        help="inner distance between the walls, mm (walls; default 1084.5)",
+    )
+    cal.add_argument("--board", default="9x6", help="inner corners COLSxROWS (checkerboards)")
+    cal.add_argument("--square", type=float, default=97.0, help="square size mm (checkerboards)")
+    cal.add_argument(
+        "--method",
+        choices=("joint", "paper", "method1", "method2"),
+        default=None,
+        help="default: the best one for the target",
+    )
+    cal.add_argument("--out", type=Path, required=True, help="system.json to write")
+    cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    cal.set_defaults(func=cmd_calibrate)
+
+    mp = sub.add_parser("map", help="laser pixels -> points on the laser plane (mm)")
+    mp.add_argument("image", type=Path)
+    mp.add_argument("--system", type=Path, required=True, help="system.json")
+    mp.add_argument("--json", action="store_true")
+    mp.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    mp.set_defaults(func=cmd_map)
+
+
+def load_system(path: Path) -> Any:
+    """system.json from the CLI or from the service's store (then its checksum is verified)."""
+    from omnisort_hw.core.extrinsics.common import SystemCalibration, load_system_json
+
+    raw = json.loads(path.read_text()) if path.is_file() else None
+    if isinstance(raw, dict) and "checksum" in raw:
+        from omnisort_hw.storage import read_calibration_file
+
+        record = read_calibration_file(path, "system")
+        return SystemCalibration.from_json(record.payload, source=str(path))
+    return load_system_json(path)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from omnisort_hw.core.camera_io import load_camera_json
+    from omnisort_hw.extrinsics_pipeline import calibrate_system, image_record, read_image
+    from omnisort_hw.fileio import atomic_write_json
+    from omnisort_hw.runlog import RunLog
+
+    if args.separation is not None and args.target == "checkerboards":
+        raise InputError("--separation is for the wall targets; boards take --board/--square")
+    try:
+        cols, rows = (int(v) for v in args.board.lower().split("x"))
+    except ValueError as exc:
+        raise InputError(f"--board must look like 9x6, got {args.board!r}") from exc
+    model, _ = load_camera_json(args.camera)
+    image = read_image(args.image)
+    with RunLog(args.log) as log:
+        calib = calibrate_system(
+            image,
+            model,
+            args.target,
+            args.method,
+            separation_mm=args.separation if args.separation is not None else 1084.5,
+            board=(cols, rows),
+            square_mm=args.square,
+            source=str(args.image),
+            log=log,
+        )
+    calib.image = image_record(args.image)
+    payload = calib.to_json()
+    payload["elapsed_s"] = round(calib.elapsed_s, 4)
+    atomic_write_json(args.out, payload)
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "out": str(args.out),
+                    "parameters": calib.parameters(),
+                    "std": calib.std,
+                    "residuals": calib.residuals,
+                    "method": calib.method,
+                }
+            )
+        )
+    else:
+        print(f"system calibration ({calib.method}) written to {args.out}")
+        for key, value in calib.parameters().items():
+            std = calib.std.get(key)
+            extra = f"  +- {std:.4f}" if std is not None else ""
+            print(f"  {key:<20} {value:10.4f}{extra}")
+    return 0
+
+
+def cmd_map(args: argparse.Namespace) -> int:
+    from omnisort_hw.core.laser_stripe import laser_stripe_points
+    from omnisort_hw.core.mapping import pixels_to_plane, segments
+    from omnisort_hw.extrinsics_pipeline import check_image_size, read_image
+    from omnisort_hw.runlog import RunLog
+
+    calib = load_system(args.system)
+    image = read_image(args.image)
+    check_image_size(image, calib.model, str(args.image))
+    pixels = laser_stripe_points(image)
+    points = pixels_to_plane(pixels, calib)
+    segs = segments(points, calib)
+    with RunLog(args.log) as log:
+        log.image("map/image", image)
+        log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
+        log.points3d("map/points_S", points[~(points != points).any(axis=1)], color=(255, 0, 0))
+    result = {"points": len(pixels), "segments": [s.summary() for s in segs]}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{len(pixels)} laser points, {len(segs)} segments")
+        for i, s in enumerate(segs):
+            print(
+                f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"
+                f"  bearing {s.bearing_deg:7.1f} deg  length {s.length_mm:7.1f} mm"
+            )
+    return 0

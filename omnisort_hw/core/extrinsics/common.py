@@ -1,0 +1,147 @@
+"""The result of every extrinsic method, and system.json's layout (keys shared with truth.json)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.frames import camera_angles, camera_rotation, laser_angles, laser_normal
+from omnisort_hw.errors import CalibrationFileError, InputError
+
+PARAMETERS = (
+    "cam_roll_deg",
+    "cam_pitch_deg",
+    "cam_yaw_deg",
+    "laser_roll_deg",
+    "laser_pitch_deg",
+    "laser_distance_mm",
+)
+
+
+@dataclass
+class SystemCalibration:
+    """Camera rotation R_SC and laser plane (normal in S, distance d below the viewpoint)."""
+
+    model: OcamModel
+    R_SC: np.ndarray
+    laser_normal: np.ndarray
+    laser_distance_mm: float
+    method: str
+    target: dict[str, Any] = field(default_factory=dict)
+    residuals: dict[str, Any] = field(default_factory=dict)
+    std: dict[str, float] = field(default_factory=dict)
+    robot_base: dict[str, Any] | None = None
+    image: dict[str, Any] | None = None
+    elapsed_s: float = 0.0
+
+    @classmethod
+    def from_angles(
+        cls, model: OcamModel, angles_deg: dict[str, float], method: str, **kw: Any
+    ) -> SystemCalibration:
+        r = np.radians
+        R = camera_rotation(
+            r(angles_deg["cam_roll_deg"]),
+            r(angles_deg["cam_pitch_deg"]),
+            r(angles_deg["cam_yaw_deg"]),
+        )
+        n = laser_normal(r(angles_deg["laser_roll_deg"]), r(angles_deg["laser_pitch_deg"]))
+        return cls(model, R, n, float(angles_deg["laser_distance_mm"]), method, **kw)
+
+    def parameters(self) -> dict[str, float]:
+        """The six calibrated figures in the units of the comparison tables."""
+        roll, pitch, yaw = np.degrees(camera_angles(self.R_SC))
+        l_roll, l_pitch = np.degrees(laser_angles(self.laser_normal))
+        return {
+            "cam_roll_deg": float(roll),
+            "cam_pitch_deg": float(pitch),
+            "cam_yaw_deg": float(yaw),
+            "laser_roll_deg": float(l_roll),
+            "laser_pitch_deg": float(l_pitch),
+            "laser_distance_mm": float(self.laser_distance_mm),
+        }
+
+    def to_json(self) -> dict[str, Any]:
+        """system.json: the keys of the architecture note, comparable with truth.json."""
+        p = self.parameters()
+        out: dict[str, Any] = {
+            "camera": self.model.to_dict(),
+            "camera_rotation": {
+                "roll_deg": p["cam_roll_deg"],
+                "pitch_deg": p["cam_pitch_deg"],
+                "yaw_deg": p["cam_yaw_deg"],
+                "matrix": self.R_SC.tolist(),
+            },
+            "laser_plane": {
+                "roll_deg": p["laser_roll_deg"],
+                "pitch_deg": p["laser_pitch_deg"],
+                "distance_mm": p["laser_distance_mm"],
+                "normal": [float(x) for x in self.laser_normal],
+            },
+            "target": self.target,
+            "method": self.method,
+            "residuals": self.residuals,
+            "std": self.std,
+            "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        }
+        if self.robot_base is not None:
+            out["robot_base"] = self.robot_base
+        if self.image is not None:
+            out["image"] = self.image
+        return out
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any], source: str = "system.json") -> SystemCalibration:
+        """Read system.json (or truth.json); a missing or malformed key names the file and key."""
+        try:
+            model = OcamModel.from_dict(data["camera"], source=f"{source}: camera")
+            R = np.asarray(data["camera_rotation"]["matrix"], float)
+            n = np.asarray(data["laser_plane"]["normal"], float)
+            d = float(data["laser_plane"]["distance_mm"])
+        except KeyError as exc:
+            raise CalibrationFileError(f"{source}: missing key {exc.args[0]!r}") from exc
+        except (TypeError, ValueError, InputError) as exc:
+            raise CalibrationFileError(f"{source}: malformed system calibration ({exc})") from exc
+        if R.shape != (3, 3) or n.shape != (3,) or not np.isfinite(d) or d <= 0:
+            raise CalibrationFileError(f"{source}: camera_rotation/laser_plane have wrong shapes")
+        if abs(np.linalg.det(R) - 1.0) > 1e-6 or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+            raise CalibrationFileError(f"{source}: camera_rotation.matrix is not a rotation")
+        return cls(
+            model=model,
+            R_SC=R,
+            laser_normal=n / np.linalg.norm(n),
+            laser_distance_mm=d,
+            method=str(data.get("method", "truth")),
+            target=dict(data.get("target", {})),
+            residuals=dict(data.get("residuals", {})),
+            std=dict(data.get("std", {})),
+            robot_base=data.get("robot_base"),
+            image=data.get("image"),
+        )
+
+
+def load_system_json(path: str | Path) -> SystemCalibration:
+    """Read a system.json / truth.json file with errors that name it."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise CalibrationFileError(f"{p}: system calibration file not found") from exc
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CalibrationFileError(f"{p}: not a readable JSON system calibration ({exc})") from exc
+    if not isinstance(data, dict):
+        raise CalibrationFileError(f"{p}: top level is not a JSON object")
+    return SystemCalibration.from_json(data, source=str(p))
+
+
+def pixel_scale(model: OcamModel, rays_C: np.ndarray) -> np.ndarray:
+    """Pixels per radian of a small angle at each ray (d rho / d theta of the inverse model),
+    used to express angular residuals as image pixels, where the noise is."""
+    theta = model.angle_from_axis(rays_C)
+    deriv = np.polynomial.polynomial.polyder(model.inv_poly)
+    return np.abs(np.polynomial.polynomial.polyval(theta, deriv))

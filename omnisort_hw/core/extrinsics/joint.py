@@ -1,0 +1,308 @@
+"""`joint`: camera rotation and laser plane from one image of the two-sided target.
+
+1. Closed-form start. Each wall's border is a straight 3D line, so its rays span a plane through
+   the viewpoint; the two planes meet along the common wall direction Y. The A-D and B-C
+   segments (markers at equal positions along the walls) are perpendicular to the walls, which
+   gives X. With the rotation, the border planes place the walls (known separation D sets the
+   scale) and the laser rays, cut with the wall planes, give 3D points to fit the laser plane.
+2. One robust least-squares refinement of all unknowns together: camera roll/pitch/yaw, laser
+   roll/pitch/distance, and the nuisance geometry (left wall X, border height, the markers'
+   positions along the walls and heights). Residuals are angles between observed rays and the
+   model's lines/points, scaled to pixels by the lens' local scale, so every observation is
+   weighted by the image noise it carries. The covariance of the solution gives each
+   parameter's standard deviation.
+
+Observability: pitch (about Y, the wall direction) is fixed only through the A-D / B-C
+markers and the equal height of the borders; its standard deviation is reported as measured.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.extrinsics.common import PARAMETERS, SystemCalibration, pixel_scale
+from omnisort_hw.core.features import TargetFeatures
+from omnisort_hw.core.frames import (
+    camera_angles,
+    camera_rotation,
+    great_circle_normal,
+    laser_angles,
+    laser_normal,
+    nearest_rotation,
+    rays_to_plane,
+)
+from omnisort_hw.errors import CalibrationError
+
+SIDES = ("left", "right")
+BORDER_MARKERS = ("border_near", "border_far")
+FLOOR_MARKERS = ("floor_near", "floor_far")
+
+
+@dataclass
+class _Obs:
+    """Observed rays in C with their pixel scales, per wall."""
+
+    border: dict[str, np.ndarray]
+    floor: dict[str, np.ndarray]
+    laser: dict[str, np.ndarray]
+    markers: dict[tuple[str, str], np.ndarray]
+    scale_border: dict[str, np.ndarray]
+    scale_floor: dict[str, np.ndarray]
+    scale_laser: dict[str, np.ndarray]
+    scale_markers: dict[tuple[str, str], float]
+
+
+def observations(features: TargetFeatures, model: OcamModel) -> _Obs:
+    """Rays of every extracted feature of the two side walls."""
+    border, floor, laser, markers = {}, {}, {}, {}
+    sb, sf, sl, sm = {}, {}, {}, {}
+    for side in SIDES:
+        if side not in features.walls:
+            raise CalibrationError(f"target features have no {side} wall")
+        wall = features.walls[side]
+        if len(wall.border_px) < 5 or len(wall.laser_px) < 5:
+            raise CalibrationError(
+                f"{side} wall: {len(wall.border_px)} border and {len(wall.laser_px)} laser points; "
+                "at least 5 of each are needed"
+            )
+        border[side] = model.pixel_to_ray(wall.border_px)
+        floor[side] = model.pixel_to_ray(np.asarray(wall.floor_px, float).reshape(-1, 2))
+        sf[side] = pixel_scale(model, floor[side])
+        laser[side] = model.pixel_to_ray(wall.laser_px)
+        sb[side] = pixel_scale(model, border[side])
+        sl[side] = pixel_scale(model, laser[side])
+        for name in (*BORDER_MARKERS, *FLOOR_MARKERS):
+            if name not in wall.markers_px:
+                raise CalibrationError(f"{side} wall: marker {name} missing")
+            ray = model.pixel_to_ray(np.asarray(wall.markers_px[name], float)[None, :])[0]
+            markers[(side, name)] = ray
+            sm[(side, name)] = float(pixel_scale(model, ray[None, :])[0])
+    if min(len(floor[s]) for s in SIDES) < 5:
+        floor = {s: np.zeros((0, 3)) for s in SIDES}
+        sf = {s: np.zeros(0) for s in SIDES}
+    return _Obs(border, floor, laser, markers, sb, sf, sl, sm)
+
+
+def _ad_direction(a: np.ndarray, d: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Direction from A to D (rays a, d) given that A - D is perpendicular to y."""
+    v = d - (d @ y) / (a @ y) * a
+    return v / np.linalg.norm(v)
+
+
+def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
+    """Initial estimate of all unknowns from the target's geometry (no iteration)."""
+    m = {s: great_circle_normal(obs.border[s]) for s in SIDES}
+    y = np.cross(m["left"], m["right"])
+    y /= np.linalg.norm(y)
+    along = obs.markers[("left", "border_far")] - obs.markers[("left", "border_near")]
+    if y @ along < 0:
+        y = -y
+    xs = [
+        _ad_direction(obs.markers[("left", n)], obs.markers[("right", n)], y)
+        for n in (*BORDER_MARKERS, *FLOOR_MARKERS)
+    ]
+    x = np.mean(xs, axis=0)
+    x -= (x @ y) * y
+    x /= np.linalg.norm(x)
+    R = nearest_rotation(np.stack([x, y, np.cross(x, y)]))
+    # Border plane normal in S is parallel to (-z_b, 0, x_w): z_b / x_w = -m_x / m_z.
+    k = {}
+    for s in SIDES:
+        mS = R @ m[s]
+        k[s] = -mS[0] / mS[2]
+    if abs(k["left"] - k["right"]) < 1e-9:
+        raise CalibrationError("border lines are degenerate (walls not seen apart)")
+    x_left = k["right"] * separation / (k["left"] - k["right"])
+    z_b = k["left"] * x_left
+    walls = {"left": x_left, "right": x_left + separation}
+    pts = np.concatenate(
+        [rays_to_plane(obs.laser[s] @ R.T, np.array([1.0, 0.0, 0.0]), walls[s]) for s in SIDES]
+    )
+    centroid = pts.mean(axis=0)
+    n = great_circle_normal(pts - centroid)
+    if n[2] < 0:
+        n = -n
+    d = -(n @ centroid) / n[2]
+    marker_pts = {
+        key: rays_to_plane((R @ ray)[None, :], np.array([1.0, 0.0, 0.0]), walls[key[0]])[0]
+        for key, ray in obs.markers.items()
+    }
+    y_near = np.mean([p[1] for (s, nm), p in marker_pts.items() if nm.endswith("near")])
+    y_far = np.mean([p[1] for (s, nm), p in marker_pts.items() if nm.endswith("far")])
+    z_top = np.mean([p[2] for (s, nm), p in marker_pts.items() if nm.startswith("border")])
+    z_floor = np.mean([p[2] for (s, nm), p in marker_pts.items() if nm.startswith("floor")])
+    roll, pitch, yaw = camera_angles(R)
+    l_roll, l_pitch = laser_angles(n)
+    x0 = [roll, pitch, yaw, l_roll, l_pitch, d, x_left, z_b, y_near, y_far, z_top, z_floor]
+    if len(obs.floor["left"]):
+        # The wall/floor line: its plane normal in S is ~ (-z_f, 0, x_w), as for the border.
+        mf = R @ great_circle_normal(obs.floor["left"])
+        x0.append(-mf[0] / mf[2] * x_left)
+    return {
+        "x": np.array(x0),
+        "R": R,
+        "normal": n,
+        "d": d,
+    }
+
+
+NAMES = (
+    "cam_roll",
+    "cam_pitch",
+    "cam_yaw",
+    "laser_roll",
+    "laser_pitch",
+    "laser_distance",
+    "wall_left_x",
+    "border_z",
+    "marker_near_y",
+    "marker_far_y",
+    "marker_top_z",
+    "marker_floor_z",
+    "floor_z",
+)  # floor_z only when the wall/floor lines were extracted
+
+
+def _tangent_basis(rays: np.ndarray) -> np.ndarray:
+    """Two unit vectors perpendicular to each ray, (N, 2, 3)."""
+    helper = np.where(np.abs(rays[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(rays, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(rays, t1)
+    return np.stack([t1, t2], axis=1)
+
+
+class JointProblem:
+    """Residuals (pixels) of all observations for a parameter vector (see NAMES)."""
+
+    def __init__(self, obs: _Obs, separation: float) -> None:
+        self.obs = obs
+        self.separation = separation
+        self.marker_keys = sorted(obs.markers)
+        self.marker_rays = np.array([obs.markers[k] for k in self.marker_keys])
+        self.marker_basis = _tangent_basis(self.marker_rays)
+        self.marker_scale = np.array([obs.scale_markers[k] for k in self.marker_keys])
+
+    def split(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, float]]:
+        R = camera_rotation(p[0], p[1], p[2])
+        n = laser_normal(p[3], p[4])
+        geom = {
+            "left": p[6],
+            "right": p[6] + self.separation,
+            "z_b": p[7],
+            "y_near": p[8],
+            "y_far": p[9],
+            "z_top": p[10],
+            "z_floor": p[11],
+        }
+        if len(p) > 12:
+            geom["z_f"] = p[12]
+        return R, n, float(p[5]), geom
+
+    def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
+        R, n, d, g = self.split(p)
+        out: dict[str, np.ndarray] = {}
+        for s in SIDES:
+            xw = g[s]
+            # Border line: X = xw, Z = z_b, along Y. Its great circle normal ~ (-z_b, 0, xw).
+            mb = np.array([-g["z_b"], 0.0, xw])
+            mb /= np.linalg.norm(mb)
+            out[f"border_{s}"] = (self.obs.border[s] @ (R.T @ mb)) * self.obs.scale_border[s]
+            if "z_f" in g:
+                mf = np.array([-g["z_f"], 0.0, xw])
+                mf /= np.linalg.norm(mf)
+                out[f"floor_{s}"] = (self.obs.floor[s] @ (R.T @ mf)) * self.obs.scale_floor[s]
+            # Laser line: wall plane X = xw meets n.(p - (0, 0, -d)) = 0.
+            p0 = np.array([xw, 0.0, -d - n[0] * xw / n[2]])
+            u = np.array([0.0, -n[2], n[1]])
+            ml = np.cross(p0, u)
+            ml /= np.linalg.norm(ml)
+            out[f"laser_{s}"] = (self.obs.laser[s] @ (R.T @ ml)) * self.obs.scale_laser[s]
+        pts = np.array(
+            [
+                [
+                    g[side],
+                    g["y_near"] if name.endswith("near") else g["y_far"],
+                    g["z_top"] if name.startswith("border") else g["z_floor"],
+                ]
+                for side, name in self.marker_keys
+            ]
+        )
+        dirs = pts @ R  # rows: R^T p
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        out["markers"] = (
+            np.einsum("nkj,nj->nk", self.marker_basis, dirs) * self.marker_scale[:, None]
+        ).ravel()
+        return out
+
+    def residuals(self, p: np.ndarray) -> np.ndarray:
+        return np.concatenate(list(self.residual_blocks(p).values()))
+
+
+def calibrate_joint(
+    features: TargetFeatures, model: OcamModel, separation_mm: float
+) -> SystemCalibration:
+    """The default method: closed-form start, then one robust joint refinement."""
+    t0 = time.perf_counter()
+    obs = observations(features, model)
+    start = closed_form(obs, separation_mm)
+    prob = JointProblem(obs, separation_mm)
+    # Robust pass (soft L1 with a 1 px knee) so stray extracted points cannot pull the fit, then
+    # a plain least-squares pass on the inliers' scale for the covariance.
+    robust = least_squares(
+        prob.residuals,
+        start["x"],
+        method="trf",
+        loss="soft_l1",
+        f_scale=1.0,
+        x_scale="jac",
+        max_nfev=200,
+    )
+    sol = least_squares(prob.residuals, robust.x, method="lm", x_scale="jac", max_nfev=200)
+    p = sol.x
+    res = sol.fun
+    dof = max(res.size - p.size, 1)
+    sigma2 = float(res @ res) / dof
+    J = sol.jac
+    cov = np.linalg.pinv(J.T @ J) * sigma2
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    R, n, d, geom = prob.split(p)
+    blocks = prob.residual_blocks(p)
+    calib = SystemCalibration(
+        model=model,
+        R_SC=R,
+        laser_normal=n,
+        laser_distance_mm=d,
+        method="joint",
+        target={
+            "kind": features.kind,
+            "separation_mm": separation_mm,
+            "wall_left_x_mm": float(geom["left"]),
+            "wall_right_x_mm": float(geom["right"]),
+            "border_z_mm": float(geom["z_b"]),
+        },
+        residuals={
+            "rms_px": float(np.sqrt(np.mean(res**2))),
+            **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
+            "observations": int(res.size),
+        },
+    )
+    deg = np.degrees
+    calib.std = {
+        PARAMETERS[0]: float(deg(std[0])),
+        PARAMETERS[1]: float(deg(std[1])),
+        PARAMETERS[2]: float(deg(std[2])),
+        PARAMETERS[3]: float(deg(std[3])),
+        PARAMETERS[4]: float(deg(std[4])),
+        PARAMETERS[5]: float(std[5]),
+        "border_z_mm": float(std[7]),
+        "wall_left_x_mm": float(std[6]),
+    }
+    calib.elapsed_s = time.perf_counter() - t0
+    return calib

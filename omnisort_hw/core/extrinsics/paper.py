@@ -1,0 +1,182 @@
+"""`paper`: the published method, a chain of one-dimensional minimisations.
+
+Each step minimises one measure over one angle (bounded Brent search), the other angles held,
+with the extracted pixels projected onto a horizontal plane (for the laser: onto a plane
+parallel to the candidate laser plane):
+
+1. the two border lines AB and DC parallel,
+2. the border lines parallel to Y,
+3. their ends lined up (A level with D, B with C),
+4. the two laser segments parallel,
+5. the laser segments' ends lined up,
+6. the measured separation of the laser segments equal to D (sets the distance d).
+
+The paper names the angle of each step in its own frame. In this project's frame (geometry.md:
+roll about X, pitch about Y along the walls, yaw about Z) the measures control, in order:
+camera roll, camera yaw, camera pitch, laser roll, laser pitch, laser distance; a rotation
+about the wall direction leaves the projected borders parallel, which is why pitch comes from
+the ends. The chain is repeated (at most `passes` times) until no angle moves by more than
+0.001 degree, since each step is solved with the later angles still at their old values.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.extrinsics.joint import observations
+from omnisort_hw.core.features import TargetFeatures
+from omnisort_hw.core.frames import camera_rotation, great_circle_normal, laser_normal
+
+BOUND = np.radians(20.0)
+SIDES = ("left", "right")
+
+
+def _project_horizontal(rays_S: np.ndarray) -> np.ndarray:
+    """Central projection onto the horizontal plane Z = -1 (X, Y)."""
+    return rays_S[:, :2] / -rays_S[:, 2:3]
+
+
+def _direction(points: np.ndarray) -> np.ndarray:
+    """Principal direction of 2D points, oriented towards +Y."""
+    c = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(c, full_matrices=False)
+    v = vt[0]
+    return v if v[1] >= 0 else -v
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b))
+
+
+def _minimise(fun: object, x0: float) -> float:
+    res = minimize_scalar(
+        fun, bounds=(x0 - BOUND, x0 + BOUND), method="bounded", options={"xatol": 1e-7}
+    )
+    return float(res.x)
+
+
+def _laser_ends(
+    laser_rays: np.ndarray,
+    marker_near: np.ndarray,
+    marker_far: np.ndarray,
+    floor_near: np.ndarray,
+    floor_far: np.ndarray,
+) -> np.ndarray:
+    """Rays where a wall's laser line crosses the vertical marker lines at its two ends."""
+    m_laser = great_circle_normal(laser_rays)
+    ends = []
+    for top, bottom in ((marker_near, floor_near), (marker_far, floor_far)):
+        m_vertical = np.cross(top, bottom)
+        r = np.cross(m_laser, m_vertical)
+        r /= np.linalg.norm(r)
+        ends.append(r if r @ (top + bottom) > 0 else -r)
+    return np.array(ends)
+
+
+class _Chain:
+    """The measures of the chain, each a function of the angles it is minimised over."""
+
+    def __init__(self, obs: Any, ends: dict[str, np.ndarray]) -> None:
+        self.obs = obs
+        self.ends = ends
+
+    def _borders(self, r: float, p: float, y: float) -> list[np.ndarray]:
+        R = camera_rotation(r, p, y)
+        return [_project_horizontal(self.obs.border[s] @ R.T) for s in SIDES]
+
+    def borders_parallel(self, r: float, p: float, y: float) -> float:
+        a, b = (_direction(pts) for pts in self._borders(r, p, y))
+        return abs(_angle_between(a, b))
+
+    def borders_along_y(self, r: float, p: float, y: float) -> float:
+        axis = np.array([0.0, 1.0])
+        return sum(abs(_angle_between(_direction(b), axis)) for b in self._borders(r, p, y))
+
+    def ends_mismatch(self, r: float, p: float, y: float) -> float:
+        R = camera_rotation(r, p, y)
+        c = {k: _project_horizontal((R @ v)[None, :])[0] for k, v in self.obs.markers.items()}
+        names = ("border_near", "border_far", "floor_near", "floor_far")
+        return float(sum((c[("left", n)][1] - c[("right", n)][1]) ** 2 for n in names))
+
+    @staticmethod
+    def plane_coords(R: np.ndarray, lr: float, lp: float, rays: np.ndarray) -> np.ndarray:
+        """Project rays onto a plane parallel to the candidate laser plane, in its 2D frame."""
+        n = laser_normal(lr, lp)
+        pts = rays @ R.T
+        pts = pts / -(pts @ n)[:, None]
+        e_y = np.cross(n, [1.0, 0.0, 0.0])
+        e_y /= np.linalg.norm(e_y)
+        e_x = np.cross(e_y, n)
+        return np.stack([pts @ e_x, pts @ e_y], axis=1)
+
+    def lasers_parallel(self, R: np.ndarray, lr: float, lp: float) -> float:
+        a, b = (_direction(self.plane_coords(R, lr, lp, self.obs.laser[s])) for s in SIDES)
+        return abs(_angle_between(a, b))
+
+    def laser_ends_mismatch(self, R: np.ndarray, lr: float, lp: float) -> float:
+        e = {s: self.plane_coords(R, lr, lp, self.ends[s]) for s in SIDES}
+        return float(np.sum((e["left"][:, 1] - e["right"][:, 1]) ** 2))
+
+
+def calibrate_paper(
+    features: TargetFeatures, model: OcamModel, separation_mm: float, passes: int = 5
+) -> SystemCalibration:
+    t0 = time.perf_counter()
+    obs = observations(features, model)
+    mk = obs.markers
+    ends = {
+        s: _laser_ends(
+            obs.laser[s],
+            mk[(s, "border_near")],
+            mk[(s, "border_far")],
+            mk[(s, "floor_near")],
+            mk[(s, "floor_far")],
+        )
+        for s in SIDES
+    }
+    chain = _Chain(obs, ends)
+    roll = pitch = yaw = l_roll = l_pitch = 0.0
+    for _ in range(passes):
+        before = np.array([roll, pitch, yaw, l_roll, l_pitch])
+        roll = _minimise(lambda r, p=pitch, y=yaw: chain.borders_parallel(r, p, y), roll)
+        yaw = _minimise(lambda y, r=roll, p=pitch: chain.borders_along_y(r, p, y), yaw)
+        pitch = _minimise(lambda p, r=roll, y=yaw: chain.ends_mismatch(r, p, y), pitch)
+        R = camera_rotation(roll, pitch, yaw)
+        l_roll = _minimise(lambda lr, R=R, lp=l_pitch: chain.lasers_parallel(R, lr, lp), l_roll)
+        l_pitch = _minimise(
+            lambda lp, R=R, lr=l_roll: chain.laser_ends_mismatch(R, lr, lp), l_pitch
+        )
+        moved = np.abs(np.array([roll, pitch, yaw, l_roll, l_pitch]) - before)
+        if moved.max() < np.radians(1e-3):
+            break
+    R = camera_rotation(roll, pitch, yaw)
+    n = laser_normal(l_roll, l_pitch)
+
+    def separation_error(d: float) -> float:
+        pts = {}
+        for s in SIDES:
+            rays = obs.laser[s] @ R.T
+            t = -d * n[2] / (rays @ n)
+            pts[s] = rays * t[:, None]
+        return (np.mean(pts["right"][:, 0]) - np.mean(pts["left"][:, 0]) - separation_mm) ** 2
+
+    res = minimize_scalar(
+        separation_error, bounds=(10.0, 20000.0), method="bounded", options={"xatol": 1e-6}
+    )
+    calib = SystemCalibration(
+        model=model,
+        R_SC=R,
+        laser_normal=n,
+        laser_distance_mm=float(res.x),
+        method="paper",
+        target={"kind": features.kind, "separation_mm": separation_mm},
+        residuals={"separation_error_mm": float(np.sqrt(res.fun))},
+    )
+    calib.elapsed_s = time.perf_counter() - t0
+    return calib
