@@ -14,10 +14,12 @@ from omnisort_hw.errors import OmnisortError
 COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.intrinsics_cmd",
     "omnisort_hw.cli.extrinsics_cmd",
+    "omnisort_hw.cli.evaluate_cmd",
     "omnisort_hw.cli.serve_cmd",
     "omnisort_hw.cli.ctl_cmd",
     "omnisort_hw.cli.review_cmd",
     "omnisort_hw.cli.devices_cmd",
+    "omnisort_hw.cli.sim_cmd",
 )
 
 

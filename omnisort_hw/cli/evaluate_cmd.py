@@ -1,0 +1,73 @@
+"""`omnisort evaluate table3`: the paper's comparison on simulated data (and other experiments)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    ev = sub.add_parser("evaluate", help="reproduce the published experiments on the simulator")
+    esub = ev.add_subparsers(dest="evaluate_command", required=True, metavar="EXPERIMENT")
+    t3 = esub.add_parser("table3", help="camera/laser calibration: all four methods vs truth")
+    t3.add_argument("--n", type=int, default=35, help="configurations (default 35)")
+    t3.add_argument("--seed", type=int, default=0)
+    t3.add_argument("--degraded", action="store_true", help="'real camera' degradation mode")
+    t3.add_argument("--width", type=int, default=None, help="render size (default 1920)")
+    t3.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help="dataset folder: read it if it holds this experiment, else render into it",
+    )
+    t3.add_argument("--json", action="store_true", help="print one JSON object")
+    t3.set_defaults(func=cmd_table3)
+    for extension in EXTENSIONS:
+        extension(esub)
+
+
+# Other experiments register here: each adds its own parser to the `evaluate` group.
+EXTENSIONS: list[Any] = []
+
+
+def _matching(data: Path, n: int, seed: int, degraded: bool) -> bool:
+    index = data / "dataset.json"
+    if not index.is_file():
+        return False
+    info = json.loads(index.read_text())
+    return (info.get("n"), info.get("seed"), bool(info.get("degraded"))) == (n, seed, degraded)
+
+
+def cmd_table3(args: argparse.Namespace) -> int:
+    from omnisort_hw.errors import InputError
+    from omnisort_hw.evaluation import evaluate_dataset, format_table
+
+    if args.n < 1:
+        raise InputError(f"--n must be at least 1, got {args.n}")
+    data = args.data or Path("build") / (
+        f"table3-n{args.n}-seed{args.seed}"
+        + ("-degraded" if args.degraded else "")
+        + (f"-w{args.width}" if args.width else "")
+    )
+    if not _matching(data, args.n, args.seed, args.degraded):
+        from sim_backend.dataset import make_dataset
+
+        print(f"rendering {args.n} configurations into {data}", file=sys.stderr)
+        make_dataset(
+            data,
+            "table3",
+            args.n,
+            args.seed,
+            width=args.width,
+            degraded=args.degraded,
+            progress=sys.stderr.isatty() or not args.json,
+        )
+    result = evaluate_dataset(data, progress=sys.stderr.isatty())
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_table(result))
+    return 0
