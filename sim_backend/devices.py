@@ -53,7 +53,7 @@ from omnisort_hw.errors import ConfigError, MotionRefusedError
 from sim_backend.api import camera_model_for, render_world
 from sim_backend.geometry import homogeneous, invert_transform
 from sim_backend.robot import tcp_pose, tcp_tool
-from sim_backend.scene import Scene, load_scene
+from sim_backend.scene import Scene, load_scene, sized
 from sim_backend.world import MM, SimWorld
 
 NOMINAL_EXPOSURE_MS = 10.0
@@ -82,13 +82,15 @@ class SimCell:
         """A cell from a scene (object, file or shipped name); `camera` overrides [camera] keys
         (e.g. width=640, height=640: the cube-map face size scales along)."""
         sc = scene if isinstance(scene, Scene) else load_scene(scene)
+        width, height = camera.pop("width", None), camera.pop("height", None)
+        sc = sized(sc, width, height)
         if camera:
-            sc = resize_scene(sc, **camera)
+            sc = sc.replace(camera=camera)
         return cls(sc, seed)
 
     @property
     def name(self) -> str:
-        """"sim:SCENE", used in device names."""
+        """ "sim:SCENE", used in device names."""
         return f"sim:{self.scene.name}"
 
     def render(
@@ -119,20 +121,6 @@ class SimCell:
     def close(self) -> None:
         """Disconnect pybullet now."""
         self._finalizer()
-
-
-def resize_scene(scene: Scene, width: int | None = None, height: int | None = None,
-                 **extra: Any) -> Scene:
-    """The scene with another image size; the cube-map faces scale with the width."""
-    cam: dict[str, Any] = dict(extra)
-    ren: dict[str, Any] = {}
-    if width is not None:
-        cam["width"] = int(width)
-        cam["height"] = int(height if height is not None else width)
-        ren["face_px"] = max(64, round(scene.render.face_px * width / scene.camera.width))
-    elif height is not None:
-        cam["height"] = int(height)
-    return scene.replace(camera=cam, render=ren) if ren else scene.replace(camera=cam)
 
 
 class _Connectable:
@@ -350,8 +338,7 @@ class SimGripper(Gripper):
                     [0.0, 0.0, 0.0, 1.0],
                     physicsClientId=world.client,
                 )
-                p.changeConstraint(self._constraint, maxForce=2000.0,
-                                   physicsClientId=world.client)
+                p.changeConstraint(self._constraint, maxForce=2000.0, physicsClientId=world.client)
                 self._held = body
             world.step(int(0.2 / world.time_step))
             self._closed = True
@@ -449,8 +436,9 @@ class SimArm(_Connectable, Arm):
     def stop(self) -> None:
         self._stop.set()
 
-    def _plan_limits(self, joint_speed: float, joint_accel: float, lin_speed: float,
-                     lin_accel: float) -> PlanLimits:
+    def _plan_limits(
+        self, joint_speed: float, joint_accel: float, lin_speed: float, lin_accel: float
+    ) -> PlanLimits:
         rate = 1.0 / self.cell.world.time_step
         return PlanLimits(
             joint_speed_deg_s=joint_speed,
@@ -500,9 +488,7 @@ class SimArm(_Connectable, Arm):
         self.safety_status().raise_if_stopped(self.name)
         limits = self._plan_limits(self.joint_speed, self.joint_accel, v, a)
         try:
-            traj = plan_linear_move(
-                self.model, self.joint_positions(), T, limits, tool=self.tool
-            )
+            traj = plan_linear_move(self.model, self.joint_positions(), T, limits, tool=self.tool)
         except (MotionRefusedError, ValueError) as exc:
             raise MotionLimitError(f"{self.name}: linear move refused: {exc}") from None
         self._execute(traj, timeout_s, "linear move")
@@ -645,8 +631,14 @@ class SimWristCamera(_Connectable, Camera):
 
     _kind = "wrist_camera"
 
-    def __init__(self, cell: SimCell, width: int = 320, height: int = 240,
-                 fov_deg: float = 70.0, offset_mm: float = 40.0) -> None:
+    def __init__(
+        self,
+        cell: SimCell,
+        width: int = 320,
+        height: int = 240,
+        fov_deg: float = 70.0,
+        offset_mm: float = 40.0,
+    ) -> None:
         super().__init__(cell)
         if cell.world.arm is None:
             raise DeviceConfigError(
@@ -683,9 +675,7 @@ class SimWristCamera(_Connectable, Camera):
             eye = T[:3, 3] * MM
             target = eye + T[:3, 2]
             view = p.computeViewMatrix(list(eye), list(target), list(-T[:3, 0]))
-            proj = p.computeProjectionMatrixFOV(
-                self.fov_deg, self.width / self.height, 0.01, 10.0
-            )
+            proj = p.computeProjectionMatrixFOV(self.fov_deg, self.width / self.height, 0.01, 10.0)
             _, _, rgba, _, seg = p.getCameraImage(
                 self.width,
                 self.height,

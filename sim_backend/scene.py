@@ -665,6 +665,16 @@ def load_scene(path: str | Path) -> Scene:
     return scene_from_dict(data, p.parent, str(p))
 
 
+def sized(scene: Scene, width: int | None, height: int | None = None) -> Scene:
+    """The scene rendered at another image size; the cube-map faces scale with the width."""
+    if width is None or (width == scene.camera.width and (height or width) == scene.camera.height):
+        return scene
+    face = max(64, round(scene.render.face_px * width / scene.camera.width))
+    return scene.replace(
+        camera={"width": int(width), "height": int(height or width)}, render={"face_px": face}
+    )
+
+
 def shipped_scenes() -> list[str]:
     """Names of the scenes shipped in `sim_backend/scenes`."""
     return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
