@@ -26,7 +26,7 @@ def _import_pybullet_quietly() -> None:
         sys.stdout.flush()
         saved = os.dup(1)
     except (OSError, ValueError, AttributeError):
-        import pybullet  # noqa: F401
+        import pybullet
 
         return
     try:
