@@ -27,10 +27,16 @@ _BATCH = 8000
 
 @dataclass(frozen=True)
 class LaserPlane:
-    """n . X + d = 0 in S (mm); `emitter` = (0, 0, -d); e1, e2 span the plane."""
+    """The plane through the emitter (0, 0, -d) with unit normal n (geometry.md), in S (mm):
+    n . X + d n_z = 0. e1, e2 span the plane."""
 
     normal: np.ndarray
     distance: float
+
+    @property
+    def offset(self) -> float:
+        """The plane's constant: n . X + offset = 0 (offset = d n_z, so the emitter is on it)."""
+        return float(self.distance * self.normal[2])
 
     @property
     def emitter(self) -> np.ndarray:
@@ -47,7 +53,7 @@ class LaserPlane:
 
     def signed_distance(self, pts: np.ndarray) -> np.ndarray:
         """Signed distance (mm) of points (..., 3) to the plane."""
-        return np.asarray(pts) @ self.normal + self.distance
+        return np.asarray(pts) @ self.normal + self.offset
 
 
 def ray_hits(
@@ -140,7 +146,7 @@ def laser_polylines(
     for name, body, rect in world.laser_rects():
         if body in world.info.no_laser:
             continue
-        seg = rect.plane_segment(plane.normal, -plane.distance)
+        seg = rect.plane_segment(plane.normal, -plane.offset)
         if seg is None:
             continue
         a, b = seg

@@ -480,7 +480,7 @@ class Shader:
         if self.no_laser.size:
             ok &= ~np.isin(seg, self.no_laser)
         idx = np.flatnonzero(ok)
-        s = t[idx] * (rays[idx] @ self.plane.normal.astype(np.float32)) + self.plane.distance
+        s = t[idx] * (rays[idx] @ self.plane.normal.astype(np.float32)) + self.plane.offset
         near = np.abs(s) < 5.0 * self.sigma
         idx, s = idx[near], s[near]
         if idx.size == 0:
