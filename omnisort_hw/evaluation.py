@@ -41,6 +41,48 @@ MAPPING_DISTANCES_MM = (300.0, 600.0, 900.0, 1200.0, 1500.0)
 MAPPING_BEARINGS_DEG = (0.0, 90.0, 180.0, 270.0)
 
 
+_TRUTH_MARKERS = {
+    "border.near": "border_near",
+    "border.far": "border_far",
+    "low.near": "floor_near",
+    "low.far": "floor_far",
+}
+_INNER_FACE = {"left": "wall_left.+x", "right": "wall_right.-x"}
+
+
+def features_from_truth(truth: dict[str, Any], points: int = 100) -> Any:
+    """Two-sided target features made from the simulator's truth instead of the image: border
+    and wall/floor lines projected from the wall geometry, the exact laser polylines on the
+    inner faces, the marker centres. With them a method's error is the solver's alone."""
+    from omnisort_hw.core.features import TargetFeatures, WallFeatures
+
+    model = OcamModel.from_dict(truth["camera"])
+    R = np.asarray(truth["camera_rotation"]["matrix"], float)
+    s = np.linspace(0.05, 0.95, points)[:, None]
+    walls = {}
+    for wall in truth["target"]["walls"]:
+        a, b = np.asarray(wall["border_segment_S_mm"], float)
+        floor_z = float(truth["target"]["floor_z_mm"])
+        fa, fb = a.copy(), b.copy()
+        fa[2] = fb[2] = floor_z
+        laser = [
+            np.asarray(p["points_px"], float)
+            for p in truth["laser_polylines_px"]
+            if p["surface"] == _INNER_FACE[wall["name"]]
+        ]
+        walls[wall["name"]] = WallFeatures(
+            border_px=model.ray_to_pixel((a + s * (b - a)) @ R),
+            laser_px=np.concatenate(laser) if laser else np.zeros((0, 2)),
+            markers_px={
+                _TRUTH_MARKERS[m["name"]]: np.asarray(m["center_px"], float)
+                for m in truth["markers_px"]
+                if m["wall"] == wall["name"]
+            },
+            floor_px=model.ray_to_pixel((fa + s * (fb - fa)) @ R),
+        )
+    return TargetFeatures("two-sided", model.image_size, walls)
+
+
 def truth_parameters(truth: dict[str, Any]) -> dict[str, float]:
     cr, lp = truth["camera_rotation"], truth["laser_plane"]
     return {

@@ -106,14 +106,13 @@ class _Chain:
 
     @staticmethod
     def plane_coords(R: np.ndarray, lr: float, lp: float, rays: np.ndarray) -> np.ndarray:
-        """Project rays onto a plane parallel to the candidate laser plane, in its 2D frame."""
+        """Project rays onto a plane parallel to the candidate laser plane; return their (X, Y)
+        in S. The plane is a graph over X-Y, so "ends lined up" reads as equal Y, as for the
+        borders, and the true laser lines project parallel to Y."""
         n = laser_normal(lr, lp)
         pts = rays @ R.T
         pts = pts / -(pts @ n)[:, None]
-        e_y = np.cross(n, [1.0, 0.0, 0.0])
-        e_y /= np.linalg.norm(e_y)
-        e_x = np.cross(e_y, n)
-        return np.stack([pts @ e_x, pts @ e_y], axis=1)
+        return pts[:, :2]
 
     def lasers_parallel(self, R: np.ndarray, lr: float, lp: float) -> float:
         a, b = (_direction(self.plane_coords(R, lr, lp, self.obs.laser[s])) for s in SIDES)
