@@ -40,7 +40,8 @@ CHECKSUM_KEY = "checksum"
 
 # Top-level keys the core's payloads must carry: camera.json is the core's OCam model dict
 # (`camera_io.MODEL_KEYS`, plus its calibration record); system.json has the shared keys of the
-# architecture. Deeper checks of the model belong to `OcamModel.from_dict` (`camera_model()`).
+# architecture, of which `robot_base` ("when known": after register_robot) and `image` may be
+# absent. Deeper checks of the model belong to `OcamModel.from_dict` (`camera_model()`).
 REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
     "camera": MODEL_KEYS,
     "system": (
@@ -48,14 +49,13 @@ REQUIRED_KEYS: dict[str, tuple[str, ...]] = {
         "camera_rotation",
         "laser_plane",
         "target",
-        "robot_base",
         "method",
         "residuals",
         "std",
-        "image",
         "created",
     ),
 }
+OPTIONAL_KEYS: dict[str, tuple[str, ...]] = {"camera": (), "system": ("robot_base", "image")}
 
 Health = Literal["ok", "missing", "corrupt", "stale", "wrong_serial"]
 
@@ -323,14 +323,29 @@ class CalibrationStore:
             )
         return FileHealth(kind, str(path), "ok", f"{path}: ok", **common)
 
-    def check_motion_allowed(self) -> None:
-        """Raise MotionRefusedError (with each file's problem) unless both files are healthy."""
+    def check_motion_allowed(self, require_robot_base: bool = False) -> None:
+        """Raise MotionRefusedError (with each file's problem) unless both files are healthy.
+
+        With `require_robot_base`, system.json must also hold the robot's base pose (what
+        motions planned from the camera need: sorting, picking).
+        """
         problems = [h for h in (self.check(k) for k in KINDS) if not h.ok]
         if problems:
             raise MotionRefusedError(
                 "motion refused: calibration not usable: "
                 + "; ".join(f"{h.kind} {h.health}: {h.message}" for h in problems)
             )
+        if require_robot_base and not self.robot_registered():
+            raise MotionRefusedError(
+                f"motion refused: {self.path('system')} has no robot_base: run register_robot"
+            )
+
+    def robot_registered(self) -> bool:
+        """True when a valid system.json holds a robot base pose."""
+        try:
+            return isinstance(self.load_system().get("robot_base"), dict)
+        except CalibrationFileError:
+            return False
 
     def status(self) -> dict[str, Any]:
         """A summary for the service's `status` reply: per-file health and `motion_allowed`."""
@@ -340,6 +355,7 @@ class CalibrationStore:
             "max_age_days": self.max_age_days,
             "expected_camera_serial": self.expected_serial,
             "motion_allowed": all(f["health"] == "ok" for f in files.values()),
+            "robot_registered": self.robot_registered(),
             "files": files,
         }
 

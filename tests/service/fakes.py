@@ -216,6 +216,7 @@ def system_payload() -> dict:
     payload: dict = {k: {} for k in REQUIRED_KEYS["system"]}
     payload["camera"] = camera_payload()
     payload["created"] = "2026-01-01T00:00:00+00:00"
+    payload["robot_base"] = {"matrix": np.eye(4).tolist(), "xyz_mm": [0.0, 0.0, 0.0]}
     return payload
 
 

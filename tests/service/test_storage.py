@@ -236,3 +236,16 @@ def test_sigkill_during_write_keeps_a_loadable_calibration(tmp_path: Path) -> No
     assert advanced >= 1, "no write completed before a kill; the test proved nothing"
     assert not list(state.glob(".*.tmp"))
     assert fileio.history_versions(store.path("camera"))
+
+
+def test_robot_base_is_optional_but_required_for_planned_motions(tmp_path: Path) -> None:
+    store = make_store(tmp_path)
+    store.save_camera(camera_payload())
+    store.save_system(system_payload())
+    store.check_motion_allowed()
+    assert store.status()["robot_registered"] is False
+    with pytest.raises(MotionRefusedError, match="register_robot"):
+        store.check_motion_allowed(require_robot_base=True)
+    store.save_system({**system_payload(), "robot_base": {"matrix": np.eye(4), "xyz_mm": [0] * 3}})
+    store.check_motion_allowed(require_robot_base=True)
+    assert store.status()["robot_registered"] is True
