@@ -139,6 +139,16 @@ def load_system_json(path: str | Path) -> SystemCalibration:
     return SystemCalibration.from_json(data, source=str(p))
 
 
+def fit_laser_plane(points_S: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Least-squares plane through 3D points in S: (upward unit normal, distance d of the
+    geometry.md convention, i.e. the plane meets the Z axis at -d, RMS distance in mm)."""
+    centroid = points_S.mean(axis=0)
+    _, _, vt = np.linalg.svd(points_S - centroid, full_matrices=False)
+    n = vt[-1] if vt[-1][2] > 0 else -vt[-1]
+    rms = float(np.sqrt(np.mean(((points_S - centroid) @ n) ** 2)))
+    return n, float(-(n @ centroid) / n[2]), rms
+
+
 def pixel_scale(model: OcamModel, rays_C: np.ndarray) -> np.ndarray:
     """Pixels per radian of a small angle at each ray (d rho / d theta of the inverse model),
     used to express angular residuals as image pixels, where the noise is."""

@@ -26,7 +26,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import PARAMETERS, SystemCalibration, pixel_scale
+from omnisort_hw.core.extrinsics.common import (
+    PARAMETERS,
+    SystemCalibration,
+    fit_laser_plane,
+    pixel_scale,
+)
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import (
     camera_angles,
@@ -124,11 +129,7 @@ def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
     pts = np.concatenate(
         [rays_to_plane(obs.laser[s] @ R.T, np.array([1.0, 0.0, 0.0]), walls[s]) for s in SIDES]
     )
-    centroid = pts.mean(axis=0)
-    n = great_circle_normal(pts - centroid)
-    if n[2] < 0:
-        n = -n
-    d = -(n @ centroid) / n[2]
+    n, d, _ = fit_laser_plane(pts)
     marker_pts = {
         key: rays_to_plane((R @ ray)[None, :], np.array([1.0, 0.0, 0.0]), walls[key[0]])[0]
         for key, ray in obs.markers.items()

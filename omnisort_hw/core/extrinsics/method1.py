@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.extrinsics.common import SystemCalibration, fit_laser_plane
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import great_circle_normal, nearest_rotation, rays_to_plane
 from omnisort_hw.errors import CalibrationError
@@ -60,12 +60,7 @@ def calibrate_method1(
         "far": (np.array([0.0, 1.0, 0.0]), y_far),
     }
     pts = np.concatenate([rays_to_plane(laser[w] @ R.T, *planes[w]) for w in WALLS])
-    centroid = pts.mean(axis=0)
-    n = great_circle_normal(pts - centroid)
-    if n[2] < 0:
-        n = -n
-    d = float(-(n @ centroid) / n[2])
-    fit_rms = float(np.sqrt(np.mean(((pts - centroid) @ n) ** 2)))
+    n, d, fit_rms = fit_laser_plane(pts)
     calib = SystemCalibration(
         model=model,
         R_SC=R,

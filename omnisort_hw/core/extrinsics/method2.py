@@ -17,9 +17,9 @@ from scipy.spatial.transform import Rotation
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec
-from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.extrinsics.common import SystemCalibration, fit_laser_plane
 from omnisort_hw.core.features import BoardsFeatures
-from omnisort_hw.core.frames import great_circle_normal, nearest_rotation, rays_to_plane
+from omnisort_hw.core.frames import nearest_rotation, rays_to_plane
 from omnisort_hw.errors import CalibrationError
 
 
@@ -92,12 +92,7 @@ def calibrate_method2(features: BoardsFeatures, model: OcamModel) -> SystemCalib
         nC = poses[name][:3, 2]
         rays = model.pixel_to_ray(b.laser_px)
         pts.append(rays_to_plane(rays, nC, float(nC @ poses[name][:3, 3])) @ R.T)
-    allpts = np.concatenate(pts)
-    centroid = allpts.mean(axis=0)
-    n = great_circle_normal(allpts - centroid)
-    if n[2] < 0:
-        n = -n
-    d = float(-(n @ centroid) / n[2])
+    n, d, plane_rms = fit_laser_plane(np.concatenate(pts))
     calib = SystemCalibration(
         model=model,
         R_SC=R,
@@ -110,7 +105,7 @@ def calibrate_method2(features: BoardsFeatures, model: OcamModel) -> SystemCalib
         },
         residuals={
             "board_rms_deg": {k: float(np.degrees(v)) for k, v in fit.items()},
-            "laser_plane_rms_mm": float(np.sqrt(np.mean(((allpts - centroid) @ n) ** 2))),
+            "laser_plane_rms_mm": plane_rms,
             "boards_perpendicularity_deg": float(
                 np.degrees(np.arcsin(np.clip(abs(normals["left"] @ normals["far"]), 0, 1)))
             ),
