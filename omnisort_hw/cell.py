@@ -583,21 +583,116 @@ class Cell:
             "camera_serial": self.store.expected_serial,
         }
 
-    def calibrate_extrinsics(
-        self, image: str | None, method: str | None, cancel: threading.Event
-    ) -> dict[str, Any]:
-        """Camera-laser system calibration from a fresh capture or an image, saved as
-        system.json."""
-        raise NotAvailableError(
-            "calibrate what=extrinsics: the extrinsic calibration of omnisort_hw.core "
-            "(target and laser-stripe extraction, plane fit) is not in this build yet"
-        )
+    def _source_image(
+        self, image: str | None, laser: bool = True
+    ) -> tuple[np.ndarray, dict[str, Any], str]:
+        """The image to work on: the file `image`, or a fresh capture (laser switched to
+        `laser` first) saved under `capture_dir`. Returns (image, image record, source)."""
+        from omnisort_hw.extrinsics_pipeline import image_record, read_image
 
-    def map_scene(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
-        """Laser map of the scene (obstacles and objects on the laser plane)."""
-        raise NotAvailableError(
-            "map: the laser mapping of omnisort_hw.core is not in this build yet"
-        )
+        if image is not None:
+            return read_image(image), image_record(image), str(image)
+        captured = self.capture(encoding="path", fmt="png", laser=laser)
+        path = captured["path"]
+        return read_image(path), image_record(path), path
+
+    def calibrate_extrinsics(
+        self,
+        image: str | None = None,
+        target: str | None = None,
+        method: str | None = None,
+        separation_mm: float | None = None,
+        board: str | None = None,
+        square_mm: float | None = None,
+        cancel: threading.Event | None = None,
+    ) -> dict[str, Any]:
+        """Camera rotation and laser plane from one image of the calibration target (a fresh
+        capture with the laser on, or `image`), saved as system.json. The previous robot base
+        pose is not carried over: it was registered with the previous camera rotation."""
+        from omnisort_hw.errors import InputError
+
+        target = target or self._config_target().get("kind")
+        if target is None:
+            raise InputError(
+                "calibrate what=extrinsics needs target=two-sided|three-sided|checkerboards "
+                "(or kind in the configuration's [target] section)"
+            )
+        model = self.store.camera_model()
+        img, record, source = self._source_image(image)
+        _raise_if_cancelled(cancel, "calibration")
+        with core_component("calibrate what=extrinsics"):
+            from omnisort_hw.extrinsics_pipeline import DEFAULT_SEPARATION_MM, calibrate_system
+
+            separation = separation_mm or self._config_target().get(
+                "separation_mm", DEFAULT_SEPARATION_MM
+            )
+            calib = calibrate_system(
+                img,
+                model,
+                target,
+                method,
+                separation_mm=float(separation),
+                board=_board_size(board or "9x6"),
+                square_mm=square_mm or 97.0,
+                source=source,
+                log=self.runlog,
+            )
+        _raise_if_cancelled(cancel, "calibration")
+        calib.image = record
+        payload = calib.to_json()
+        payload["elapsed_s"] = round(calib.elapsed_s, 4)
+        saved = self.store.save_system(payload)
+        return {
+            "path": str(saved),
+            "method": calib.method,
+            "target": target,
+            "parameters": calib.parameters(),
+            "std": calib.std,
+            "residuals": calib.residuals,
+            "image": record,
+        }
+
+    def _config_target(self) -> dict[str, Any]:
+        section = self.config.get("target", {})
+        return dict(section) if isinstance(section, dict) else {}
+
+    def system_calibration(self) -> Any:
+        """The verified system.json as the core's SystemCalibration."""
+        from omnisort_hw.core.extrinsics.common import SystemCalibration
+
+        rec = self.store.read("system")
+        return SystemCalibration.from_json(rec.payload, source=str(rec.path))
+
+    def map_scene(
+        self, image: str | None = None, cancel: threading.Event | None = None
+    ) -> dict[str, Any]:
+        """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments."""
+        from omnisort_hw.extrinsics_pipeline import check_image_size
+
+        calib = self.system_calibration()
+        img, record, source = self._source_image(image)
+        _raise_if_cancelled(cancel, "mapping")
+        check_image_size(img, calib.model, source)
+        with core_component("map"):
+            from omnisort_hw.core.laser_stripe import laser_stripe_points
+            from omnisort_hw.core.mapping import pixels_to_plane, segments
+
+            pixels = laser_stripe_points(img)
+            points = pixels_to_plane(pixels, calib)
+            segs = segments(points, calib)
+        rl = self.runlog
+        finite = points[np.all(np.isfinite(points), axis=1)]
+        rl.image("map/image", img)
+        rl.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
+        rl.points3d("map/points_S", finite, color=(255, 0, 0))
+        for i, seg in enumerate(segs):
+            rl.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
+        return {
+            "image": record,
+            "points": len(pixels),
+            "points_on_plane": len(finite),
+            "segments": [seg.summary() for seg in segs],
+        }
 
     def register_robot(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
         """Robot base pose from the floor checkerboard, stored in system.json."""
@@ -627,6 +722,27 @@ class Cell:
             "sort: the sorting pipeline of omnisort_hw.core (locate, motion planning, pick and "
             "place) is not in this build yet"
         )
+
+
+@contextmanager
+def core_component(what: str) -> Iterator[None]:
+    """Turn "this part of the core is not in the build yet" into NotAvailableError."""
+    try:
+        yield
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.startswith("omnisort_hw."):
+            raise NotAvailableError(f"{what}: {exc.name} is not in this build yet") from None
+        raise
+
+
+def _board_size(text: str) -> tuple[int, int]:
+    from omnisort_hw.errors import InputError
+
+    try:
+        cols, rows = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise InputError(f"board must look like 9x6 (inner corners), got {text!r}") from None
+    return cols, rows
 
 
 def _raise_if_cancelled(cancel: threading.Event | None, what: str = "move") -> None:

@@ -53,7 +53,15 @@ def calibrate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
             degree=args["degree"],
             cancel=ctx.cancel,
         )
-    return ctx.cell.calibrate_extrinsics(args["image"], args["method"], ctx.cancel)
+    return ctx.cell.calibrate_extrinsics(
+        image=args["image"],
+        target=args["target"],
+        method=args["method"],
+        separation_mm=args["separation_mm"],
+        board=args["board"],
+        square_mm=args["square_mm"],
+        cancel=ctx.cancel,
+    )
 
 
 def map_scene(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:

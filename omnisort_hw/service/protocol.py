@@ -134,22 +134,24 @@ def _check_move(args: dict[str, Any]) -> None:
 
 
 def _check_calibrate(args: dict[str, Any]) -> None:
+    def refuse(keys: tuple[str, ...], why: str) -> None:
+        for key in keys:
+            if args.get(key) is not None:
+                raise ProtocolError(BAD_ARGUMENT, f"calibrate: {key} {why}", field=key)
+
     if args["what"] == "intrinsics":
         for key, what in (("folder", "a folder of images"), ("square_mm", "the square size")):
             if args.get(key) is None:
                 raise ProtocolError(
                     BAD_ARGUMENT, f"calibrate what=intrinsics needs {key} ({what})", field=key
                 )
+        refuse(("image", "target", "separation_mm", "method"), "is for what=extrinsics")
         return
-    for key in ("board", "square_mm", "degree"):
-        if args.get(key) is not None:
-            raise ProtocolError(BAD_ARGUMENT, f"{key} is for what=intrinsics only", field=key)
-    if args["what"] == "extrinsics" and args.get("folder"):
-        raise ProtocolError(
-            BAD_ARGUMENT,
-            "calibrate what=extrinsics takes image (or none for a fresh capture), not folder",
-            field="folder",
-        )
+    refuse(("folder", "degree"), "is for what=intrinsics")
+    if args.get("target") not in (None, "checkerboards"):
+        refuse(("board", "square_mm"), "is for target=checkerboards")
+    if args.get("target") == "checkerboards":
+        refuse(("separation_mm",), "is for the wall targets")
 
 
 _IMAGE = Arg("image", "str", help="path of an image on the cell PC; omitted: a fresh capture")
@@ -180,11 +182,13 @@ COMMANDS: dict[str, Command] = {
             (
                 Arg("what", "str", required=True, choices=("intrinsics", "extrinsics")),
                 Arg("folder", "str", help="intrinsics: folder of calibration images"),
-                Arg("board", "str", max_chars=16, help="intrinsics: inner corners COLSxROWS"),
-                Arg("square_mm", "number", lo=0.1, hi=10000.0, help="intrinsics: square size"),
+                Arg("board", "str", max_chars=16, help="board inner corners COLSxROWS"),
+                Arg("square_mm", "number", lo=0.1, hi=10000.0, help="board square size"),
                 Arg("degree", "int", lo=2, hi=12, help="intrinsics: polynomial degree"),
                 _IMAGE,
-                Arg("method", "str", max_chars=64, help="extrinsics method (core's names)"),
+                Arg("target", "str", choices=("two-sided", "three-sided", "checkerboards")),
+                Arg("separation_mm", "number", lo=1.0, hi=100000.0, help="inner wall distance"),
+                Arg("method", "str", choices=("joint", "paper", "method1", "method2")),
             ),
             job_state="calibrating",
             check=_check_calibrate,

@@ -77,7 +77,19 @@ def test_malformed_lines(line: bytes, code: str) -> None:
         ("calibrate", {}, "what"),
         ("calibrate", {"what": "intrinsics"}, "folder"),
         ("calibrate", {"what": "intrinsics", "folder": "/x"}, "square_mm"),
-        ("calibrate", {"what": "extrinsics", "square_mm": 20}, "square_mm"),
+        ("calibrate", {"what": "extrinsics", "target": "two-sided", "square_mm": 20}, "square_mm"),
+        ("calibrate", {"what": "extrinsics", "degree": 3}, "degree"),
+        ("calibrate", {"what": "extrinsics", "method": "best"}, "method"),
+        (
+            "calibrate",
+            {"what": "extrinsics", "target": "checkerboards", "separation_mm": 9},
+            "separation_mm",
+        ),
+        (
+            "calibrate",
+            {"what": "intrinsics", "folder": "/x", "square_mm": 2, "image": "a"},
+            "image",
+        ),
         (
             "calibrate",
             {"what": "intrinsics", "folder": "/x", "square_mm": 20, "degree": 1},

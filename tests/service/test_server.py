@@ -157,8 +157,6 @@ def test_missing_or_corrupt_calibration_blocks_motion(make_service) -> None:
 @pytest.mark.parametrize(
     ("cmd", "args", "component"),
     [
-        ("calibrate", {"what": "extrinsics"}, "extrinsic calibration"),
-        ("map", None, "laser mapping"),
         ("register_robot", None, "robot registration"),
         ("locate", None, "colour-blob"),
         ("sort", {"max_objects": 3}, "sorting pipeline"),
@@ -338,3 +336,49 @@ def test_calibrate_intrinsics_through_the_service(make_service, reference_dir, t
     paths = entity_paths(h.cell.runlog_path or "")
     assert {"/calibration/intrinsics/rms_px", "/calibration/intrinsics/parameters"} <= paths
     assert "/intrinsics/image" in paths
+
+
+def test_extrinsics_and_map_need_their_inputs(service: Harness) -> None:
+    with service.client() as c:
+        r = c.call("calibrate", {"what": "extrinsics"})
+        assert r["error"]["code"] == "bad_input" and "needs target" in r["error"]["message"]
+        # The in-memory cell's system.json is a stand-in without a camera rotation matrix.
+        r = c.call("map")
+        assert r["error"]["code"] == "bad_calibration_file", r
+        assert "system.json" in r["error"]["message"]
+        assert c.call("status")["result"]["state"] == "idle"
+
+
+@pytest.mark.reference
+def test_calibrate_extrinsics_and_map_reference_images(make_service, reference_dir) -> None:
+    """Intrinsics, then extrinsics from the two-sided target, then a laser map, all through
+    the protocol on the third-party reference images."""
+    pytest.importorskip("omnisort_hw.core.target_features", reason="target features not built")
+    pytest.importorskip("omnisort_hw.core.laser_stripe", reason="laser stripe not built")
+    h = make_service(calibrated=False)
+    with h.client(timeout_s=300) as c:
+        r = c.call(
+            "calibrate",
+            {"what": "intrinsics", "folder": str(reference_dir / "intrinsics"), "square_mm": 116},
+        )
+        assert r["ok"], r
+        r = c.call(
+            "calibrate",
+            {
+                "what": "extrinsics",
+                "image": str(reference_dir / "two_sided_target.png"),
+                "target": "two-sided",
+                "separation_mm": 1292.4,
+            },
+        )
+        assert r["ok"], r
+        assert set(r["result"]["parameters"]) >= {"cam_roll_deg", "laser_distance_mm"}
+        st = c.call("status")["result"]["calibration"]
+        assert st["files"]["system"]["health"] == "ok" and st["motion_allowed"] is True
+        assert st["robot_registered"] is False
+        r = c.call("map", {"image": str(reference_dir / "mapping_cubes.jpg")})
+        assert r["ok"], r
+        assert r["result"]["points_on_plane"] > 100 and r["result"]["segments"]
+    h.running.stop()
+    paths = entity_paths(h.cell.runlog_path or "")
+    assert {"/extrinsics/image", "/map/points_S", "/map/image/laser"} <= paths
