@@ -388,9 +388,9 @@ class SimArm(_Connectable, Arm):
         super().__init__(cell)
         robot = cell.scene.robot
         if robot is None or cell.world.arm is None:
-            raise DeviceConfigError(
+            raise _sim_device_error(
+                "[arm].scene",
                 f"scene {cell.scene.name!r} has no [robot] section; a sim arm needs one",
-                key="[arm].scene",
             )
         self.robot = robot
         self.model = cell.world.ur
@@ -641,9 +641,8 @@ class SimWristCamera(_Connectable, Camera):
     ) -> None:
         super().__init__(cell)
         if cell.world.arm is None:
-            raise DeviceConfigError(
-                f"scene {cell.scene.name!r} has no robot to carry a wrist camera",
-                key="[camera].scene",
+            raise _sim_device_error(
+                "[camera].scene", f"scene {cell.scene.name!r} has no robot to carry a wrist camera"
             )
         self.width, self.height, self.fov_deg = int(width), int(height), float(fov_deg)
         self.offset_mm = float(offset_mm)

@@ -257,10 +257,10 @@ class RobotSpec:
     base_yaw_deg: float = -90.0
     pedestal_mm: float = 0.0
     home_deg: tuple[float, float, float, float, float, float] = (
-        0.0,
-        -100.0,
-        -110.0,
+        180.0,
         -60.0,
+        -120.0,
+        -90.0,
         90.0,
         0.0,
     )
@@ -277,8 +277,8 @@ class DegradeSpec:
     so the same seed gives the same degradation; give lo = hi for a fixed value."""
 
     enabled: bool = False
-    noise_read: Vec2 = (0.004, 0.012)
-    noise_shot: Vec2 = (0.004, 0.012)
+    noise_read: Vec2 = (0.006, 0.016)
+    noise_shot: Vec2 = (0.006, 0.016)
     blur_sigma_px: Vec2 = (0.4, 1.1)
     vignetting: Vec2 = (0.15, 0.45)
     exposure_ev: Vec2 = (-0.4, 0.3)
@@ -327,7 +327,14 @@ class Scene:
         for key, value in changes.items():
             current = getattr(self, key)
             if isinstance(value, dict) and dataclasses.is_dataclass(current):
-                updates[key] = dataclasses.replace(current, **value)
+                hints = typing.get_type_hints(type(current))
+                fields = {f.name for f in dataclasses.fields(current)}
+                parsed = {}
+                for name, v in value.items():
+                    if name not in fields:
+                        raise ConfigError(f"{key}.{name}: unknown key")
+                    parsed[name] = _parse_value(hints[name], v, f"{key}.{name}")
+                updates[key] = dataclasses.replace(current, **parsed)
             else:
                 updates[key] = value
         new = dataclasses.replace(self, **updates)
@@ -341,6 +348,8 @@ class Scene:
 def _parse_value(tp: Any, value: object, path: str) -> Any:
     """Convert a TOML value to the annotated type `tp`, or raise ConfigError naming `path`."""
     origin = get_origin(tp)
+    if isinstance(tp, type) and type(value) is tp:
+        return value
     if tp is Color:
         return _color(value, path)
     if origin in (types.UnionType, typing.Union):
