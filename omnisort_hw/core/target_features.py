@@ -291,11 +291,15 @@ def assign_markers(
         bad = [min(SIDES, key=lambda s: counts[s])]
     if bad:
         side = bad[0]
-        where = ", ".join(_fmt(blobs[i].uv) for i in sides[side]) or "nowhere"
+        where = (
+            "at " + ", ".join(_fmt(blobs[i].uv) for i in sides[side])
+            if sides[side].size
+            else "none"
+        )
         want = " or ".join(str(a) for a in allowed)
         raise FeatureNotFoundError(
             f"{side} wall: found {counts[side]} blue marker(s) where {want} were expected "
-            f"(at {where}); {kind} target: {counts['left']} left, {counts['right']} right. "
+            f"({where}); {kind} target: {counts['left']} left, {counts['right']} right. "
             "Markers missing, covered, or not this target?"
         )
     walls: dict[str, dict[str, Blob]] = {}
@@ -559,6 +563,59 @@ def _wall(
     )
 
 
+def _face_level(
+    gray: np.ndarray, model: OcamModel, m: dict[str, Blob], ends: tuple[str, str]
+) -> float:
+    """Median grey level inside the quadrilateral of a wall's four markers (its white face)."""
+    e0, e1 = ends
+    c = model.pixel_to_ray(
+        np.stack(
+            [m[f"floor_{e0}"].uv, m[f"floor_{e1}"].uv, m[f"border_{e0}"].uv, m[f"border_{e1}"].uv]
+        )
+    )
+    s, t = np.meshgrid(np.linspace(0.25, 0.75, 7), np.linspace(0.2, 0.6, 5))
+    s, t = s.ravel()[:, None], t.ravel()[:, None]
+    rays = (1 - s) * (1 - t) * c[0] + s * (1 - t) * c[1] + (1 - s) * t * c[2] + s * t * c[3]
+    uv = model.ray_to_pixel(_unit(rays)).astype(np.float32)
+    vals = cv2.remap(
+        gray, uv[:, 0:1], uv[:, 1:2], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+    )
+    return float(np.median(vals))
+
+
+def _check_far_end_open(
+    gray: np.ndarray,
+    model: OcamModel,
+    walls_m: dict[str, dict[str, Blob]],
+    corners: dict[str, Blob],
+    used: list[Blob],
+) -> None:
+    """Two-sided target: no third wall may close the far end (a face as white as the side walls'
+    below a black/white border from one far border marker to the other), else the image shows
+    the three-sided target and a two-sided calibration would silently ignore its far wall."""
+    white = min(_face_level(gray, model, walls_m[s], ("near", "far")) for s in SIDES)
+    if _face_level(gray, model, corners, ("near", "far")) < 0.8 * white:
+        return
+    r_floor = model.pixel_to_ray(np.stack([corners["floor_near"].uv, corners["floor_far"].uv]))
+    try:
+        find_line_edge(
+            gray,
+            model,
+            corners["border_near"],
+            corners["border_far"],
+            r_floor.mean(axis=0),
+            "far wall border",
+            used,
+        )
+    except FeatureNotFoundError:
+        return
+    raise FeatureNotFoundError(
+        "two-sided target: a third white wall with a black/white border closes the far end "
+        f"between the markers at {_fmt(corners['border_near'].uv)} and "
+        f"{_fmt(corners['border_far'].uv)}; this looks like the three-sided target"
+    )
+
+
 def extract_target_features(
     image_bgr: np.ndarray, model: OcamModel, kind: str = "two-sided"
 ) -> TargetFeatures:
@@ -572,19 +629,21 @@ def extract_target_features(
     walls: dict[str, WallFeatures] = {}
     for side in SIDES:
         walls[side] = _wall(gray, model, side, walls_m[side], ("near", "far"), stripe, used)
-    if kind == "three-sided":
-        own = walls_m["far"]
-        if own:
-            corners = own
-        else:
-            left, right = walls_m["left"], walls_m["right"]
-            corners = {
-                "border_near": left["border_far"],
-                "floor_near": left["floor_far"],
-                "border_far": right["border_far"],
-                "floor_far": right["floor_far"],
-            }
-        far = _wall(gray, model, "far", corners, ("near", "far"), stripe, used)
+    left, right = walls_m["left"], walls_m["right"]
+    own = walls_m.get("far", {})
+    corners = own or {
+        "border_near": left["border_far"],
+        "floor_near": left["floor_far"],
+        "border_far": right["border_far"],
+        "floor_far": right["floor_far"],
+    }
+    if kind == "two-sided":
+        _check_far_end_open(gray, model, walls_m, corners, used)
+    else:
+        try:
+            far = _wall(gray, model, "far", corners, ("near", "far"), stripe, used)
+        except FeatureNotFoundError as exc:
+            raise FeatureNotFoundError(f"{exc} (is this the two-sided target?)") from None
         if not own:
             far.markers_px = {}
         walls["far"] = far
@@ -626,9 +685,7 @@ def extract_board_features(
     try:
         first = detect_corners(image, (cols, rows))
     except FeatureNotFoundError as exc:
-        raise FeatureNotFoundError(
-            f"checkerboard target: no complete {cols}x{rows} board found ({exc})"
-        ) from None
+        raise FeatureNotFoundError(f"checkerboard target: {exc}") from None
     masked = image.copy()
     masked[_board_mask((h, w), _board_outline(first, cols, rows, 1.5))] = 128
     try:
