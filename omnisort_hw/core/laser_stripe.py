@@ -24,8 +24,9 @@ How (all vectorised, no loop over pixels):
    fit through those centres (peaks more than 1 px off dropped, one refit) gives the centre on
    the candidate's line and the local slope. A point is kept from the scan that cuts the
    stripe squarely (|slope| <= 1), so each stripe section is measured once.
-4. Chains: points are linked through a grid (gaps of a cell bridged, for dashed, aliased
-   stripes); chains that are too short or have too few strong points are dropped.
+4. Chains: points are linked through a grid of one scan spacing (gaps of a cell bridged, for
+   dashed, aliased stripes); chains that are too short or have too few strong points are
+   dropped, and with them isolated specks of JPEG colour noise.
 """
 
 from __future__ import annotations
@@ -201,8 +202,14 @@ def _fit_windows(
     wt = np.where(resid <= 1.0, wt, 0.0)
     a, b, det = _weighted_line(k, pos, wt)
     centre_h = height[:, _ALONG]
+    # windows cut by the image border would be padded: no measurement there
+    lines_at, samples_at = (v0, u0) if across_u else (u0, v0)
+    n_lines, n_samples = (h, w) if across_u else (w, h)
+    inside = (lines_at >= _ALONG) & (lines_at < n_lines - _ALONG)
+    inside &= (samples_at >= reach) & (samples_at < n_samples - reach)
     ok = (
-        (det > 0)
+        inside
+        & (det > 0)
         & ((wt > 0).sum(axis=1) >= 3)
         & (centre_h > threshold)
         & (np.abs(a) <= 1.5)
@@ -222,8 +229,9 @@ def _fit_windows(
 def _keep_chains(
     points: np.ndarray, strong: np.ndarray, shape: tuple[int, int], cell: int
 ) -> np.ndarray:
-    """Hysteresis on chains: points are linked through a grid of `cell`-px cells (neighbouring
-    cells and one-cell gaps, for dashed stripes); a chain survives if it has at least
+    """Hysteresis on chains: points are linked through a grid of `cell`-px cells (one scan-line
+    spacing; neighbouring cells and one-cell gaps link, so short gaps of dashed stripes are
+    bridged and specks a few spacings away are not); a chain survives if it has at least
     _MIN_CHAIN points, _MIN_STRONG of them strong."""
     if points.shape[0] == 0:
         return np.zeros(0, dtype=bool)
@@ -275,7 +283,7 @@ def laser_stripe_points_stats(
     pts_c, amp_c, ok_c = _fit_windows(bgr, full_c, False, low)
     pts = np.concatenate([pts_r[ok_r], pts_c[ok_c]])
     amp = np.concatenate([amp_r[ok_r], amp_c[ok_c]])
-    keep = _keep_chains(pts, amp > high, (h, w), 2 * s)
+    keep = _keep_chains(pts, amp > high, (h, w), s)
     pts = pts[keep]
     stats = StripeStats(noise, low, high, int(full_r.shape[0] + full_c.shape[0]), int(pts.shape[0]))
     return pts, stats

@@ -75,10 +75,12 @@ _MIN_EDGE_CONTRAST = 4.0  # grey levels per pixel: below this no edge is claimed
 
 @dataclass(frozen=True)
 class Blob:
-    """A blue marker candidate: sub-pixel centre (u, v) and area in pixels."""
+    """A blue marker candidate: sub-pixel centre (u, v), area in pixels, and contrast (its blue
+    saturation above the surrounding background, grey levels)."""
 
     uv: np.ndarray
     area: float
+    contrast: float = 0.0
 
     @property
     def radius(self) -> float:
@@ -241,7 +243,7 @@ def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
         yy, xx = np.mgrid[ya:yb, xa:xb]
         s = float(wts.sum())
         uv = np.array([(wts * xx).sum() / s, (wts * yy).sum() / s])
-        blobs.append(Blob(uv, tot))
+        blobs.append(Blob(uv, tot, level - base))
     return blobs
 
 
@@ -282,9 +284,12 @@ def assign_markers(
     allowed = (4,) if kind == "two-sided" else (4, 6)
     for side, idx in sides.items():
         if idx.size > max(allowed):
-            areas = np.array([blobs[i].area for i in idx])
-            idx = idx[areas >= 0.25 * np.median(areas)]
-            sides[side] = idx
+            # surplus: specks of JPEG chroma noise or blue clutter, pale or tiny next to markers
+            contrast = np.array([blobs[i].contrast for i in idx])
+            area = np.array([blobs[i].area for i in idx])
+            strong = (contrast >= 0.5 * np.median(contrast)) & (area >= 0.1 * np.median(area))
+            if strong.sum() >= min(allowed):
+                sides[side] = idx[strong]
     counts = {s: int(i.size) for s, i in sides.items()}
     bad = [s for s in SIDES if counts[s] not in allowed]
     if kind == "three-sided" and not bad and counts["left"] != counts["right"]:
