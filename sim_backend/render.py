@@ -38,7 +38,7 @@ import pybullet as p
 
 from omnisort_hw.core.camera_model import OcamModel
 from sim_backend.laser import HALL_RADIUS_MM, LaserFan, LaserPlane
-from sim_backend.world import AnalyticBox, Panel, SimWorld
+from sim_backend.world import MM, AnalyticBox, AnalyticCylinder, Panel, SimWorld
 
 NEAR_M = 0.01
 FAR_M = 40.0
@@ -111,7 +111,7 @@ class FisheyeGeometry:
         px_angle = np.hypot(gx, gy)
         self.domain = theta <= self.theta_circle + 1.5 * px_angle
         self.inside = theta <= self.theta_circle
-        self.ring = self.domain & (np.abs(theta - self.theta_circle) <= 1.5 * px_angle)
+        self.ring = self.domain & (np.abs(theta - self.theta_circle) <= 0.75 * px_angle)
         self.pixel_index = np.flatnonzero(self.domain).astype(np.int64)
         rays_dom = rays_c.reshape(-1, 3)[self.pixel_index]
         self.rays_S = (rays_dom @ self.R_SC.T).astype(np.float32)
@@ -123,6 +123,7 @@ class FisheyeGeometry:
             max(f.width for f in self.faces),
         )
         self.atlas_xy = self.rays_to_atlas(rays_dom)
+        self.key = ""
         self.build_seconds = time.perf_counter() - t0
 
     def _layout(self, rays: np.ndarray) -> list[FaceSpec]:
@@ -203,6 +204,7 @@ def geometry_for(
     geo = _GEOMETRY_CACHE.get(key)
     if geo is None:
         geo = FisheyeGeometry(model, R_SC, face_px, circle_fov_deg)
+        geo.key = key
         _GEOMETRY_CACHE[key] = geo
         while len(_GEOMETRY_CACHE) > _GEOMETRY_CACHE_SIZE:
             _GEOMETRY_CACHE.popitem(last=False)
@@ -220,8 +222,70 @@ class Atlas:
     inv_dist: np.ndarray
 
 
+def _raster_rects(world: SimWorld, geo: FisheyeGeometry) -> list[tuple[int, int, int, int]]:
+    """Per face, the pixel rectangle (c0, c1, r0, r1) where a rasterised body can appear.
+
+    Each link's bounding sphere is a cone of directions; 16 points on a polygon around the
+    cone's rim (widened so it circumscribes the cone) are projected into the face. A sphere
+    reaching behind a face's plane claims the whole face; a face nothing reaches is empty.
+    """
+    spheres = []
+    for body in world.raster_bodies():
+        n_links = p.getNumJoints(body, physicsClientId=world.client)
+        for link in range(-1, n_links):
+            lo, hi = p.getAABB(body, link, physicsClientId=world.client)
+            lo, hi = np.asarray(lo) / MM, np.asarray(hi) / MM
+            spheres.append(((lo + hi) / 2.0 @ world.R_SC, float(np.linalg.norm(hi - lo)) / 2.0))
+    phi = np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False)
+    rects = []
+    for f in geo.faces:
+        box = [np.inf, -np.inf, np.inf, -np.inf]
+        full = False
+        for centre, radius in spheres:
+            depth = float(centre @ f.forward)
+            if depth + radius <= 0.0:
+                continue
+            dist = float(np.linalg.norm(centre))
+            if depth - radius <= NEAR_M / MM or dist <= radius * 1.01:
+                full = True
+                break
+            axis = centre / dist
+            alpha = np.arctan(np.tan(np.arcsin(radius / dist)) / np.cos(np.pi / 16)) * 1.02
+            e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(axis, e1)
+            rim = np.cos(alpha) * axis + np.sin(alpha) * (
+                np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+            )
+            d = rim @ f.forward
+            if np.any(d <= 1e-6):
+                full = True
+                break
+            x, y = (rim @ f.right) / d, (rim @ f.up) / d
+            box = [min(box[0], x.min()), max(box[1], x.max()),
+                   min(box[2], y.min()), max(box[3], y.max())]
+        if full:
+            rects.append((0, f.width, 0, f.height))
+            continue
+        if not np.isfinite(box[0]):
+            rects.append((0, 0, 0, 0))
+            continue
+        c0 = int(np.clip(np.floor((box[0] - f.x0) / f.pitch) - 2, 0, f.width))
+        c1 = int(np.clip(np.ceil((box[1] - f.x0) / f.pitch) + 3, 0, f.width))
+        r0 = int(np.clip(np.floor(f.height - 1 - (box[3] - f.y0) / f.pitch) - 2, 0, f.height))
+        r1 = int(np.clip(np.ceil(f.height - 1 - (box[2] - f.y0) / f.pitch) + 3, 0, f.height))
+        rects.append((c0, c1, r0, r1))
+    return rects
+
+
 def render_atlas(world: SimWorld, geo: FisheyeGeometry) -> Atlas:
-    """Draw every needed face with pybullet's CPU renderer into the atlas."""
+    """Draw the rasterised bodies (arm, cubes) with pybullet's CPU renderer into the atlas.
+
+    The static bodies are shaded exactly from their geometry, so they are made transparent
+    for the duration (the CPU renderer then skips them at no cost), and each face is drawn
+    only over the rectangle where a rasterised body can appear (an off-centre frustum on the
+    face's own pixel grid, so the samples stay where `rays_to_atlas` expects them).
+    """
     h, w = geo.atlas_shape
     rgb = np.zeros((h, w, 3), np.uint8)
     seg = np.full((h, w), -1.0, np.float32)
@@ -229,44 +293,82 @@ def render_atlas(world: SimWorld, geo: FisheyeGeometry) -> Atlas:
     ren = world.scene.render
     light = np.asarray(ren.light_direction, float)
     light = light / np.linalg.norm(light)
-    for f in geo.faces:
-        fwd = world.R_SC @ f.forward
-        up = world.R_SC @ f.up
-        view = p.computeViewMatrix([0.0, 0.0, 0.0], list(fwd), list(up))
-        x1 = f.x0 + f.width * f.pitch
-        y1 = f.y0 + f.height * f.pitch
-        proj = p.computeProjectionMatrix(
-            f.x0 * NEAR_M, x1 * NEAR_M, f.y0 * NEAR_M, y1 * NEAR_M, NEAR_M, FAR_M
+    colors = {b.body: b.color for b in world.info.boxes} | {
+        c.body: c.color for c in world.info.cylinders
+    }
+    static = sorted(world.static_bodies())
+    for body in static:
+        p.changeVisualShape(
+            body, -1, rgbaColor=[*colors[body], 0.0], physicsClientId=world.client
         )
-        _, _, img, zbuf, ids = p.getCameraImage(
-            f.width,
-            f.height,
-            view,
-            proj,
-            renderer=p.ER_TINY_RENDERER,
-            lightDirection=list(light * 10.0),
-            lightColor=[1.0, 1.0, 1.0],
-            lightAmbientCoeff=ren.ambient,
-            lightDiffuseCoeff=ren.diffuse,
-            lightSpecularCoeff=0.0,
-            shadow=0,
-            physicsClientId=world.client,
-        )
-        img = np.asarray(img, np.uint8).reshape(f.height, f.width, 4)
-        zbuf = np.asarray(zbuf, np.float32).reshape(f.height, f.width)
-        ids = np.asarray(ids, np.int32).reshape(f.height, f.width)
-        z_m = FAR_M * NEAR_M / (FAR_M - (FAR_M - NEAR_M) * zbuf)
-        xs = f.x0 + np.arange(f.width) * f.pitch
-        ys = f.y0 + (f.height - 1 - np.arange(f.height)) * f.pitch
-        stretch = np.sqrt(1.0 + xs[None, :] ** 2 + ys[:, None] ** 2)
-        dist_mm = z_m * stretch * 1000.0
-        hit = ids >= 0
-        rows = slice(f.row, f.row + f.height)
-        cols = slice(0, f.width)
-        rgb[rows, cols] = img[..., :3]
-        seg[rows, cols] = np.where(hit, ids, -1).astype(np.float32)
-        inv[rows, cols] = np.where(hit, 1.0 / dist_mm, 0.0).astype(np.float32)
+    try:
+        for f, (c0, c1, r0, r1) in zip(geo.faces, _raster_rects(world, geo), strict=True):
+            if c1 <= c0 or r1 <= r0:
+                continue
+            fw, fh = c1 - c0, r1 - r0
+            fwd = world.R_SC @ f.forward
+            up = world.R_SC @ f.up
+            view = p.computeViewMatrix([0.0, 0.0, 0.0], list(fwd), list(up))
+            xl = f.x0 + c0 * f.pitch
+            yb = f.y0 + (f.height - r1) * f.pitch
+            proj = p.computeProjectionMatrix(
+                xl * NEAR_M, (xl + fw * f.pitch) * NEAR_M, yb * NEAR_M,
+                (yb + fh * f.pitch) * NEAR_M, NEAR_M, FAR_M,
+            )
+            _, _, img, zbuf, ids = p.getCameraImage(
+                fw,
+                fh,
+                view,
+                proj,
+                renderer=p.ER_TINY_RENDERER,
+                lightDirection=list(light * 10.0),
+                lightColor=[1.0, 1.0, 1.0],
+                lightAmbientCoeff=ren.ambient,
+                lightDiffuseCoeff=ren.diffuse,
+                lightSpecularCoeff=0.0,
+                shadow=0,
+                physicsClientId=world.client,
+            )
+            img = np.asarray(img, np.uint8).reshape(fh, fw, 4)
+            zbuf = np.asarray(zbuf, np.float32).reshape(fh, fw)
+            ids = np.asarray(ids, np.int32).reshape(fh, fw)
+            z_m = FAR_M * NEAR_M / (FAR_M - (FAR_M - NEAR_M) * zbuf)
+            xs = xl + np.arange(fw) * f.pitch
+            ys = yb + (fh - 1 - np.arange(fh)) * f.pitch
+            stretch = np.sqrt(1.0 + xs[None, :] ** 2 + ys[:, None] ** 2)
+            dist_mm = z_m * stretch * 1000.0
+            hit = ids >= 0
+            rows = slice(f.row + r0, f.row + r1)
+            cols = slice(c0, c1)
+            rgb[rows, cols] = img[..., :3]
+            seg[rows, cols] = np.where(hit, ids, -1).astype(np.float32)
+            inv[rows, cols] = np.where(hit, 1.0 / dist_mm, 0.0).astype(np.float32)
+    finally:
+        for body in static:
+            p.changeVisualShape(
+                body, -1, rgbaColor=[*colors[body], 1.0], physicsClientId=world.client
+            )
     return Atlas(rgb, seg, inv)
+
+
+@dataclass
+class Hits:
+    """What each ray sees: distance (mm, inf for the hall), colour, class key and body id
+    (-1 for the floor and the hall)."""
+
+    t: np.ndarray
+    rgb: np.ndarray
+    key: np.ndarray
+    body: np.ndarray
+
+    def copy(self) -> Hits:
+        """An independent copy (the cached static hits must not be edited)."""
+        return Hits(self.t.copy(), self.rgb.copy(), self.key.copy(), self.body.copy())
+
+    def take(self, sl: slice) -> Hits:
+        """A copy of a slice of the samples."""
+        return Hits(self.t[sl].copy(), self.rgb[sl].copy(), self.key[sl].copy(),
+                    self.body[sl].copy())
 
 
 @dataclass
@@ -293,8 +395,29 @@ class _BoxTables:
     panel_face: tuple[int, float]
 
 
+@dataclass(frozen=True)
+class _CylTables:
+    """Per-frame constants of an analytic cylinder: axis, radius, bounding cone, colour."""
+
+    body: int
+    p0: np.ndarray
+    axis: np.ndarray
+    length: float
+    radius: float
+    cone_dirs: np.ndarray
+    cos_cones: np.ndarray
+    color: np.ndarray
+
+
 class Shader:
-    """Shades rays of one frame from the atlas, the analytic surfaces and the laser."""
+    """Shades rays of one frame: exact static geometry, the rasterised rest, the laser.
+
+    The static scene (floor, target walls, boards, bins: boxes that never move) is intersected
+    analytically (`static_hits`); for the pixel centres this is done once per camera
+    configuration and world and cached. The atlas holds only the moving or non-box bodies; a
+    rasterised body wins where it is nearer than the static hit. Cubes are boxes too: the
+    raster says where one is seen, the exact ray/box hit gives its colour and distance.
+    """
 
     def __init__(self, world: SimWorld, atlas: Atlas, laser_on: bool) -> None:
         self.world = world
@@ -312,11 +435,14 @@ class Shader:
         las = scene.laser
         self.sigma = las.width_mm / (2.0 * np.sqrt(2.0 * np.log(2.0)))
         self.no_laser = np.array(sorted(world.info.no_laser), np.int64)
-        self.boxes = [self._tables(b) for b in world.analytic_boxes()]
-        top = max([b.body for b in self.boxes] + [0])
-        self.box_lut = np.full(top + 2, -1, np.int32)
-        for k, b in enumerate(self.boxes):
-            self.box_lut[b.body + 1] = k
+        boxes = world.analytic_boxes()
+        self.static = [self._tables(b) for b in boxes if not b.dynamic]
+        self.cylinders = [self._cyl_tables(c) for c in world.info.cylinders]
+        self.dynamic = [self._tables(b) for b in boxes if b.dynamic]
+        top = max([b.body for b in self.dynamic] + [0])
+        self.dynamic_lut = np.full(top + 2, -1, np.int32)
+        for k, b in enumerate(self.dynamic):
+            self.dynamic_lut[b.body + 1] = k
 
     def _lambert(self, normal: np.ndarray) -> float:
         return float(self.ambient + self.diffuse * max(0.0, float(normal @ self.light)))
@@ -349,6 +475,80 @@ class Shader:
         )
 
     @staticmethod
+    def _cyl_tables(c: AnalyticCylinder) -> _CylTables:
+        """Tables of a cylinder; its candidate rays come from the bounding cones of pieces of
+        at most 100 mm (a long rod's single bounding sphere would hold the camera)."""
+        axis = c.p1 - c.p0
+        length = float(np.linalg.norm(axis))
+        n = max(1, int(np.ceil(length / 100.0)))
+        piece = length / n
+        centres = c.p0 + (np.arange(n) + 0.5)[:, None] * (axis / n)
+        dist = np.linalg.norm(centres, axis=1)
+        radius = float(np.hypot(piece / 2.0, c.radius)) + 1.0
+        with np.errstate(invalid="ignore"):
+            cos = np.where(dist <= radius, -2.0, np.cos(np.arcsin(np.minimum(radius / dist, 1.0))))
+        return _CylTables(
+            c.body,
+            c.p0.astype(np.float64),
+            axis / length,
+            length,
+            c.radius,
+            (centres / np.maximum(dist, 1e-9)[:, None]).astype(np.float32),
+            cos.astype(np.float32),
+            np.asarray(c.color, np.float32),
+        )
+
+    @staticmethod
+    def _cylinder(c: _CylTables, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Ray/capped-cylinder entry for rays from 0: (hit, distance, outward normal (n, 3))."""
+        d = rays.astype(np.float64)
+        w = -c.p0
+        da = d @ c.axis
+        wa = float(w @ c.axis)
+        d_perp = d - da[:, None] * c.axis
+        w_perp = w - wa * c.axis
+        qa = np.einsum("ij,ij->i", d_perp, d_perp)
+        qb = d_perp @ w_perp
+        qc = float(w_perp @ w_perp) - c.radius**2
+        disc = qb * qb - qa * qc
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t_side = (-qb - np.sqrt(disc)) / qa
+        h = wa + t_side * da
+        side = (disc >= 0) & (qa > 1e-12) & (t_side > 0) & (h >= 0) & (h <= c.length)
+        t = np.where(side, t_side, np.inf)
+        normal = np.zeros_like(d)
+        pts = t_side[:, None] * d - c.p0
+        radial = pts - (pts @ c.axis)[:, None] * c.axis
+        normal[side] = radial[side] / c.radius
+        for h_cap, sign in ((0.0, -1.0), (c.length, 1.0)):
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t_cap = (h_cap - wa) / da
+            p_cap = t_cap[:, None] * d - c.p0
+            r_cap = p_cap - (p_cap @ c.axis)[:, None] * c.axis
+            inside = np.einsum("ij,ij->i", r_cap, r_cap) <= c.radius**2
+            cap = inside & (t_cap > 0) & (t_cap < t) & (sign * da < 0)
+            t = np.where(cap, t_cap, t)
+            normal[cap] = sign * c.axis
+        hit = np.isfinite(t)
+        return hit, t.astype(np.float32), normal
+
+    def _nearest_cylinders(self, rays: np.ndarray, hits: Hits) -> None:
+        """Let the static cylinders replace what is behind them."""
+        for c in self.cylinders:
+            cand = np.flatnonzero(np.any(rays @ c.cone_dirs.T >= c.cos_cones, axis=1))
+            if cand.size == 0:
+                continue
+            hit, tt, normal = self._cylinder(c, rays[cand])
+            closer = hit & (tt < hits.t[cand])
+            sel = cand[closer]
+            lam = self.ambient + self.diffuse * np.clip(normal[closer] @ self.light, 0.0, None)
+            hits.rgb[sel] = c.color[None, :] * lam[:, None].astype(np.float32)
+            hits.t[sel] = tt[closer]
+            hits.body[sel] = c.body
+            along = np.abs(normal[closer] @ c.axis) > 0.5
+            hits.key[sel] = c.body * 8 + 4 + along.astype(np.int32)
+
+    @staticmethod
     def _slab(b: _BoxTables, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Ray/box entry: (hit, distance, entry face index 2*axis + (sign < 0)) for rays from 0."""
         tn_list, d_list = [], []
@@ -372,19 +572,14 @@ class Shader:
         return hit, tmin, face
 
     def _shade_box(
-        self,
-        b: _BoxTables,
-        idx: np.ndarray,
-        rays: np.ndarray,
-        tt: np.ndarray,
-        face: np.ndarray,
-        out: tuple[np.ndarray, np.ndarray, np.ndarray],
+        self, b: _BoxTables, idx: np.ndarray, rays: np.ndarray, tt: np.ndarray,
+        face: np.ndarray, hits: Hits,
     ) -> None:
-        """Write colour, key and distance of box hits (face colours, pattern on the panel face)."""
-        rgb, key, t = out
-        rgb[idx] = b.face_rgb[face]
-        key[idx] = b.body * 8 + 4 + face // 2
-        t[idx] = tt
+        """Write colour, key, distance and body of box hits (pattern on the panel face)."""
+        hits.rgb[idx] = b.face_rgb[face]
+        hits.key[idx] = b.body * 8 + 4 + face // 2
+        hits.t[idx] = tt
+        hits.body[idx] = b.body
         if b.panel is None:
             return
         axis, sign = b.panel_face
@@ -397,95 +592,110 @@ class Shader:
         a = (pts - rect.origin) @ rect.axis_u
         bb = (pts - rect.origin) @ rect.axis_v
         albedo, cls = b.panel.pattern.shade(a, bb)
-        rgb[sel] = albedo * self._lambert(rect.normal)
-        key[sel] = b.body * 8 + 1 + cls.astype(np.int32)
+        hits.rgb[sel] = albedo * self._lambert(rect.normal)
+        hits.key[sel] = b.body * 8 + 1 + cls.astype(np.int32)
 
-    def shade(self, rays: np.ndarray, axy: np.ndarray, exact: bool = False) -> Shaded:
-        """Shade rays (n, 3) in S whose atlas coordinates are `axy` (n, 2).
-
-        The rasterised body ids decide what each ray sees; boxes are then intersected exactly.
-        With `exact` (sub-samples of edge pixels), every box whose bounding cone holds a ray is
-        tested too, so box silhouettes are exact rather than quantised to the face pixels.
-        """
-        n = rays.shape[0]
-        seg = remap_flat(self.atlas.seg, axy, cv2.INTER_NEAREST).astype(np.int32)
-        rgb = remap_flat(self.atlas.rgb, axy, cv2.INTER_LINEAR).astype(np.float32)
-        rgb *= np.float32(1.0 / 255.0)
-        key = seg * 8
-        t = np.full(n, np.inf, np.float32)
-        box_k = self.box_lut[np.clip(seg + 1, 0, self.box_lut.size - 1)]
-        box_k[seg + 1 >= self.box_lut.size] = -1
-        background = seg < 0
-        for k, b in enumerate(self.boxes):
-            idx = np.flatnonzero(box_k == k)
-            if idx.size == 0:
+    def _nearest_boxes(self, tables: list[_BoxTables], rays: np.ndarray, hits: Hits) -> None:
+        """Let every box whose bounding cone holds a ray replace what is behind it."""
+        for b in tables:
+            cand = np.flatnonzero(rays @ b.axis_dir >= b.cos_cone)
+            if cand.size == 0:
                 continue
-            hit, tt, face = self._slab(b, rays[idx])
-            background[idx[~hit]] = True
-            self._shade_box(b, idx[hit], rays[idx[hit]], tt[hit], face[hit], (rgb, key, t))
-        self._shade_background(rays, np.flatnonzero(background), rgb, key, t)
-        solid = np.flatnonzero((box_k < 0) & (seg >= 0))
-        if solid.size:
-            lin = remap_flat(self.atlas.inv_dist, axy[solid], cv2.INTER_LINEAR)
-            near = remap_flat(self.atlas.inv_dist, axy[solid], cv2.INTER_NEAREST)
-            use = np.where(np.abs(lin - near) > 0.02 * near, near, lin)
-            with np.errstate(divide="ignore"):
-                t[solid] = np.where(use > 0, 1.0 / use, np.inf)
-        if exact:
-            for b in self.boxes:
-                cand = np.flatnonzero(rays @ b.axis_dir >= b.cos_cone)
-                if cand.size == 0:
-                    continue
-                hit, tt, face = self._slab(b, rays[cand])
-                closer = hit & (tt < t[cand])
-                sel = cand[closer]
-                self._shade_box(b, sel, rays[sel], tt[closer], face[closer], (rgb, key, t))
-                seg[sel] = b.body
-        laser = np.zeros(n, np.float32)
-        if self.laser_on:
-            self._laser(rays, seg, t, laser)
-        return Shaded(rgb, laser, key)
+            hit, tt, face = self._slab(b, rays[cand])
+            closer = hit & (tt < hits.t[cand])
+            sel = cand[closer]
+            self._shade_box(b, sel, rays[sel], tt[closer], face[closer], hits)
 
-    def _shade_background(
-        self, rays: np.ndarray, bg: np.ndarray, rgb: np.ndarray, key: np.ndarray, t: np.ndarray
-    ) -> None:
-        """Rays that hit no body: the analytic floor, else the hall around the cell."""
-        if bg.size == 0:
-            return
-        rb = rays[bg]
-        rz = rb[:, 2]
+    def static_hits(self, rays: np.ndarray) -> Hits:
+        """Exact hits of rays (n, 3) in S on the static scene: floor, hall and static boxes."""
+        n = rays.shape[0]
+        hits = Hits(
+            np.full(n, np.inf, np.float32),
+            np.empty((n, 3), np.float32),
+            np.full(n, -16, np.int32),
+            np.full(n, -1, np.int32),
+        )
+        rz = rays[:, 2]
         floor = self.world.floor
         down = rz < -1e-6
-        tz = np.full(bg.size, np.inf, np.float32)
-        tz[down] = np.float32(floor.z) / rz[down]
-        x = tz * rb[:, 0]
-        y = tz * rb[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tz = np.where(down, np.float32(floor.z) / rz, np.float32(np.inf))
+        x = tz * rays[:, 0]
+        y = tz * rays[:, 1]
         on_floor = down & (x * x + y * y < np.float32(HALL_RADIUS_MM**2))
-        fi = bg[on_floor]
-        albedo, cls = floor.shade(x[on_floor], y[on_floor])
-        rgb[fi] = albedo * self._lambert(np.array([0.0, 0.0, 1.0]))
-        key[fi] = -8 + cls.astype(np.int32)
-        t[fi] = tz[on_floor]
-        hi = bg[~on_floor]
-        w = np.clip(rb[~on_floor, 2] * 2.0 + 0.3, 0.0, 1.0)[:, None]
-        rgb[hi] = self.hall * (1.0 - w) + self.sky * w
-        key[hi] = -16
-        t[hi] = np.inf
+        fi = np.flatnonzero(on_floor)
+        albedo, cls = floor.shade(x[fi], y[fi])
+        hits.rgb[fi] = albedo * self._lambert(np.array([0.0, 0.0, 1.0]))
+        hits.key[fi] = -8 + cls.astype(np.int32)
+        hits.t[fi] = tz[fi]
+        hi = np.flatnonzero(~on_floor)
+        w = np.clip(rz[hi] * 2.0 + 0.3, 0.0, 1.0)[:, None]
+        hits.rgb[hi] = self.hall * (1.0 - w) + self.sky * w
+        self._nearest_boxes(self.static, rays, hits)
+        self._nearest_cylinders(rays, hits)
+        return hits
 
-    def _laser(self, rays: np.ndarray, seg: np.ndarray, t: np.ndarray, out: np.ndarray) -> None:
+    def shade(
+        self, rays: np.ndarray, axy: np.ndarray, static: Hits | None = None, exact: bool = False
+    ) -> Shaded:
+        """Shade rays (n, 3) in S with atlas coordinates `axy` (n, 2).
+
+        `static` are the rays' precomputed static hits (else computed here). With `exact`
+        (sub-samples of edge pixels) every cube whose bounding cone holds a ray is tested too,
+        so cube silhouettes are exact rather than quantised to the atlas pixels.
+        """
+        n = rays.shape[0]
+        hits = static if static is not None else self.static_hits(rays)
+        seg = remap_flat(self.atlas.seg, axy, cv2.INTER_NEAREST).astype(np.int32)
+        raster = np.flatnonzero(seg >= 0)
+        if raster.size:
+            xy = axy[raster]
+            lin = remap_flat(self.atlas.inv_dist, xy, cv2.INTER_LINEAR)
+            near = remap_flat(self.atlas.inv_dist, xy, cv2.INTER_NEAREST)
+            use = np.where(np.abs(lin - near) > 0.02 * near, near, lin)
+            with np.errstate(divide="ignore"):
+                t_r = np.where(use > 0, 1.0 / use, np.inf).astype(np.float32)
+            wins = t_r < hits.t[raster]
+            idx, t_r, seg_r = raster[wins], t_r[wins], seg[raster[wins]]
+            k = self.dynamic_lut[np.clip(seg_r + 1, 0, self.dynamic_lut.size - 1)]
+            k[seg_r + 1 >= self.dynamic_lut.size] = -1
+            for j, b in enumerate(self.dynamic):
+                sel = idx[k == j]
+                if sel.size == 0:
+                    continue
+                hit, tt, face = self._slab(b, rays[sel])
+                self._shade_box(b, sel[hit], rays[sel[hit]], tt[hit], face[hit], hits)
+            other = k < 0
+            sel = idx[other]
+            if sel.size:
+                rgb = remap_flat(self.atlas.rgb, axy[sel], cv2.INTER_LINEAR).astype(np.float32)
+                hits.rgb[sel] = rgb * np.float32(1.0 / 255.0)
+                hits.t[sel] = t_r[other]
+                hits.key[sel] = seg_r[other] * 8
+                hits.body[sel] = seg_r[other]
+        if exact and self.dynamic:
+            self._nearest_boxes(self.dynamic, rays, hits)
+        laser = np.zeros(n, np.float32)
+        if self.laser_on:
+            self._laser(rays, hits, laser)
+        return Shaded(hits.rgb, laser, hits.key)
+
+    def _laser(self, rays: np.ndarray, hits: Hits, out: np.ndarray) -> None:
         """Stripe intensity: Gaussian in the signed distance to the plane, fall-off, shadows."""
         assert self.fan is not None
         las = self.world.scene.laser
-        ok = np.isfinite(t)
-        if self.no_laser.size:
-            ok &= ~np.isin(seg, self.no_laser)
-        idx = np.flatnonzero(ok)
-        s = t[idx] * (rays[idx] @ self.plane.normal.astype(np.float32)) + self.plane.offset
+        with np.errstate(invalid="ignore"):
+            s = hits.t * (rays @ self.plane.normal.astype(np.float32)) + np.float32(
+                self.plane.offset
+            )
         near = np.abs(s) < 5.0 * self.sigma
-        idx, s = idx[near], s[near]
+        if self.no_laser.size:
+            near &= ~np.isin(hits.body, self.no_laser)
+        idx = np.flatnonzero(near)
         if idx.size == 0:
             return
-        pts = rays[idx].astype(np.float64) * t[idx, None].astype(np.float64)
+        s = s[idx]
+        pts = rays[idx].astype(np.float64) * hits.t[idx, None].astype(np.float64)
         lit, rng = self.fan.lit(pts)
         falloff = np.minimum(1.0, (las.reference_range_mm / np.maximum(rng, 1.0)) ** las.falloff)
         gauss = np.exp(-0.5 * (s / self.sigma) ** 2)
@@ -522,16 +732,38 @@ def _flag_pixels(
     return flag & geo.domain
 
 
+def static_hits_for(world: SimWorld, geo: FisheyeGeometry, shader: Shader) -> Hits:
+    """The static hits of the pixel centres, cached on the world per camera configuration."""
+    cache = world.render_cache
+    hits = cache.get(geo.key)
+    if hits is None:
+        parts = [
+            shader.static_hits(geo.rays_S[start : start + _CHUNK])
+            for start in range(0, geo.pixel_index.size, _CHUNK)
+        ]
+        hits = Hits(
+            np.concatenate([h.t for h in parts]),
+            np.concatenate([h.rgb for h in parts]),
+            np.concatenate([h.key for h in parts]),
+            np.concatenate([h.body for h in parts]),
+        )
+        cache.clear()
+        cache[geo.key] = hits
+    return hits
+
+
 def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None) -> RenderResult:
     """Render the world's current state through `model` (laser as the switch says, or as given)."""
     scene = world.scene
     t0 = time.perf_counter()
     geo = geometry_for(model, world.R_SC, scene.render.face_px, scene.camera.image_circle_fov_deg)
+    on = world.laser_on if laser_on is None else laser_on
     t1 = time.perf_counter()
     atlas = render_atlas(world, geo)
-    t2 = time.perf_counter()
-    on = world.laser_on if laser_on is None else laser_on
     shader = Shader(world, atlas, on)
+    t2 = time.perf_counter()
+    static = static_hits_for(world, geo, shader)
+    t3 = time.perf_counter()
     h, w = geo.height, geo.width
     npx = h * w
     key = np.full(npx, -32, np.int32)
@@ -539,20 +771,20 @@ def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None
     laser = np.zeros(npx, np.float32)
     for start in range(0, geo.pixel_index.size, _CHUNK):
         sl = slice(start, start + _CHUNK)
-        out = shader.shade(geo.rays_S[sl], geo.atlas_xy[sl])
+        out = shader.shade(geo.rays_S[sl], geo.atlas_xy[sl], static=static.take(sl))
         inside = geo.inside_dom[sl]
         pix = geo.pixel_index[sl]
         rgb[pix] = out.rgb * inside[:, None]
         laser[pix] = out.laser * inside
         key[pix] = np.where(inside, out.key, -32)
-    t3 = time.perf_counter()
+    t4 = time.perf_counter()
     k = scene.render.supersampling
     rgb_img = rgb.reshape(h, w, 3)
     laser_img = laser.reshape(h, w)
+    n_super = 0
     if k > 1:
         if scene.render.adaptive:
-            flags = _flag_pixels(key.reshape(h, w), rgb_img, laser_img, geo)
-            todo = np.flatnonzero(flags)
+            todo = np.flatnonzero(_flag_pixels(key.reshape(h, w), rgb_img, laser_img, geo))
         else:
             todo = geo.pixel_index
         per_chunk = max(1, _CHUNK // (k * k))
@@ -560,19 +792,16 @@ def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None
             pix = todo[start : start + per_chunk]
             rays, axy, inside = geo.subsample(pix, k)
             out = shader.shade(rays, axy, exact=True)
-            col = (out.rgb * inside[:, None]).reshape(pix.size, k * k, 3).mean(axis=1)
-            las = (out.laser * inside).reshape(pix.size, k * k).mean(axis=1)
-            rgb[pix] = col
-            laser[pix] = las
+            rgb[pix] = (out.rgb * inside[:, None]).reshape(pix.size, k * k, 3).mean(axis=1)
+            laser[pix] = (out.laser * inside).reshape(pix.size, k * k).mean(axis=1)
         n_super = int(todo.size)
-    else:
-        n_super = 0
-    t4 = time.perf_counter()
+    t5 = time.perf_counter()
     stats = {
         "geometry_s": t1 - t0,
         "raster_s": t2 - t1,
-        "shade_s": t3 - t2,
-        "supersample_s": t4 - t3,
+        "static_s": t3 - t2,
+        "shade_s": t4 - t3,
+        "supersample_s": t5 - t4,
         "supersampled_pixels": float(n_super),
         "atlas_pixels": float(geo.atlas_shape[0] * geo.atlas_shape[1]),
     }

@@ -54,6 +54,19 @@ class AnalyticBox:
 
 
 @dataclass(frozen=True)
+class AnalyticCylinder:
+    """A static capped cylinder (the boom's emitter housing and rod), shaded analytically:
+    axis from `p0` to `p1` in S (mm), radius (mm), uniform colour."""
+
+    name: str
+    body: int
+    p0: np.ndarray
+    p1: np.ndarray
+    radius: float
+    color: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
 class MarkerTruth:
     """A target marker: wall, name, paper letter (A-D at the border ends, else ''), corners in S."""
 
@@ -90,6 +103,7 @@ class WorldInfo:
     walls: list[dict[str, object]] = field(default_factory=list)
     cubes: list[tuple[CubeSpec, int]] = field(default_factory=list)
     boxes: list[AnalyticBox] = field(default_factory=list)
+    cylinders: list[AnalyticCylinder] = field(default_factory=list)
     no_laser: set[int] = field(default_factory=set)
 
 
@@ -124,6 +138,8 @@ class SimWorld:
             scene.floor.work_area_color.rgb,
         )
         self.arm: ArmBodies | None = None
+        # Per camera configuration: the exact static hits of the pixel centres (render.py).
+        self.render_cache: dict[str, object] = {}
         self.T_S_B: np.ndarray | None = None
         self._build()
 
@@ -191,6 +207,7 @@ class SimWorld:
             analytic=False,
         )
         p.changeDynamics(floor, -1, lateralFriction=0.8, physicsClientId=self.client)
+        self.floor_body = floor
         half = FLOOR_HALF_M * 1000.0
         self.info.static_rects.append(
             (
@@ -236,6 +253,16 @@ class SimWorld:
         )
         self.info.names[housing] = "laser_housing"
         self.info.no_laser.add(housing)
+        self.info.cylinders.append(
+            AnalyticCylinder(
+                "laser_housing",
+                housing,
+                np.array([0.0, 0.0, -d - b.housing_height_mm / 2.0]),
+                np.array([0.0, 0.0, -d + b.housing_height_mm / 2.0]),
+                b.housing_radius_mm,
+                b.color.rgb,
+            )
+        )
         # The rod climbs from the housing's side to the boom behind the camera (towards -Y).
         start = np.array([0.0, -b.housing_radius_mm * 0.6, -d + b.housing_height_mm / 2.0])
         end = np.array([0.0, -b.rod_length_mm, 40.0])
@@ -267,6 +294,9 @@ class SimWorld:
             physicsClientId=self.client,
         )
         self.info.names[rod] = "boom_rod"
+        self.info.cylinders.append(
+            AnalyticCylinder("boom_rod", rod, start, end, b.rod_radius_mm, b.color.rgb)
+        )
 
     def _build_target(self, t: TargetSpec) -> None:
         cx, cy = t.center_mm
@@ -547,6 +577,19 @@ class SimWorld:
             for face in box_faces(f"cube_{i}", T[:3, 3], T[:3, :3], half):
                 out.append((face.name, body, face))
         return out
+
+    def static_bodies(self) -> set[int]:
+        """Bodies shaded from exact static geometry (never rasterised for the fisheye)."""
+        return {b.body for b in self.info.boxes if not b.dynamic} | {
+            c.body for c in self.info.cylinders
+        }
+
+    def raster_bodies(self) -> list[int]:
+        """Bodies the fisheye rasterises: what moves or is not a simple shape (arm, cubes)."""
+        hidden = self.static_bodies() | {self.floor_body}
+        n = p.getNumBodies(physicsClientId=self.client)
+        ids = [p.getBodyUniqueId(i, physicsClientId=self.client) for i in range(n)]
+        return [b for b in ids if b not in hidden]
 
     def analytic_boxes(self) -> list[AnalyticBox]:
         """Every analytically shaded box at its current pose (cubes move)."""

@@ -15,8 +15,10 @@ import pytest
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import detect_corners
-from sim_backend.api import png_bytes, render_scene
-from sim_backend.scene import load_scene, sized
+from sim_backend.api import camera_model_for, png_bytes, render_scene
+from sim_backend.render import Shader, geometry_for, remap_flat, render_atlas
+from sim_backend.scene import Color, CubeSpec, load_scene, sized
+from sim_backend.world import SimWorld
 from tests.sim.helpers import corner_errors, only_board, redness, stripe_offsets
 
 
@@ -157,33 +159,57 @@ def test_tilted_laser_plane_passes_through_the_emitter() -> None:
         np.testing.assert_allclose((pts - [0.0, 0.0, -d]) @ n, 0.0, atol=1e-3)
 
 
-def test_rasterised_bodies_sit_where_the_model_projects_them() -> None:
-    """The emitter housing (drawn by pybullet, not analytically) is a disc centred on the image
-    centre whose top edge lies where the camera model puts it; this pins pybullet's pixel
-    sampling convention (a half-pixel slip moves both by about 0.5 px)."""
-    width = 960
-    scene = sized(load_scene("two_sided"), width).replace(
-        boom={"color": [1.0, 0.0, 0.0]}, laser={"on": False}
+@pytest.mark.parametrize("roll_deg", [0.0, -50.0])
+def test_rasterised_bodies_sit_where_the_model_projects_them(roll_deg: float) -> None:
+    """What pybullet draws into the cube-map faces lines up with the exact geometry.
+
+    For each cube (drawn by pybullet, then shaded exactly), the pixels the atlas attributes to
+    it and the pixels whose ray hits it exactly (both on a 0.25 px grid) have the same
+    centroid. This pins pybullet's sampling convention: a half-pixel slip moves the atlas
+    centroid by about 0.45 px. Rolling the camera by -50 degrees puts the cubes in side faces.
+    """
+    # Edges that run along the atlas' pixel rows or columns alias without averaging out, so
+    # the cubes are turned by odd angles.
+    red = Color("red", (0.85, 0.08, 0.08))
+    cubes = tuple(
+        CubeSpec(red, 120.0, xy, yaw)
+        for xy, yaw in (((-300.0, 500.0), 17.0), ((250.0, 650.0), 33.0), ((0.0, 950.0), 61.0))
     )
-    image, truth = render_scene(scene)
-    blue = image[..., 0].astype(float) / 255.0
-    c = (width - 1) / 2.0
-    win = 60
-    r0 = int(c) - win
-    sub = blue[r0 : r0 + 2 * win + 2, r0 : r0 + 2 * win + 2]
-    floor = np.median(blue[r0 - 30 : r0 - 10, int(c) - 10 : int(c) + 10])
-    cover = np.clip(1.0 - sub / floor, 0.0, 1.0)
-    xs = np.arange(sub.shape[1]) + r0
-    u_centroid = (cover.sum(axis=0) * xs).sum() / cover.sum()
-    assert abs(u_centroid - c) < 0.15
-    column = cover[:, win : win + 2].mean(axis=1)
-    top_edge = r0 + (win + 1) - column[: win + 1].sum()
-    boom = scene.boom
-    d = scene.laser.distance_mm
-    theta = np.arctan(boom.housing_radius_mm / (d - boom.housing_height_mm / 2.0))
-    model = OcamModel.from_dict(truth["camera"])
-    expected = model.ray_to_pixel(np.array([0.0, -np.sin(theta), np.cos(theta)]))[1]
-    assert abs(top_edge - expected) < 0.3, (top_edge, expected)
+    scene = sized(load_scene("sorting"), 960).replace(
+        camera={"roll_deg": roll_deg}, cubes=cubes
+    )
+    world = SimWorld(scene)
+    model = camera_model_for(scene)
+    geo = geometry_for(model, world.R_SC, scene.render.face_px, 185.0)
+    shader = Shader(world, render_atlas(world, geo), False)
+    faces = set()
+    for cube in shader.dynamic:
+        centre = world.body_pose(cube.body)[:3, 3]
+        uv0 = model.ray_to_pixel(world.R_SC.T @ centre)
+        offs = np.arange(-20.0, 20.0, 0.25)
+        uu, vv = np.meshgrid(uv0[0] + offs, uv0[1] + offs)
+        uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
+        rays_c = model.pixel_to_ray(uv)
+        rays_s = (rays_c @ world.R_SC.T).astype(np.float32)
+        seg = remap_flat(shader.atlas.seg, geo.rays_to_atlas(rays_c), cv2.INTER_NEAREST)
+        drawn = seg.astype(int) == cube.body
+        # The exact nearest cube along each ray (cubes may hide one another).
+        dist = np.full((len(shader.dynamic), len(rays_s)), np.inf, np.float32)
+        for j, other in enumerate(shader.dynamic):
+            hit, t, _ = Shader._slab(other, rays_s)
+            dist[j, hit] = t[hit]
+        nearest = np.argmin(dist, axis=0)
+        exact = np.isfinite(dist.min(axis=0)) & (
+            np.array([b.body for b in shader.dynamic])[nearest] == cube.body
+        )
+        assert exact.sum() > 2000 and drawn.sum() > 2000
+        shift = uv[drawn].mean(axis=0) - uv[exact].mean(axis=0)
+        assert np.linalg.norm(shift) < 0.12, (roll_deg, shift)
+        assert (drawn & exact).sum() / (drawn | exact).sum() > 0.95
+        faces.add(geo.faces[int(np.argmax(rays_c.mean(axis=0) @ np.array(
+            [f.forward for f in geo.faces]).T))].name)
+    assert (faces == {"front"}) == (roll_deg == 0.0), faces
+    world.close()
 
 
 def test_adaptive_supersampling_matches_full_supersampling() -> None:
