@@ -170,3 +170,16 @@ def test_mapping_splits_separate_obstacles_and_ignores_rays_away_from_the_plane(
     assert np.isnan(mapped[-2]).all()
     segs = segments(mapped, truth)
     assert [round(s.distance_mm) for s in segs] == [500, 900]
+
+
+def test_joint_rejects_stray_points() -> None:
+    sc = scenes(1, seed=8)[0]
+    clean = two_sided(MODEL, sc, seed=2, noise=NOISE)
+    dirty = two_sided(MODEL, sc, seed=2, noise=NOISE)
+    rng = np.random.default_rng(5)
+    for wall in dirty.walls.values():  # 8 of 120 laser points are reflections 5-15 px away
+        wall.laser_px[rng.choice(len(wall.laser_px), 8, replace=False)] += rng.uniform(5, 15, 2)
+    a = errors(calibrate_joint(clean, MODEL, sc.separation), sc.angles_deg)
+    b = errors(calibrate_joint(dirty, MODEL, sc.separation), sc.angles_deg)
+    # Without rejection 7% outliers at 10 px would move the laser angles by ~0.1 deg.
+    assert np.all(np.abs(b[:5] - a[:5]) < 0.01) and abs(b[5] - a[5]) < 0.3

@@ -28,8 +28,19 @@ def rot_z(rad: float) -> np.ndarray:
 
 
 def camera_rotation(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """R_SC from angles in radians."""
-    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll) @ R_NOM
+    """R_SC from angles in radians: Rz(yaw) Ry(pitch) Rx(roll) R_nom, written out (it sits in
+    the inner loop of the joint solver)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    # Columns 2 and 3 of Rz Ry Rx are negated by R_nom = diag(1, -1, -1).
+    return np.array(
+        [
+            [cy * cp, -(cy * sp * sr - sy * cr), -(cy * sp * cr + sy * sr)],
+            [sy * cp, -(sy * sp * sr + cy * cr), -(sy * sp * cr - cy * sr)],
+            [-sp, -cp * sr, -cp * cr],
+        ]
+    )
 
 
 def camera_angles(R_SC: np.ndarray) -> tuple[float, float, float]:

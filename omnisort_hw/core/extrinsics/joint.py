@@ -185,8 +185,13 @@ class JointProblem:
     def __init__(self, obs: _Obs, separation: float) -> None:
         self.obs = obs
         self.separation = separation
+        self.has_floor = len(obs.floor["left"]) > 0
         self.marker_keys = sorted(obs.markers)
         self.marker_rays = np.array([obs.markers[k] for k in self.marker_keys])
+        # Which parameter gives each marker's X (wall), Y (near/far) and Z (top/floor).
+        self.marker_right = np.array([side == "right" for side, _ in self.marker_keys])
+        self.marker_far = np.array([name.endswith("far") for _, name in self.marker_keys])
+        self.marker_top = np.array([name.startswith("border") for _, name in self.marker_keys])
         self.marker_basis = _tangent_basis(self.marker_rays)
         self.marker_scale = np.array([obs.scale_markers[k] for k in self.marker_keys])
 
@@ -208,32 +213,36 @@ class JointProblem:
 
     def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
         R, n, d, g = self.split(p)
+        # Great-circle normals in S of every line, one row each, per side: the border
+        # (X = xw, Z = z_b, along Y: normal ~ (-z_b, 0, xw)), the wall/floor line likewise, and
+        # the laser line where the wall plane X = xw meets n.(p - (0, 0, -d)) = 0.
+        xs = np.array([g["left"], g["right"]])
+        z_laser = -d - n[0] * xs / n[2]
+        u = np.array([0.0, -n[2], n[1]])
+        p0 = np.stack([xs, np.zeros(2), z_laser], axis=1)
+        rows = [np.stack([-np.full(2, g["z_b"]), np.zeros(2), xs], axis=1)]
+        if self.has_floor:
+            rows.append(np.stack([-np.full(2, g["z_f"]), np.zeros(2), xs], axis=1))
+        rows.append(np.cross(p0, u))
+        normals = np.concatenate(rows)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        in_C = normals @ R  # rows: R^T m, the normals in the camera frame
+        k = len(rows)
         out: dict[str, np.ndarray] = {}
-        for s in SIDES:
-            xw = g[s]
-            # Border line: X = xw, Z = z_b, along Y. Its great circle normal ~ (-z_b, 0, xw).
-            mb = np.array([-g["z_b"], 0.0, xw])
-            mb /= np.linalg.norm(mb)
-            out[f"border_{s}"] = (self.obs.border[s] @ (R.T @ mb)) * self.obs.scale_border[s]
-            if "z_f" in g:
-                mf = np.array([-g["z_f"], 0.0, xw])
-                mf /= np.linalg.norm(mf)
-                out[f"floor_{s}"] = (self.obs.floor[s] @ (R.T @ mf)) * self.obs.scale_floor[s]
-            # Laser line: wall plane X = xw meets n.(p - (0, 0, -d)) = 0.
-            p0 = np.array([xw, 0.0, -d - n[0] * xw / n[2]])
-            u = np.array([0.0, -n[2], n[1]])
-            ml = np.cross(p0, u)
-            ml /= np.linalg.norm(ml)
-            out[f"laser_{s}"] = (self.obs.laser[s] @ (R.T @ ml)) * self.obs.scale_laser[s]
-        pts = np.array(
-            [
-                [
-                    g[side],
-                    g["y_near"] if name.endswith("near") else g["y_far"],
-                    g["z_top"] if name.startswith("border") else g["z_floor"],
-                ]
-                for side, name in self.marker_keys
+        for i, s in enumerate(SIDES):
+            out[f"border_{s}"] = (self.obs.border[s] @ in_C[i]) * self.obs.scale_border[s]
+            if self.has_floor:
+                out[f"floor_{s}"] = (self.obs.floor[s] @ in_C[2 + i]) * self.obs.scale_floor[s]
+            out[f"laser_{s}"] = (self.obs.laser[s] @ in_C[2 * (k - 1) + i]) * self.obs.scale_laser[
+                s
             ]
+        pts = np.stack(
+            [
+                np.where(self.marker_right, g["right"], g["left"]),
+                np.where(self.marker_far, g["y_far"], g["y_near"]),
+                np.where(self.marker_top, g["z_top"], g["z_floor"]),
+            ],
+            axis=1,
         )
         dirs = pts @ R  # rows: R^T p
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -245,6 +254,27 @@ class JointProblem:
     def residuals(self, p: np.ndarray) -> np.ndarray:
         return np.concatenate(list(self.residual_blocks(p).values()))
 
+    def reject_outliers(self, res: np.ndarray, k: float = 4.0) -> int:
+        """Drop border, floor and laser points whose residual exceeds k robust sigmas (MAD of
+        all residuals); markers are kept (each one is needed). Returns how many went."""
+        sigma = 1.4826 * float(np.median(np.abs(res - np.median(res))))
+        if sigma <= 0:
+            return 0
+        dropped, start = 0, 0
+        blocks = [("border", self.obs.border, self.obs.scale_border)]
+        if self.has_floor:
+            blocks.append(("floor", self.obs.floor, self.obs.scale_floor))
+        blocks.append(("laser", self.obs.laser, self.obs.scale_laser))
+        for side in SIDES:
+            for _, rays, scale in blocks:
+                n = len(rays[side])
+                keep = np.abs(res[start : start + n]) <= k * sigma
+                start += n
+                if not keep.all() and keep.sum() >= 5:
+                    rays[side], scale[side] = rays[side][keep], scale[side][keep]
+                    dropped += int((~keep).sum())
+        return dropped
+
 
 def calibrate_joint(
     features: TargetFeatures, model: OcamModel, separation_mm: float
@@ -254,18 +284,12 @@ def calibrate_joint(
     obs = observations(features, model)
     start = closed_form(obs, separation_mm)
     prob = JointProblem(obs, separation_mm)
-    # Robust pass (soft L1 with a 1 px knee) so stray extracted points cannot pull the fit, then
-    # a plain least-squares pass on the inliers' scale for the covariance.
-    robust = least_squares(
-        prob.residuals,
-        start["x"],
-        method="trf",
-        loss="soft_l1",
-        f_scale=1.0,
-        x_scale="jac",
-        max_nfev=200,
-    )
-    sol = least_squares(prob.residuals, robust.x, method="lm", x_scale="jac", max_nfev=200)
+    # LM from the closed-form start; then points further than 4 robust sigmas from the fit
+    # (stray extracted points) are dropped and the plain least-squares solve repeated, which
+    # also gives the covariance.
+    sol = least_squares(prob.residuals, start["x"], method="lm", x_scale="jac", max_nfev=400)
+    if prob.reject_outliers(sol.fun):
+        sol = least_squares(prob.residuals, sol.x, method="lm", x_scale="jac", max_nfev=400)
     p = sol.x
     res = sol.fun
     dof = max(res.size - p.size, 1)
