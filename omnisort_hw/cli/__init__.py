@@ -15,6 +15,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.intrinsics_cmd",
     "omnisort_hw.cli.extrinsics_cmd",
     "omnisort_hw.cli.evaluate_cmd",
+    "omnisort_hw.cli.demo_cmd",
     "omnisort_hw.cli.serve_cmd",
     "omnisort_hw.cli.ctl_cmd",
     "omnisort_hw.cli.review_cmd",
