@@ -88,8 +88,13 @@ def run(shared: Path) -> dict[str, Any]:
         "print('RESULT ' + json.dumps(_measure()))"
     )
     proc = subprocess.run(
-        [sys.executable, "-c", code], env=env, cwd=ROOT, capture_output=True, text=True,
-        timeout=900, check=False,
+        [sys.executable, "-c", code],
+        env=env,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
     )
     if proc.returncode != 0:
         raise RuntimeError(f"bench_sim child failed: {proc.stderr.strip()[-2000:]}")

@@ -262,8 +262,12 @@ def _raster_rects(world: SimWorld, geo: FisheyeGeometry) -> list[tuple[int, int,
                 full = True
                 break
             x, y = (rim @ f.right) / d, (rim @ f.up) / d
-            box = [min(box[0], x.min()), max(box[1], x.max()),
-                   min(box[2], y.min()), max(box[3], y.max())]
+            box = [
+                min(box[0], x.min()),
+                max(box[1], x.max()),
+                min(box[2], y.min()),
+                max(box[3], y.max()),
+            ]
         if full:
             rects.append((0, f.width, 0, f.height))
             continue
@@ -298,9 +302,7 @@ def render_atlas(world: SimWorld, geo: FisheyeGeometry) -> Atlas:
     }
     static = sorted(world.static_bodies())
     for body in static:
-        p.changeVisualShape(
-            body, -1, rgbaColor=[*colors[body], 0.0], physicsClientId=world.client
-        )
+        p.changeVisualShape(body, -1, rgbaColor=[*colors[body], 0.0], physicsClientId=world.client)
     try:
         for f, (c0, c1, r0, r1) in zip(geo.faces, _raster_rects(world, geo), strict=True):
             if c1 <= c0 or r1 <= r0:
@@ -312,8 +314,12 @@ def render_atlas(world: SimWorld, geo: FisheyeGeometry) -> Atlas:
             xl = f.x0 + c0 * f.pitch
             yb = f.y0 + (f.height - r1) * f.pitch
             proj = p.computeProjectionMatrix(
-                xl * NEAR_M, (xl + fw * f.pitch) * NEAR_M, yb * NEAR_M,
-                (yb + fh * f.pitch) * NEAR_M, NEAR_M, FAR_M,
+                xl * NEAR_M,
+                (xl + fw * f.pitch) * NEAR_M,
+                yb * NEAR_M,
+                (yb + fh * f.pitch) * NEAR_M,
+                NEAR_M,
+                FAR_M,
             )
             _, _, img, zbuf, ids = p.getCameraImage(
                 fw,
@@ -367,8 +373,9 @@ class Hits:
 
     def take(self, sl: slice) -> Hits:
         """A copy of a slice of the samples."""
-        return Hits(self.t[sl].copy(), self.rgb[sl].copy(), self.key[sl].copy(),
-                    self.body[sl].copy())
+        return Hits(
+            self.t[sl].copy(), self.rgb[sl].copy(), self.key[sl].copy(), self.body[sl].copy()
+        )
 
 
 @dataclass
@@ -572,8 +579,13 @@ class Shader:
         return hit, tmin, face
 
     def _shade_box(
-        self, b: _BoxTables, idx: np.ndarray, rays: np.ndarray, tt: np.ndarray,
-        face: np.ndarray, hits: Hits,
+        self,
+        b: _BoxTables,
+        idx: np.ndarray,
+        rays: np.ndarray,
+        tt: np.ndarray,
+        face: np.ndarray,
+        hits: Hits,
     ) -> None:
         """Write colour, key, distance and body of box hits (pattern on the panel face)."""
         hits.rgb[idx] = b.face_rgb[face]

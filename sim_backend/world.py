@@ -25,7 +25,7 @@ from sim_backend.geometry import (
 )
 from sim_backend.patterns import CheckerPattern, FloorPattern, Marker, WallPattern
 from sim_backend.robot import ArmBodies, build_arm, tcp_pose, ur_model
-from sim_backend.scene import BoardSpec, CubeSpec, Scene, TargetSpec
+from sim_backend.scene import BinSpec, BoardSpec, CubeSpec, Scene, TargetSpec
 
 MM = 1e-3
 FLOOR_HALF_M = 20.0
@@ -447,10 +447,7 @@ class SimWorld:
         p.changeDynamics(body, -1, lateralFriction=0.8, physicsClientId=self.client)
         self.info.cubes.append((c, body))
 
-    def _build_bin(self, i: int, b: object) -> None:
-        from sim_backend.scene import BinSpec
-
-        assert isinstance(b, BinSpec)
+    def _build_bin(self, i: int, b: BinSpec) -> None:
         sx, sy, sz = b.size_mm
         w = b.wall_mm
         R = rot_z(b.yaw_deg)

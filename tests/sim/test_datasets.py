@@ -71,8 +71,12 @@ def test_table3_dataset_layout(tmp_path: Path) -> None:
         boards = json.loads((folder / "checkerboards.truth.json").read_text())["checkerboards"]
         for board in boards:
             assert set(board) >= {"inner_corners", "square_mm", "corners_px"}
-    angles = np.array([[c.camera_roll, c.camera_pitch, c.camera_yaw, c.laser_roll,
-                        c.laser_pitch] for c in table3_configs(200, 1)])
+    angles = np.array(
+        [
+            [c.camera_roll, c.camera_pitch, c.camera_yaw, c.laser_roll, c.laser_pitch]
+            for c in table3_configs(200, 1)
+        ]
+    )
     assert np.abs(angles).max() <= 10.0 and np.abs(angles).max() > 9.0
 
 
@@ -81,8 +85,16 @@ def test_real_camera_mode_degrades_but_keeps_the_features() -> None:
     clean, _ = render_scene(scene, seed=2)
     image, truth = render_scene(scene, seed=2, degraded=True)
     settings = truth["degraded"]
-    assert set(settings) >= {"noise_read", "blur_sigma_px", "vignetting", "exposure_ev",
-                             "gamma", "jpeg_quality", "ambient", "laser_speckle"}
+    assert set(settings) >= {
+        "noise_read",
+        "blur_sigma_px",
+        "vignetting",
+        "exposure_ev",
+        "gamma",
+        "jpeg_quality",
+        "ambient",
+        "laser_speckle",
+    }
     # Noise: where the clean image is flat, the degraded one varies from pixel to pixel.
     g_clean = cv2.cvtColor(clean, cv2.COLOR_BGR2GRAY).astype(np.float32)
     g_deg = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(np.float32)
@@ -108,8 +120,20 @@ def test_cli_render_and_views(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     data = (tmp_path / "two_sided.png").read_bytes()
     assert truth["image"]["sha256"] == hashlib.sha256(data).hexdigest()
     assert truth["camera"]["image_size"] == [240, 240]
-    code = main(["sim", "checkerboard-views", "--n", "2", "--seed", "4", "--width", "320",
-                 "--out", str(tmp_path / "views")])
+    code = main(
+        [
+            "sim",
+            "checkerboard-views",
+            "--n",
+            "2",
+            "--seed",
+            "4",
+            "--width",
+            "320",
+            "--out",
+            str(tmp_path / "views"),
+        ]
+    )
     assert code == 0
     listed = json.loads(capsys.readouterr().out.split("\n", 2)[-1])
     assert [Path(p).name for p in listed] == ["view_00.png", "view_01.png"]

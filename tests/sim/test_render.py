@@ -175,9 +175,7 @@ def test_rasterised_bodies_sit_where_the_model_projects_them(roll_deg: float) ->
         CubeSpec(red, 120.0, xy, yaw)
         for xy, yaw in (((-300.0, 500.0), 17.0), ((250.0, 650.0), 33.0), ((0.0, 950.0), 61.0))
     )
-    scene = sized(load_scene("sorting"), 960).replace(
-        camera={"roll_deg": roll_deg}, cubes=cubes
-    )
+    scene = sized(load_scene("sorting"), 960).replace(camera={"roll_deg": roll_deg}, cubes=cubes)
     world = SimWorld(scene)
     model = camera_model_for(scene)
     geo = geometry_for(model, world.R_SC, scene.render.face_px, 185.0)
@@ -206,8 +204,11 @@ def test_rasterised_bodies_sit_where_the_model_projects_them(roll_deg: float) ->
         shift = uv[drawn].mean(axis=0) - uv[exact].mean(axis=0)
         assert np.linalg.norm(shift) < 0.12, (roll_deg, shift)
         assert (drawn & exact).sum() / (drawn | exact).sum() > 0.95
-        faces.add(geo.faces[int(np.argmax(rays_c.mean(axis=0) @ np.array(
-            [f.forward for f in geo.faces]).T))].name)
+        faces.add(
+            geo.faces[
+                int(np.argmax(rays_c.mean(axis=0) @ np.array([f.forward for f in geo.faces]).T))
+            ].name
+        )
     assert (faces == {"front"}) == (roll_deg == 0.0), faces
     world.close()
 
