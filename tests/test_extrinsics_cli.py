@@ -1,0 +1,160 @@
+"""`omnisort extrinsics calibrate` and `omnisort map` on rendered and third-party images."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from omnisort_hw.core.camera_io import save_camera_json
+from omnisort_hw.core.camera_model import OcamModel
+
+pytest.importorskip("pybullet")
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A tilted two-sided scene at 960 px with the laser on and off, and its camera.json."""
+    from sim_backend.api import render_scene, write_render
+    from sim_backend.scene import load_scene, sized
+
+    out = tmp_path_factory.mktemp("ext")
+    scene = sized(load_scene("two_sided"), 960).replace(
+        camera={"roll_deg": 4.0, "pitch_deg": -3.0, "yaw_deg": 6.0},
+        laser={"roll_deg": -6.0, "pitch_deg": 5.0},
+    )
+    image, truth = render_scene(scene, seed=3)
+    write_render(out, "on", image, truth)
+    off, _ = render_scene(scene, seed=3, laser_on=False)
+    cv2.imwrite(str(out / "off.png"), off)
+    hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+    blue = (hsv[..., 0] > 95) & (hsv[..., 0] < 130) & (hsv[..., 1] > 120)
+    painted = image.copy()
+    painted[cv2.dilate(blue.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0] = (200, 200, 200)
+    cv2.imwrite(str(out / "no_markers.png"), painted)
+    cv2.imwrite(str(out / "small.png"), cv2.resize(image, (640, 640)))
+    save_camera_json(out / "camera.json", OcamModel.from_dict(truth["camera"]))
+    return {"dir": out, "truth": out / "on.truth.json"}
+
+
+def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
+    d = rendered["dir"]
+    out = d / "system.json"
+    proc = run_cli(
+        "extrinsics",
+        "calibrate",
+        str(d / "on.png"),
+        "--camera",
+        str(d / "camera.json"),
+        "--target",
+        "two-sided",
+        "--out",
+        str(out),
+        "--json",
+    )
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    truth = json.loads(rendered["truth"].read_text())
+    assert result["method"] == "joint"
+    got = result["parameters"]
+    assert got["cam_roll_deg"] == pytest.approx(truth["camera_rotation"]["roll_deg"], abs=0.05)
+    assert got["laser_pitch_deg"] == pytest.approx(truth["laser_plane"]["pitch_deg"], abs=0.05)
+    system = json.loads(out.read_text())
+    assert system["image"]["sha256"] and system["laser_plane"]["distance_mm"] > 0
+    proc = run_cli("map", str(d / "on.png"), "--system", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    segs = json.loads(proc.stdout)["segments"]
+    # The two walls' laser lines; their nearest points are the walls' near ends.
+    target = truth["target"]
+    half, near = target["separation_mm"] / 2, target["walls"][0]["inner_face_origin_mm"][1]
+    want = float(np.hypot(half, near))
+    assert len(segs) >= 2
+    assert sorted(s["distance_mm"] for s in segs)[:2] == pytest.approx([want, want], rel=0.01)
+
+
+@pytest.mark.parametrize(
+    ("image", "extra", "message"),
+    [
+        ("off.png", [], "laser"),
+        ("no_markers.png", [], "marker"),
+        ("small.png", [], "image is 640x640 but the camera model is for 960x960"),
+        ("on.png", ["--target", "checkerboards"], "checkerboard"),
+        ("on.png", ["--method", "method2"], "does not work with the two-sided target"),
+        ("missing.png", [], "no such image file"),
+    ],
+)
+def test_bad_input_fails_clearly_and_writes_nothing(
+    rendered: dict[str, Path], image: str, extra: list[str], message: str
+) -> None:
+    d = rendered["dir"]
+    out = d / f"bad-{image}-{len(extra)}.json"
+    args = [
+        "extrinsics",
+        "calibrate",
+        str(d / image),
+        "--camera",
+        str(d / "camera.json"),
+        "--out",
+        str(out),
+    ]
+    if "--target" not in extra:
+        args += ["--target", "two-sided"]
+    proc = run_cli(*args, *extra)
+    assert proc.returncode != 0
+    assert message.lower() in proc.stderr.lower(), proc.stderr
+    assert not out.exists()
+
+
+@pytest.mark.reference
+def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Path) -> None:
+    from omnisort_hw.core.checkerboard import BoardSpec
+    from omnisort_hw.core.intrinsics import calibrate_images
+    from omnisort_hw.extrinsics_pipeline import calibrate_system
+
+    views = sorted((reference_dir / "intrinsics").glob("a*.jpg"))
+    model = calibrate_images(
+        [(p.name, cv2.imread(str(p))) for p in views], BoardSpec(9, 6, 116.0)
+    ).model
+    runs = {
+        "joint": ("two_sided_target.png", "two-sided"),
+        "paper": ("two_sided_target.png", "two-sided"),
+        "method1": ("three_sided_target.png", "three-sided"),
+        "method2": ("checkerboard_b.jpg", "checkerboards"),
+    }
+    params = {}
+    for method, (name, target) in runs.items():
+        calib = calibrate_system(
+            cv2.imread(str(reference_dir / name)),
+            model,
+            target,
+            method,
+            separation_mm=1292.4,
+            board=(9, 6),
+            square_mm=97.0,
+        )
+        params[method] = calib.parameters()
+    for key in (
+        "cam_roll_deg",
+        "cam_pitch_deg",
+        "cam_yaw_deg",
+        "laser_roll_deg",
+        "laser_pitch_deg",
+    ):
+        values = [p[key] for p in params.values()]
+        assert max(values) - min(values) <= 0.3, (key, values)
+    walls = [params[m]["laser_distance_mm"] for m in ("joint", "paper", "method1")]
+    assert max(walls) - min(walls) < 5.0
