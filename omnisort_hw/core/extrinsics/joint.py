@@ -186,6 +186,8 @@ class JointProblem:
         self.obs = obs
         self.separation = separation
         self.has_floor = len(obs.floor["left"]) > 0
+        # Per kind of observation, 1 / its noise in pixels (estimate_weights sets them).
+        self.weights = {"border": 1.0, "floor": 1.0, "laser": 1.0, "markers": 1.0}
         self.marker_keys = sorted(obs.markers)
         self.marker_rays = np.array([obs.markers[k] for k in self.marker_keys])
         # Which parameter gives each marker's X (wall), Y (near/far) and Z (top/floor).
@@ -252,24 +254,47 @@ class JointProblem:
         return out
 
     def residuals(self, p: np.ndarray) -> np.ndarray:
-        return np.concatenate(list(self.residual_blocks(p).values()))
+        """Weighted residuals: each kind divided by its noise, so the sum is the likelihood."""
+        return np.concatenate(
+            [
+                block * self.weights[name.split("_")[0]]
+                for name, block in self.residual_blocks(p).items()
+            ]
+        )
 
-    def reject_outliers(self, res: np.ndarray, k: float = 4.0) -> int:
-        """Drop border, floor and laser points whose residual exceeds k robust sigmas (MAD of
-        all residuals); markers are kept (each one is needed). Returns how many went."""
-        sigma = 1.4826 * float(np.median(np.abs(res - np.median(res))))
-        if sigma <= 0:
-            return 0
-        dropped, start = 0, 0
-        blocks = [("border", self.obs.border, self.obs.scale_border)]
+    def noise_px(self, p: np.ndarray) -> dict[str, float]:
+        """Robust noise estimate (px) of each kind of observation at parameters p: 1.4826 MAD
+        for the line points, RMS for the few marker coordinates; floored at 0.02 px."""
+        kinds: dict[str, list[np.ndarray]] = {}
+        for name, block in self.residual_blocks(p).items():
+            kinds.setdefault(name.split("_")[0], []).append(block)
+        out = {}
+        for kind, blocks in kinds.items():
+            r = np.concatenate(blocks)
+            sigma = np.sqrt(np.mean(r**2)) if kind == "markers" else 1.4826 * np.median(np.abs(r))
+            out[kind] = max(float(sigma), 0.02)
+        return out
+
+    def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
+        noise = self.noise_px(p)
+        self.weights.update({k: 1.0 / v for k, v in noise.items()})
+        return noise
+
+    def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> int:
+        """Drop border, floor and laser points further than k noise sigmas of their kind from
+        the fit (stray extracted points); markers are kept (each one is needed)."""
+        noise = self.noise_px(p)
+        blocks = self.residual_blocks(p)
+        dropped = 0
+        kinds = [
+            ("border", self.obs.border, self.obs.scale_border),
+            ("laser", self.obs.laser, self.obs.scale_laser),
+        ]
         if self.has_floor:
-            blocks.append(("floor", self.obs.floor, self.obs.scale_floor))
-        blocks.append(("laser", self.obs.laser, self.obs.scale_laser))
+            kinds.append(("floor", self.obs.floor, self.obs.scale_floor))
         for side in SIDES:
-            for _, rays, scale in blocks:
-                n = len(rays[side])
-                keep = np.abs(res[start : start + n]) <= k * sigma
-                start += n
+            for kind, rays, scale in kinds:
+                keep = np.abs(blocks[f"{kind}_{side}"]) <= k * noise[kind]
                 if not keep.all() and keep.sum() >= 5:
                     rays[side], scale[side] = rays[side][keep], scale[side][keep]
                     dropped += int((~keep).sum())
@@ -284,11 +309,14 @@ def calibrate_joint(
     obs = observations(features, model)
     start = closed_form(obs, separation_mm)
     prob = JointProblem(obs, separation_mm)
-    # LM from the closed-form start; then points further than 4 robust sigmas from the fit
-    # (stray extracted points) are dropped and the plain least-squares solve repeated, which
-    # also gives the covariance.
+    # LM from the closed-form start; then each kind of observation is weighted by its own
+    # noise (degraded laser points are noisier than border edges), points beyond 4 sigmas of
+    # their kind are dropped, and the weighted solve repeated: the maximum-likelihood fit,
+    # whose covariance gives the standard deviations.
     sol = least_squares(prob.residuals, start["x"], method="lm", x_scale="jac", max_nfev=400)
-    if prob.reject_outliers(sol.fun):
+    for _ in range(2):
+        prob.reject_outliers(sol.x)
+        noise = prob.estimate_weights(sol.x)
         sol = least_squares(prob.residuals, sol.x, method="lm", x_scale="jac", max_nfev=400)
     p = sol.x
     res = sol.fun
@@ -313,8 +341,9 @@ def calibrate_joint(
             "border_z_mm": float(geom["z_b"]),
         },
         residuals={
-            "rms_px": float(np.sqrt(np.mean(res**2))),
+            "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
             **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
+            "noise_px": noise,
             "observations": int(res.size),
         },
     )
