@@ -45,11 +45,13 @@ _CENTROID_LEVEL = 0.3  # ... above this fraction of the peak height
 _CHROMA_K = 1.5  # weight of |g - b|: laser light has g ~ b, yellow, orange and tan do not
 _NOISE_K = 6.0  # candidate threshold in noise standard deviations
 _FLOOR = 4.0  # grey levels: never below 8-bit quantisation and JPEG rounding
-_LOW_FRACTION = 0.15  # hysteresis: a stripe point's height, of the stripes' robust peak
+_LOW_FRACTION = 0.08  # hysteresis: a stripe point's height, of the stripes' robust peak
 _HIGH_FRACTION = 0.4  # ... and a chain's strongest point
 _STRONG_FLOOR = 30.0  # grey levels a chain must reach to be called a laser stripe
 _MIN_CHAIN = 4  # points (one per scan line) a chain needs
 _MIN_STRONG = 3  # ... of which strong
+_LONG_CHAIN = 16  # points: a chain this long without strong points may be a faint stripe ...
+_FAINT_AGREE = 0.8  # ... if this fraction of its points had a stripe on every window line
 
 
 @dataclass(frozen=True)
@@ -175,7 +177,8 @@ def _fit_windows(
     1 px off) gives the centre on the candidate's line with the noise of ~2 _ALONG + 1 lines,
     and the local slope, which decides whether this scan cut the stripe squarely (|slope| <= 1).
     `across_u`: scan lines are rows (profiles along u), else columns (along v).
-    Returns (points (N, 2) as (u, v), stripe height above background (N,), keep mask).
+    Returns (points (N, 2) as (u, v), stripe height above background (N,), whether every
+    line of the window agreed with the fit (N,), keep mask).
     """
     h, w = bgr.shape[:2]
     n = centres.shape[0]
@@ -223,16 +226,22 @@ def _fit_windows(
     else:
         pts[:, 0] = u0
         pts[:, 1] = v0 + a
-    return pts, centre_h, ok
+    return pts, centre_h, (wt > 0).sum(axis=1) >= 2 * _ALONG, ok
 
 
 def _keep_chains(
-    points: np.ndarray, strong: np.ndarray, shape: tuple[int, int], cell: int
+    points: np.ndarray,
+    strong: np.ndarray,
+    consistent: np.ndarray,
+    shape: tuple[int, int],
+    cell: int,
 ) -> np.ndarray:
     """Hysteresis on chains: points are linked through a grid of `cell`-px cells (one scan-line
     spacing; neighbouring cells and one-cell gaps link, so short gaps of dashed stripes are
     bridged and specks a few spacings away are not); a chain survives if it has at least
-    _MIN_CHAIN points, _MIN_STRONG of them strong."""
+    _MIN_CHAIN points, _MIN_STRONG of them strong, or, for a faint stripe (far away, dark or
+    diluted by blur), if it is long (_LONG_CHAIN points) and nearly all its points were seen
+    as one straight stripe on every line of their fit window, which texture does not do."""
     if points.shape[0] == 0:
         return np.zeros(0, dtype=bool)
     h, w = shape
@@ -246,7 +255,9 @@ def _keep_chains(
     lab = labels[gi, gj]
     count = np.bincount(lab, minlength=n_lab)
     has_strong = np.bincount(lab, weights=strong.astype(float), minlength=n_lab) >= _MIN_STRONG
-    good = (count >= _MIN_CHAIN) & has_strong
+    agree = np.bincount(lab, weights=consistent.astype(float), minlength=n_lab)
+    faint = (count >= _LONG_CHAIN) & (agree >= _FAINT_AGREE * count)
+    good = (count >= _MIN_CHAIN) & (has_strong | faint)
     good[0] = False
     return good[lab]
 
@@ -279,11 +290,12 @@ def laser_stripe_points_stats(
         m = mask.astype(bool, copy=False)
         full_r = full_r[m[full_r[:, 0], full_r[:, 1]]]
         full_c = full_c[m[full_c[:, 0], full_c[:, 1]]]
-    pts_r, amp_r, ok_r = _fit_windows(bgr, full_r, True, low)
-    pts_c, amp_c, ok_c = _fit_windows(bgr, full_c, False, low)
+    pts_r, amp_r, con_r, ok_r = _fit_windows(bgr, full_r, True, low)
+    pts_c, amp_c, con_c, ok_c = _fit_windows(bgr, full_c, False, low)
     pts = np.concatenate([pts_r[ok_r], pts_c[ok_c]])
     amp = np.concatenate([amp_r[ok_r], amp_c[ok_c]])
-    keep = _keep_chains(pts, amp > high, (h, w), s)
+    con = np.concatenate([con_r[ok_r], con_c[ok_c]])
+    keep = _keep_chains(pts, amp > high, con, (h, w), s)
     pts = pts[keep]
     stats = StripeStats(noise, low, high, int(full_r.shape[0] + full_c.shape[0]), int(pts.shape[0]))
     return pts, stats
