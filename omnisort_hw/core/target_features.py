@@ -31,10 +31,10 @@ wall, which has none of its own: its markers dict is empty and its face is bound
 corner markers) and the simulator's (12 markers, four on each wall; the far wall's are named
 as the simulator names them: "near" is its left end (-X), "far" its right end).
 
-Checkerboards: one full board is detected, masked out, and the second one detected; the one
-further towards -X (larger azimuth in S) is "left", the other "far". The laser points on each
-board are those inside the board's outline (inner corners extended by most of a square),
-filtered to one great circle.
+Checkerboards: one full board is detected (on the whole image, else on each half of it), masked
+out, and the second one detected the same way; the one further towards -X (larger azimuth in S)
+is "left", the other "far". The laser points on each board are those inside the board's outline
+(inner corners extended by most of a square), filtered to one great circle.
 
 Every failure raises `FeatureNotFoundError` saying what was not found and where, and an image
 whose size differs from the camera model's raises `InputError`; nothing is returned half-found.
@@ -284,12 +284,12 @@ def assign_markers(
     allowed = (4,) if kind == "two-sided" else (4, 6)
     for side, idx in sides.items():
         if idx.size > max(allowed):
-            # surplus: specks of JPEG chroma noise or blue clutter, pale or tiny next to markers
+            # surplus: specks of JPEG chroma noise or blue clutter, pale next to the markers;
+            # then, if still too many, the most marker-like (contrast x size) are kept
             contrast = np.array([blobs[i].contrast for i in idx])
-            area = np.array([blobs[i].area for i in idx])
-            strong = (contrast >= 0.5 * np.median(contrast)) & (area >= 0.1 * np.median(area))
-            if strong.sum() >= min(allowed):
-                sides[side] = idx[strong]
+            idx = idx[contrast >= 0.3 * np.median(contrast)]
+            score = np.array([blobs[i].contrast * np.sqrt(blobs[i].area) for i in idx])
+            sides[side] = np.sort(idx[np.argsort(-score)[: max(allowed)]])
     counts = {s: int(i.size) for s, i in sides.items()}
     bad = [s for s in SIDES if counts[s] not in allowed]
     if kind == "three-sided" and not bad and counts["left"] != counts["right"]:
@@ -677,6 +677,30 @@ def _board_mask(shape: tuple[int, int], outline: np.ndarray) -> np.ndarray:
     return mask.astype(bool)
 
 
+def _detect_board(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """One full board: on the whole image, else on each half with the rest greyed out (two
+    boards side by side can confuse the detector's quad linking; alone, each is found)."""
+    try:
+        return detect_corners(image, size)
+    except FeatureNotFoundError as exc:
+        first_error = exc
+    h, w = image.shape[:2]
+    halves = (
+        (slice(0, h // 2 + h // 8), slice(None)),
+        (slice(None), slice(0, w // 2 + w // 8)),
+        (slice(None), slice(w // 2 - w // 8, w)),
+        (slice(h // 2 - h // 8, h), slice(None)),
+    )
+    for rows, cols in halves:
+        part = np.full_like(image, 128)
+        part[rows, cols] = image[rows, cols]
+        try:
+            return detect_corners(part, size)
+        except FeatureNotFoundError:
+            continue
+    raise first_error
+
+
 def extract_board_features(
     image_bgr: np.ndarray,
     model: OcamModel,
@@ -688,13 +712,13 @@ def extract_board_features(
     cols, rows = inner_corners
     h, w = image.shape[:2]
     try:
-        first = detect_corners(image, (cols, rows))
+        first = _detect_board(image, (cols, rows))
     except FeatureNotFoundError as exc:
         raise FeatureNotFoundError(f"checkerboard target: {exc}") from None
     masked = image.copy()
     masked[_board_mask((h, w), _board_outline(first, cols, rows, 1.5))] = 128
     try:
-        second = detect_corners(masked, (cols, rows))
+        second = _detect_board(masked, (cols, rows))
     except FeatureNotFoundError:
         raise FeatureNotFoundError(
             f"checkerboard target: one {cols}x{rows} board found around "
