@@ -542,7 +542,10 @@ class Shader:
     def _nearest_cylinders(self, rays: np.ndarray, hits: Hits) -> None:
         """Let the static cylinders replace what is behind them."""
         for c in self.cylinders:
-            cand = np.flatnonzero(np.any(rays @ c.cone_dirs.T >= c.cos_cones, axis=1))
+            inside = rays @ c.cone_dirs[0] >= c.cos_cones[0]
+            for direction, cos in zip(c.cone_dirs[1:], c.cos_cones[1:], strict=True):
+                inside |= rays @ direction >= cos
+            cand = np.flatnonzero(inside)
             if cand.size == 0:
                 continue
             hit, tt, normal = self._cylinder(c, rays[cand])
@@ -557,25 +560,28 @@ class Shader:
 
     @staticmethod
     def _slab(b: _BoxTables, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Ray/box entry: (hit, distance, entry face index 2*axis + (sign < 0)) for rays from 0."""
-        tn_list, d_list = [], []
-        tf = None
+        """Ray/box entry: (hit, distance, entry face index 2*axis + (sign < 0)) for rays from 0.
+
+        Written with per-axis columns (no reductions over a short last axis, which numpy does
+        slowly): the entry is the largest of the three near-slab distances.
+        """
+        near, far, dirs = [], None, []
         for axis in range(3):
             d = rays @ b.R[:, axis]
             with np.errstate(divide="ignore", invalid="ignore"):
                 inv = np.float32(1.0) / d
                 t1 = (-b.half[axis] - b.origin_local[axis]) * inv
                 t2 = (b.half[axis] - b.origin_local[axis]) * inv
-            tn_list.append(np.minimum(t1, t2))
-            far = np.maximum(t1, t2)
-            tf = far if tf is None else np.minimum(tf, far)
-            d_list.append(d)
-        tn = np.stack(tn_list, axis=1)
-        axis_idx = np.argmax(tn, axis=1)
-        tmin = np.take_along_axis(tn, axis_idx[:, None], axis=1)[:, 0]
-        hit = (tmin <= tf) & (tmin > 0)
-        d_axis = np.choose(axis_idx, d_list)
-        face = 2 * axis_idx + (d_axis > 0)
+            near.append(np.minimum(t1, t2))
+            hi = np.maximum(t1, t2)
+            far = hi if far is None else np.minimum(far, hi)
+            dirs.append(d)
+        n0, n1, n2 = near
+        tmin = np.maximum(np.maximum(n0, n1), n2)
+        axis = np.where(tmin == n0, 0, np.where(tmin == n1, 1, 2))
+        d_axis = np.where(axis == 0, dirs[0], np.where(axis == 1, dirs[1], dirs[2]))
+        hit = (tmin <= far) & (tmin > 0)
+        face = 2 * axis + (d_axis > 0)
         return hit, tmin, face
 
     def _shade_box(
@@ -620,29 +626,24 @@ class Shader:
 
     def static_hits(self, rays: np.ndarray) -> Hits:
         """Exact hits of rays (n, 3) in S on the static scene: floor, hall and static boxes."""
-        n = rays.shape[0]
-        hits = Hits(
-            np.full(n, np.inf, np.float32),
-            np.empty((n, 3), np.float32),
-            np.full(n, -16, np.int32),
-            np.full(n, -1, np.int32),
-        )
         rz = rays[:, 2]
         floor = self.world.floor
         down = rz < -1e-6
         with np.errstate(divide="ignore", invalid="ignore"):
             tz = np.where(down, np.float32(floor.z) / rz, np.float32(np.inf))
-        x = tz * rays[:, 0]
-        y = tz * rays[:, 1]
-        on_floor = down & (x * x + y * y < np.float32(HALL_RADIUS_MM**2))
-        fi = np.flatnonzero(on_floor)
-        albedo, cls = floor.shade(x[fi], y[fi])
-        hits.rgb[fi] = albedo * self._lambert(np.array([0.0, 0.0, 1.0]))
-        hits.key[fi] = -8 + cls.astype(np.int32)
-        hits.t[fi] = tz[fi]
-        hi = np.flatnonzero(~on_floor)
-        w = np.clip(rz[hi] * 2.0 + 0.3, 0.0, 1.0)[:, None]
-        hits.rgb[hi] = self.hall * (1.0 - w) + self.sky * w
+            x = tz * rays[:, 0]
+            y = tz * rays[:, 1]
+            on_floor = down & (x * x + y * y < np.float32(HALL_RADIUS_MM**2))
+        albedo, cls = floor.shade(x, y)
+        lam = np.float32(self._lambert(np.array([0.0, 0.0, 1.0])))
+        w = np.clip(rz * np.float32(2.0) + np.float32(0.3), 0.0, 1.0)[:, None]
+        hall = self.hall * (1.0 - w) + self.sky * w
+        hits = Hits(
+            np.where(on_floor, tz, np.float32(np.inf)).astype(np.float32),
+            np.where(on_floor[:, None], albedo * lam, hall).astype(np.float32),
+            np.where(on_floor, cls.astype(np.int32) - 8, -16).astype(np.int32),
+            np.full(rays.shape[0], -1, np.int32),
+        )
         self._nearest_boxes(self.static, rays, hits)
         self._nearest_cylinders(rays, hits)
         return hits
