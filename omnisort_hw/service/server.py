@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import faulthandler
 import hmac
 import logging
 import os
@@ -731,6 +732,8 @@ def serve(
         host=host if host is not None else settings.service.host,
         port=port if port is not None else settings.service.port,
     )
+    # `kill -USR1 PID` prints every thread's stack to stderr (journald): for a stuck device.
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     notifier = Notifier()
     notifier.status("opening devices")
     cell = cell or Cell.from_settings(settings)

@@ -41,7 +41,12 @@ class Notifier:
         if usec.isdigit() and int(usec) > 0 and (not pid or pid == str(os.getpid())):
             self._watchdog_usec = int(usec)
         if self._address is not None:
-            self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
+            # Non-blocking: a receiver that stops reading must never stall the caller (the
+            # event loop pings the watchdog); a full queue drops the message instead.
+            self._sock = socket.socket(
+                socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK
+            )
+        self._failures = 0
 
     @property
     def enabled(self) -> bool:
@@ -62,7 +67,11 @@ class Notifier:
             try:
                 self._sock.sendto(message, self._address)
             except OSError as exc:
-                log.warning("sd_notify to %r failed: %s", self._address, exc)
+                self._failures += 1
+                if self._failures in (1, 10, 100) or self._failures % 1000 == 0:
+                    log.warning(
+                        "sd_notify to %r failed (%d so far): %s", self._address, self._failures, exc
+                    )
                 return False
         return True
 
@@ -72,7 +81,9 @@ class Notifier:
         return self.notify("READY=1", f"MAINPID={os.getpid()}", *extra)
 
     def watchdog(self) -> bool:
-        """WATCHDOG=1: the main loop is alive."""
+        """WATCHDOG=1: the main loop is alive (sent only when systemd set a watchdog)."""
+        if not self._watchdog_usec:
+            return False
         return self.notify("WATCHDOG=1")
 
     def stopping(self, status: str | None = None) -> bool:

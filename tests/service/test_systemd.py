@@ -51,8 +51,21 @@ def test_notify_over_an_abstract_socket() -> None:
     name = f"omnisort-test-{uuid.uuid4().hex}"
     with _receiver(b"\0" + name.encode()) as rx:
         n = Notifier({"NOTIFY_SOCKET": "@" + name})
-        assert n.watchdog()
-        assert rx.recv(4096) == b"WATCHDOG=1"
+        assert n.watchdog() is False  # no WATCHDOG_USEC: nothing to ping
+        assert n.status("x")
+        assert rx.recv(4096) == b"STATUS=x"
+        n.close()
+
+
+def test_a_receiver_that_stops_reading_never_blocks_the_sender(tmp_path: Path) -> None:
+    """The event loop pings from the main thread: a full notify queue must drop, not block."""
+    path = str(tmp_path / "full.sock")
+    with _receiver(path):
+        n = Notifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "1000000"})
+        t0 = time.monotonic()
+        results = [n.watchdog() for _ in range(5000)]
+        assert time.monotonic() - t0 < 5.0
+        assert results[0] is True and results[-1] is False
         n.close()
 
 
