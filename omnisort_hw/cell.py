@@ -664,9 +664,14 @@ class Cell:
         return SystemCalibration.from_json(rec.payload, source=str(rec.path))
 
     def map_scene(
-        self, image: str | None = None, cancel: threading.Event | None = None
+        self,
+        image: str | None = None,
+        cancel: threading.Event | None = None,
+        with_points: bool = False,
     ) -> dict[str, Any]:
-        """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments."""
+        """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
+
+        `with_points` adds the points themselves (S, mm, 0.1 mm) to the result."""
         from omnisort_hw.extrinsics_pipeline import check_image_size
 
         calib = self.system_calibration()
@@ -687,12 +692,15 @@ class Cell:
         rl.points3d("map/points_S", finite, color=(255, 0, 0))
         for i, seg in enumerate(segs):
             rl.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
-        return {
+        out: dict[str, Any] = {
             "image": record,
             "points": len(pixels),
             "points_on_plane": len(finite),
             "segments": [seg.summary() for seg in segs],
         }
+        if with_points:
+            out["points_S"] = np.round(finite, 1).tolist()
+        return out
 
     def register_robot(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
         """Robot base pose from the floor checkerboard, stored in system.json."""

@@ -194,7 +194,13 @@ COMMANDS: dict[str, Command] = {
             check=_check_calibrate,
             help="intrinsics from a folder of images; extrinsics from a capture or an image",
         ),
-        Command("map", "job", (_IMAGE,), job_state="mapping", help="laser map of the scene"),
+        Command(
+            "map",
+            "job",
+            (_IMAGE, Arg("points", "bool", default=False, help="include the points (S, mm)")),
+            job_state="mapping",
+            help="laser map of the scene",
+        ),
         Command(
             "register_robot",
             "job",
