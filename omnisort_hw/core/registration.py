@@ -1,0 +1,455 @@
+"""Robot registration: the UR base pose T_SB from the floor checkerboard in one fisheye image.
+
+The checkerboard lies on the floor at a known, fixed pose in the robot base frame B
+(`T_B_board`, the cell's "offset"). Its pose in S comes from its corners: a virtual top-down
+perspective view of the floor (through the camera model and R_SC) makes the small, distorted
+board look like an ordinary checkerboard for detection; the corners are mapped back and refined
+on the fisheye image; their rays give the board pose in C (`method2.board_pose`), rotated into
+S with the calibrated R_SC; with the floor level in S (the default) the pose is refined with
+four parameters (position and yaw). Then T_SB = T_S_board . inv(T_B_board).
+
+Board frame (the same as the simulator's truth `checkerboards[].pose_*`): origin at the first
+inner corner, x along the first row of corners, y along the first column (towards the next
+row), z = x cross y, into the printed face (down for a floor board). The first inner corner is
+the one diagonally next to the black outer-corner square on the side where, seen from the
+front, the rows run clockwise from x to y. Boards must have cols + rows odd (e.g. 9x6), so
+that the pattern is not symmetric under a half turn and the first corner is unique.
+
+The offset is `X, Y, Z, RX, RY, RZ`: the board frame in B, millimetres and degrees, rotation
+Rz(RZ) Ry(RY) Rx(RX) (the project's Z-Y-X order), i.e. T_B_board. A floor board printed face
+up has RX = 180 (its z points down); the shipped sorting scene's board is
+`200, -180, 2, 180, 0, 90`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.checkerboard import BoardSpec, detect_corners, to_gray
+from omnisort_hw.core.extrinsics.method2 import board_pose
+from omnisort_hw.core.frames import rot_x, rot_y, rot_z
+from omnisort_hw.errors import CalibrationError, FeatureNotFoundError, InputError
+
+# Virtual view: field of the top-down view (half angle from the nadir) and its magnification
+# relative to the fisheye's pixel density at the centre (the view is cut into a few tiles).
+VIEW_HALF_ANGLE_DEG = 62.0
+VIEW_MAGNIFICATION = 1.1
+# Magnification of the view the corners are refined in (relative to the fisheye's centre).
+FINE_MAGNIFICATION = 1.5
+# Half-size of the corner refinement window, in units of the local corner spacing (smaller
+# windows are biased outwards on the resampled, anti-aliased squares: measured on renders).
+FINE_WINDOW = 0.6
+# Largest tilt (deg) between the freely fitted board and the level floor before we refuse.
+MAX_LEVEL_TILT_DEG = 3.0
+
+
+def pose_from_offset(offset: tuple[float, ...] | np.ndarray) -> np.ndarray:
+    """T (4x4) from X, Y, Z mm and RX, RY, RZ deg with R = Rz(RZ) Ry(RY) Rx(RX)."""
+    vals = np.asarray(offset, float).reshape(-1)
+    if vals.shape != (6,) or not np.all(np.isfinite(vals)):
+        raise InputError(f"offset must be 6 finite numbers X,Y,Z,RX,RY,RZ, got {offset!r}")
+    rx, ry, rz = np.radians(vals[3:])
+    T = np.eye(4)
+    T[:3, :3] = rot_z(rz) @ rot_y(ry) @ rot_x(rx)
+    T[:3, 3] = vals[:3]
+    return T
+
+
+def rpy_deg(R: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) in degrees of R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    pitch = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
+    roll = np.arctan2(R[2, 1], R[2, 2])
+    yaw = np.arctan2(R[1, 0], R[0, 0])
+    return float(np.degrees(roll)), float(np.degrees(pitch)), float(np.degrees(yaw))
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform."""
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+def pose_record(T: np.ndarray) -> dict[str, Any]:
+    """{matrix, xyz_mm, rpy_deg} as in system.json / truth.json."""
+    return {
+        "matrix": np.round(T, 9).tolist(),
+        "xyz_mm": np.round(T[:3, 3], 4).tolist(),
+        "rpy_deg": [round(v, 6) for v in rpy_deg(T[:3, :3])],
+    }
+
+
+def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
+    """Translation error (mm) and rotation angle between two poses (deg)."""
+    from scipy.spatial.transform import Rotation
+
+    dt = float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]))
+    R = Rotation.from_matrix(T_est[:3, :3].T @ T_true[:3, :3])
+    return dt, float(np.degrees(R.magnitude()))
+
+
+# ---- detection ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TopView:
+    """A virtual pinhole looking straight down in S (x_V = X_S, y_V = -Y_S) and its remap."""
+
+    f_px: float
+    origin_uv: tuple[float, float]  # the virtual pixel of the nadir, in this tile's pixels
+    size: tuple[int, int]
+
+    def rays_S(self, uv: np.ndarray) -> np.ndarray:
+        """Unit rays in S of virtual pixels (N, 2)."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        d = np.stack(
+            [
+                (uv[:, 0] - self.origin_uv[0]) / self.f_px,
+                -(uv[:, 1] - self.origin_uv[1]) / self.f_px,
+                -np.ones(len(uv)),
+            ],
+            axis=1,
+        )
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    def render(self, image: np.ndarray, model: OcamModel, R_SC: np.ndarray) -> np.ndarray:
+        """The fisheye image resampled into this view (bilinear)."""
+        w, h = self.size
+        us, vs = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+        rays = self.rays_S(np.stack([us.ravel(), vs.ravel()], axis=1)) @ R_SC
+        px = model.ray_to_pixel(rays).astype(np.float32).reshape(h, w, 2)
+        return cv2.remap(
+            image, px[..., 0], px[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
+        )
+
+
+def _centre_density(model: OcamModel) -> float:
+    """Pixels per radian of the fisheye near its optical axis."""
+    eps = 1e-3
+    px = model.ray_to_pixel(np.array([[0.0, 0.0, 1.0], [np.sin(eps), 0.0, np.cos(eps)]]))
+    return float(np.linalg.norm(px[1] - px[0]) / eps)
+
+
+def _tiles(half: int, tile: int, overlap: int) -> list[tuple[int, int]]:
+    """Top-left offsets of square tiles covering [-half, half)^2 with the given overlap."""
+    step = tile - overlap
+    n = max(1, int(np.ceil((2 * half - overlap) / step)))
+    starts = -half + np.arange(n) * step
+    starts = np.minimum(starts, half - tile)
+    return [(int(x), int(y)) for y in starts for x in starts]
+
+
+def detect_floor_board(
+    image: np.ndarray,
+    model: OcamModel,
+    R_SC: np.ndarray,
+    board: BoardSpec,
+    camera_height_mm: float = 1200.0,
+) -> np.ndarray:
+    """Inner corners of the floor board in fisheye pixels (N, 2), row by row, unordered
+    between the two half-turn orderings (see `order_corners`).
+
+    The floor is resampled into virtual top-down views (tiles of one big view whose squares
+    are about 20 px for a floor `camera_height_mm` below), OpenCV's detector runs on each
+    tile, and the corners are mapped to the fisheye image and refined there to sub-pixel.
+    """
+    gray = to_gray(image)
+    density = _centre_density(model)
+    # The view's focal length: squares of about 24 px at the nominal floor distance, but
+    # never much finer than the fisheye itself resolves at the nadir.
+    f = max(24.0 * camera_height_mm / board.square_mm, 0.5 * density)
+    f = min(f, VIEW_MAGNIFICATION * density * 2.0)
+    half = int(np.ceil(f * np.tan(np.radians(VIEW_HALF_ANGLE_DEG))))
+    board_px = (max(board.cols, board.rows) + 3) * board.square_mm * f / camera_height_mm
+    tile = int(min(2 * half, max(640, 2.2 * board_px)))
+    overlap = int(min(tile - 1, 1.2 * board_px))
+    found: np.ndarray | None = None
+    for x0, y0 in _tiles(half, tile, overlap):
+        view = TopView(f, (-x0, -y0), (tile, tile))
+        sub = view.render(gray, model, R_SC)
+        if float(np.std(sub)) < 5.0:
+            continue
+        try:
+            corners_v = detect_corners(sub, board)
+        except FeatureNotFoundError:
+            continue
+        found = model.ray_to_pixel(view.rays_S(corners_v) @ R_SC)
+        break
+    if found is None:
+        raise FeatureNotFoundError(
+            f"floor board: no complete {board.cols}x{board.rows} checkerboard found on the floor "
+            "(all inner corners must be visible: park the arm out of the camera's view of the "
+            "board, check --board and the system calibration's camera rotation)"
+        )
+    return _refine(gray, found, model, R_SC, board)
+
+
+def _refine(
+    gray: np.ndarray, corners: np.ndarray, model: OcamModel, R_SC: np.ndarray, board: BoardSpec
+) -> np.ndarray:
+    """Sub-pixel corners: refined in a fine top-down view around the board (where the squares'
+    edges are straight, as the corner refinement assumes), then mapped to fisheye pixels."""
+    f = FINE_MAGNIFICATION * _centre_density(model)
+    rays = model.pixel_to_ray(corners) @ R_SC.T
+    if np.any(rays[:, 2] > -0.05):
+        raise FeatureNotFoundError("floor board: the board is at or above the horizon")
+    uv = f * np.stack([rays[:, 0], -rays[:, 1]], axis=1) / -rays[:, 2:3]
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    size = int(np.ceil(1.4 * np.max(hi - lo))) + 16
+    x0, y0 = (lo + hi) / 2.0 - size / 2.0
+    view = TopView(f, (-x0, -y0), (size, size))
+    sub = view.render(gray, model, R_SC)
+    local = uv - [x0, y0]
+    grid = local.reshape(board.rows, board.cols, 2)
+    dx = np.linalg.norm(np.diff(grid, axis=1), axis=2).min()
+    dy = np.linalg.norm(np.diff(grid, axis=0), axis=2).min()
+    half = int(np.clip(FINE_WINDOW * min(dx, dy), 2, 40))
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
+    refined = cv2.cornerSubPix(
+        sub, local.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), criteria
+    ).reshape(-1, 2)
+    if np.max(np.linalg.norm(refined - local, axis=1)) > 0.4 * min(dx, dy):
+        raise FeatureNotFoundError("floor board: corner refinement diverged (blurred board?)")
+    return model.ray_to_pixel(view.rays_S(refined.astype(np.float64)) @ R_SC)
+
+
+# ---- ordering and pose --------------------------------------------------------------------
+
+
+def _sample(gray: np.ndarray, uv: np.ndarray, radius: int) -> np.ndarray:
+    """Mean grey level in a (2r+1)^2 window around each pixel (N, 2)."""
+    k = 2 * radius + 1
+    blur = cv2.blur(gray.astype(np.float32), (k, k))
+    u = np.clip(np.round(uv[:, 0]).astype(int), 0, gray.shape[1] - 1)
+    v = np.clip(np.round(uv[:, 1]).astype(int), 0, gray.shape[0] - 1)
+    return blur[v, u]
+
+
+def order_corners(
+    image: np.ndarray, corners_px: np.ndarray, model: OcamModel, board: BoardSpec
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Corners in the board's own order (module docstring), with T_CB and the RMS (rad).
+
+    Mirrored orderings are recognised by the pose (a board seen from its back), the half-turn
+    by the colour of the outer squares next to the two candidate first corners.
+    """
+    if (board.cols + board.rows) % 2 == 0 or board.cols == board.rows:
+        raise InputError(
+            f"board {board.cols}x{board.rows}: use a board with cols + rows odd and cols != "
+            "rows (e.g. 9x6); otherwise its first corner is ambiguous"
+        )
+    pts = board.object_points()
+    grid = corners_px.reshape(board.rows, board.cols, 2)
+    rays = model.pixel_to_ray(grid.reshape(-1, 2))
+    T, rms = board_pose(rays, pts)
+    if T[:3, 2] @ T[:3, 3] < 0:  # z towards the camera: the ordering is mirrored
+        grid = grid[:, ::-1]
+        rays = model.pixel_to_ray(grid.reshape(-1, 2))
+        T, rms = board_pose(rays, pts)
+    s = board.square_mm
+    # Outer square next to corner 0 (black on the right ordering) and its white neighbour,
+    # and the same two at the opposite corner (the other candidate's first corner).
+    far = np.array([(board.cols - 1) * s, (board.rows - 1) * s])
+    probes = np.array(
+        [
+            [-s / 2, -s / 2, 0.0],
+            [s / 2, -s / 2, 0.0],
+            [far[0] + s / 2, far[1] + s / 2, 0.0],
+            [far[0] - s / 2, far[1] + s / 2, 0.0],
+        ]
+    )
+    cam = probes @ T[:3, :3].T + T[:3, 3]
+    px = model.ray_to_pixel(cam)
+    spacing = np.linalg.norm(grid[0, 1] - grid[0, 0])
+    level = _sample(to_gray(image), px, max(1, int(0.2 * spacing)))
+    here = level[1] - level[0]  # positive when corner 0's outer square is the dark one
+    there = level[3] - level[2]
+    if abs(here - there) < 20.0:
+        raise FeatureNotFoundError(
+            "floor board: cannot tell the board's first corner (outer squares not visible "
+            "or too little contrast)"
+        )
+    if there > here:
+        grid = grid[::-1, ::-1]
+        rays = model.pixel_to_ray(grid.reshape(-1, 2))
+        T, rms = board_pose(rays, pts)
+    return grid.reshape(-1, 2), T, rms
+
+
+_R_LEVEL = np.diag([1.0, -1.0, -1.0])  # board frame with z down, x along X_S at yaw 0
+
+
+def _level_pose(x: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = rot_z(x[3]) @ _R_LEVEL
+    T[:3, 3] = x[:3]
+    return T
+
+
+def _level_residuals(x: np.ndarray, rays_S: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    T = _level_pose(x)
+    p = pts @ T[:3, :3].T + T[:3, 3]
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    return np.cross(rays_S, p).ravel()
+
+
+@dataclass
+class Registration:
+    """The result of one registration: poses (4x4, mm), fit quality and 1-sigma figures."""
+
+    T_SB: np.ndarray
+    T_S_board: np.ndarray
+    T_B_board: np.ndarray
+    corners_px: np.ndarray = field(repr=False)
+    rms_deg: float
+    rms_px: float
+    level: bool
+    free_tilt_deg: float
+    board_extent_S: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    std: dict[str, float] = field(default_factory=dict)
+
+    def record(self, model_name: str | None = None) -> dict[str, Any]:
+        """The `robot_base` entry of system.json (keys shared with truth.json first)."""
+        out: dict[str, Any] = pose_record(self.T_SB)
+        if model_name:
+            out["model"] = model_name
+        out.update(
+            {
+                "method": "floor_board_level" if self.level else "floor_board",
+                "board_pose_S": pose_record(self.T_S_board),
+                "offset_T_B_board": pose_record(self.T_B_board),
+                "rms_deg": round(self.rms_deg, 6),
+                "rms_px": round(self.rms_px, 4),
+                "free_tilt_deg": round(self.free_tilt_deg, 4),
+                "board_extent_S_mm": [round(v, 2) for v in self.board_extent_S],
+                "std": {k: round(v, 6) for k, v in self.std.items()},
+            }
+        )
+        return out
+
+
+def register_from_corners(
+    image: np.ndarray,
+    corners_px: np.ndarray,
+    model: OcamModel,
+    R_SC: np.ndarray,
+    board: BoardSpec,
+    T_B_board: np.ndarray,
+    level: bool = True,
+) -> Registration:
+    """T_SB from detected floor-board corners (any of the orderings `detect_floor_board` gives).
+
+    With `level`, the board is taken to lie on a level floor (its normal along Z of S) and
+    its position and yaw are fitted to the corner rays; otherwise the free 6-DOF pose is used.
+    """
+    ordered, T_CB, rms = order_corners(image, corners_px, model, board)
+    R_S = np.eye(4)
+    R_S[:3, :3] = R_SC
+    T_free = R_S @ T_CB
+    free_tilt = float(np.degrees(np.arccos(np.clip(-T_free[2, 2], -1.0, 1.0))))
+    pts = board.object_points()
+    rays_S = model.pixel_to_ray(ordered) @ R_SC.T
+    x0 = np.concatenate([T_free[:3, 3], [np.arctan2(T_free[1, 0], T_free[0, 0])]])
+    sol = least_squares(_level_residuals, x0, args=(rays_S, pts), method="lm")
+    dof = max(1, sol.fun.size - 4)
+    sigma2 = float(sol.fun @ sol.fun) / dof
+    if level:
+        if free_tilt > MAX_LEVEL_TILT_DEG:
+            raise CalibrationError(
+                f"floor board: tilted {free_tilt:.1f} deg from level in S (more than "
+                f"{MAX_LEVEL_TILT_DEG} deg): the board is not flat on the floor or the camera "
+                "rotation in system.json is wrong"
+            )
+        T_S_board = _level_pose(sol.x)
+        rms = float(np.sqrt(np.mean(sol.fun**2) * 3 / 2))
+    else:
+        T_S_board = T_free
+    T_SB = T_S_board @ invert(T_B_board)
+    # 1-sigma of the base position and yaw from the level fit's covariance.
+    J = sol.jac
+    try:
+        cov = sigma2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((4, 4), np.nan)
+    c = invert(T_B_board)[:3, 3]
+    psi = sol.x[3]
+    dR = rot_z(psi + np.pi / 2) @ _R_LEVEL
+    dpos = np.zeros((3, 4))
+    dpos[:, :3] = np.eye(3)
+    dpos[:2, 3] = (dR @ c)[:2]
+    dpos[2, 3] = 0.0
+    cov_p = dpos @ cov @ dpos.T
+    std = {
+        "x_mm": float(np.sqrt(cov_p[0, 0])),
+        "y_mm": float(np.sqrt(cov_p[1, 1])),
+        "z_mm": float(np.sqrt(cov_p[2, 2])),
+        "yaw_deg": float(np.degrees(np.sqrt(cov[3, 3]))),
+    }
+    rms_px = float(rms * _centre_density(model))
+    # The board's area in S (inner corners grown by 1.5 squares: its outer squares and margin).
+    s = board.square_mm
+    outline = np.array(
+        [
+            [x, y, 0.0]
+            for x in (-1.5 * s, (board.cols + 0.5) * s)
+            for y in (-1.5 * s, (board.rows + 0.5) * s)
+        ]
+    )
+    pts_S = outline @ T_S_board[:3, :3].T + T_S_board[:3, 3]
+    lo, hi = pts_S.min(axis=0), pts_S.max(axis=0)
+    return Registration(
+        T_SB=T_SB,
+        T_S_board=T_S_board,
+        T_B_board=np.asarray(T_B_board, float),
+        corners_px=ordered,
+        rms_deg=float(np.degrees(rms)),
+        rms_px=rms_px,
+        level=level,
+        free_tilt_deg=free_tilt,
+        board_extent_S=(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])),
+        std=std,
+    )
+
+
+def register_robot(
+    image: np.ndarray,
+    model: OcamModel,
+    R_SC: np.ndarray,
+    board: BoardSpec,
+    T_B_board: np.ndarray,
+    level: bool = True,
+    camera_height_mm: float = 1200.0,
+) -> Registration:
+    """Detect the floor board in `image` and return the robot base pose T_SB (see module)."""
+    img = np.asarray(image)
+    if img.ndim not in (2, 3) or img.dtype != np.uint8:
+        raise InputError(f"image: expected an 8-bit image, got {img.dtype} {img.shape}")
+    if (img.shape[1], img.shape[0]) != tuple(model.image_size):
+        raise InputError(
+            f"image is {img.shape[1]}x{img.shape[0]} but the camera model is for "
+            f"{model.image_size[0]}x{model.image_size[1]}"
+        )
+    corners = detect_floor_board(img, model, R_SC, board, camera_height_mm)
+    return register_from_corners(img, corners, model, R_SC, board, T_B_board, level)
+
+
+__all__ = [
+    "Registration",
+    "TopView",
+    "detect_floor_board",
+    "invert",
+    "order_corners",
+    "pose_error",
+    "pose_from_offset",
+    "pose_record",
+    "register_from_corners",
+    "register_robot",
+    "rpy_deg",
+]
