@@ -11,12 +11,14 @@ How (all vectorised, no loop over pixels):
    score low). Only the sparse red pixels are visited: a candidate is the maximum of its scan
    line within +-4 px and stands above both samples 4 px away (a ridge, not a red area).
 2. Adaptive thresholds: the redness noise is estimated from the image itself (RMS of
-   neighbouring-pixel differences below their 99th percentile); candidates need a few noise
-   standard deviations. Then hysteresis relative to the image's own stripes: a point needs
-   0.15 and a chain's strong points 0.4 of the stripes' robust peak height (90th percentile
-   of the candidates), never less than the noise-based level, and a chain needs 3 strong
-   points of at least 30 grey levels: the one absolute figure, what any usable stripe has and
-   what texture, edge colour fringes and JPEG ringing in laser-off images do not reach.
+   neighbouring-pixel differences below their 99th percentile); candidates need 6 noise
+   standard deviations (and at least 4 grey levels, 8-bit rounding). Then hysteresis relative
+   to the image's own stripes: a point needs 0.08 and a chain's strong points 0.4 of the
+   stripes' robust peak height (90th percentile of the candidates), and a chain needs 3 strong
+   points of at least 30 grey levels (what any well exposed stripe has and what texture, edge
+   colour fringes and JPEG ringing in laser-off images do not reach) or, for a faint stripe
+   (far, dark surface, blurred), 16 points of which 80 % were seen as one straight stripe on
+   every line of their fit window, which texture and edges do not do either.
 3. Sub-pixel fit, only around candidates: a full-resolution window of 11 scan lines across the
    stripe is gathered; on every line the stripe's centre is the first moment of its redness
    profile above 30 % of its peak (unbiased for a symmetric profile, like a Gaussian fit, and
@@ -25,8 +27,8 @@ How (all vectorised, no loop over pixels):
    the candidate's line and the local slope. A point is kept from the scan that cuts the
    stripe squarely (|slope| <= 1), so each stripe section is measured once.
 4. Chains: points are linked through a grid of one scan spacing (gaps of a cell bridged, for
-   dashed, aliased stripes); chains that are too short or have too few strong points are
-   dropped, and with them isolated specks of JPEG colour noise.
+   dashed, aliased stripes); chains that fail the tests above are dropped, and with them
+   isolated specks of JPEG colour noise.
 """
 
 from __future__ import annotations

@@ -70,6 +70,7 @@ _EDGE_MIN_FRACTION = 0.5  # of the samples between the markers that must give an
 _LASER_TOL_PX = 1.5  # great-circle inlier tolerance of laser points
 _LASER_MIN_POINTS = 8
 _FACE_MARGIN_PX = 3.0  # laser points this close to a face's boundary are left out
+_MAX_BLOBS = 400  # blue candidates examined at most (largest first)
 _MIN_EDGE_CONTRAST = 4.0  # grey levels per pixel: below this no edge is claimed
 
 
@@ -204,9 +205,16 @@ def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
     n_lab, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n_lab <= 1:
         return []
-    area = stats[1:, cv2.CC_STAT_AREA].astype(float)
-    cents = cents[1:]
-    # pieces of one marker (split by a wall corner or a shadow) are merged
+    scale = w * h / 1920.0**2
+    a_min, a_max = max(6.0, 12.0 * scale), 0.002 * w * h
+    # specks far below a marker's size are noise; the rest (at most a few hundred, largest
+    # first) are candidates, and pieces of one marker (split by a wall corner) are merged
+    keep = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= 0.5 * a_min) + 1
+    keep = keep[np.argsort(-stats[keep, cv2.CC_STAT_AREA])[:_MAX_BLOBS]]
+    if keep.size == 0:
+        return []
+    stats, cents = stats[keep], cents[keep]
+    area = stats[:, cv2.CC_STAT_AREA].astype(float)
     radius = np.sqrt(area / np.pi)
     dist = np.linalg.norm(cents[:, None] - cents[None, :], axis=2)
     near = dist < 1.2 * (radius[:, None] + radius[None, :]) + 2.0
@@ -216,11 +224,10 @@ def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
         if np.array_equal(new, group):
             break
         group = new
-    scale = w * h / 1920.0**2
-    a_min, a_max = max(6.0, 12.0 * scale), 0.002 * w * h
     blobs: list[Blob] = []
     for gid in np.unique(group):
-        members = np.flatnonzero(group == gid) + 1
+        members = np.flatnonzero(group == gid)
+        labels_of = keep[members]
         x0 = int(stats[members, cv2.CC_STAT_LEFT].min())
         y0 = int(stats[members, cv2.CC_STAT_TOP].min())
         x1 = int((stats[members, cv2.CC_STAT_LEFT] + stats[members, cv2.CC_STAT_WIDTH]).max())
@@ -231,7 +238,7 @@ def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
             continue
         pad = 3
         xa, ya, xb, yb = max(x0 - pad, 0), max(y0 - pad, 0), min(x1 + pad, w), min(y1 + pad, h)
-        own = np.isin(labels[ya:yb, xa:xb], members).astype(np.uint8)
+        own = np.isin(labels[ya:yb, xa:xb], labels_of).astype(np.uint8)
         zone = cv2.dilate(own, np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)).astype(bool)
         ring = zone & ~cv2.dilate(own, np.ones((3, 3), np.uint8)).astype(bool)
         patch = blue[ya:yb, xa:xb]
@@ -247,9 +254,9 @@ def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
     return blobs
 
 
-def _side_of(blobs: list[Blob], model: OcamModel) -> np.ndarray:
-    rays = model.pixel_to_ray(np.array([b.uv for b in blobs]).reshape(-1, 2))
-    return _nominal_S(rays)
+def _directions_S(blobs: list[Blob], model: OcamModel) -> np.ndarray:
+    """Unit directions of the blobs in the nominal system frame."""
+    return _nominal_S(model.pixel_to_ray(np.array([b.uv for b in blobs]).reshape(-1, 2)))
 
 
 def _columns(S: np.ndarray, idx: np.ndarray) -> dict[str, int]:
@@ -279,7 +286,7 @@ def assign_markers(
             f"{kind} target: no blue markers found in the image (expected {expected}: 4 on "
             "each wall); is this the right target, and are the markers in view?"
         )
-    S = _side_of(blobs, model)
+    S = _directions_S(blobs, model)
     sides = {"left": np.flatnonzero(S[:, 0] < 0), "right": np.flatnonzero(S[:, 0] >= 0)}
     allowed = (4,) if kind == "two-sided" else (4, 6)
     for side, idx in sides.items():
