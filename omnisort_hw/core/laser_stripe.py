@@ -142,15 +142,16 @@ def _peak_centres(line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     less sensitive than a three-point fit to JPEG's chroma ringing and to laser speckle.
     """
     n = line.shape[-1]
+    idx = np.arange(n, dtype=line.dtype)
     j = np.argmax(line[..., 1:-1], axis=-1) + 1
-    background = np.min(line, axis=-1)
-    idx = np.clip(j[..., None] + np.arange(-_CENTROID_HALF, _CENTROID_HALF + 1), 0, n - 1)
-    vals = np.take_along_axis(line, idx, -1) - background[..., None]
-    peak = np.take_along_axis(line, j[..., None], -1)[..., 0] - background
-    wts = np.maximum(vals - _CENTROID_LEVEL * peak[..., None], 0.0)
+    background = line.min(axis=-1)
+    peak = line.max(axis=-1) - background
+    level = (background + _CENTROID_LEVEL * peak)[..., None]
+    near = np.abs(idx - j[..., None]) <= _CENTROID_HALF
+    wts = np.maximum(line - level, 0.0) * near
     total = wts.sum(axis=-1)
-    pos = (wts * idx).sum(axis=-1) / np.maximum(total, 1e-9)
-    return np.where(total > 0, pos, j.astype(float)), peak
+    pos = (wts @ idx) / np.maximum(total, 1e-9)
+    return np.where(total > 0, pos, j.astype(line.dtype)), peak
 
 
 def _weighted_line(
