@@ -704,19 +704,17 @@ class Cell:
 
     def register_robot(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
         """Robot base pose from the floor checkerboard, stored in system.json."""
-        raise NotAvailableError(
-            "register_robot: the robot registration of omnisort_hw.core (floor checkerboard) "
-            "is not in this build yet"
-        )
+        from omnisort_hw.sorting import service_register_robot
+
+        return service_register_robot(self, image, cancel)
 
     def locate(
         self, image: str | None, colors: list[str] | None, cancel: threading.Event
     ) -> dict[str, Any]:
         """Objects and their poses in the robot base frame."""
-        raise NotAvailableError(
-            "locate: the colour-blob detection and mapping of omnisort_hw.core are not in this "
-            "build yet"
-        )
+        from omnisort_hw.sorting import service_locate
+
+        return service_locate(self, image, colors, cancel)
 
     def sort(
         self,
@@ -726,10 +724,9 @@ class Cell:
         progress: Callable[[dict[str, Any]], None] | None = None,
     ) -> dict[str, Any]:
         """Locate, pick and place every object by colour until done, `max_objects` or cancel."""
-        raise NotAvailableError(
-            "sort: the sorting pipeline of omnisort_hw.core (locate, motion planning, pick and "
-            "place) is not in this build yet"
-        )
+        from omnisort_hw.sorting import service_sort
+
+        return service_sort(self, max_objects, colors, cancel, progress)
 
 
 @contextmanager

@@ -69,6 +69,7 @@ if TYPE_CHECKING:
     from drivers.base import Arm, Camera, LaserSwitch
 
 JOINT_AT_TOLERANCE_DEG = 0.5
+BLOCKED = "no collision-free path"
 
 
 # ---- configuration --------------------------------------------------------------------------
@@ -1073,20 +1074,47 @@ class Sorter:
                 + (f"refused: {plan.refused}" if plan.refused else f"{plan.duration_s:.1f} s"),
                 level="WARN" if plan.refused else "INFO",
             )
+        # Pick what can be picked; then re-plan the cubes that only another cube blocked
+        # (it may be gone now), until nothing changes. A re-plan is still a full plan made
+        # before the first move towards that cube.
+        picked: set[int] = set()
         done = 0
-        for plan, out in zip(plans, outcomes, strict=True):
-            if plan.refused is not None:
-                continue
-            if max_objects is not None and done >= max_objects:
-                out.status, out.reason = "skipped", "max_objects reached"
-                continue
-            if self.cancel.is_set():
-                out.status, out.reason = "skipped", "cancelled"
-                continue
-            self._execute(plan, out, planner)
-            done += 1
-            if self.progress is not None:
-                self.progress({"cube": out.index, "status": out.status, "color": out.color})
+        queue = [i for i, p in enumerate(plans) if p.refused is None]
+        while True:
+            for i in queue:
+                plan, out = plans[i], outcomes[i]
+                if max_objects is not None and done >= max_objects:
+                    out.status, out.reason = "skipped", "max_objects reached"
+                    continue
+                if self.cancel.is_set():
+                    out.status, out.reason = "skipped", "cancelled"
+                    continue
+                self._execute(plan, out, planner)
+                done += 1
+                if out.status == "sorted":
+                    picked.add(i)
+                if self.progress is not None:
+                    self.progress({"cube": out.index, "status": out.status, "color": out.color})
+            queue = []
+            if not picked or (max_objects is not None and done >= max_objects):
+                break
+            for i, plan in enumerate(plans):
+                if plan.refused is None or not plan.refused.startswith(BLOCKED):
+                    continue
+                if self.cancel.is_set():
+                    break
+                cube = loc.cubes[i]
+                others = [c for k, c in enumerate(loc.cubes) if k != i and k not in picked]
+                again = planner.plan_pick(cube, others, home)
+                if again.refused is None:
+                    planner.commit(again)
+                    plans[i] = again
+                    outcomes[i].status, outcomes[i].reason = "planned", ""
+                    queue.append(i)
+                    self.log.event("sorting/plan", f"cube {i} ({cube.color}): free now")
+                    break
+            if not queue:
+                break
         report = SortReport(
             outcomes,
             registration=loc.registration.record() if loc.registration else None,
@@ -1280,6 +1308,170 @@ __all__ = [
     "robot_base_T",
     "write_robot_base",
 ]
+
+
+def configs_from_cell(
+    doc: Mapping[str, Any], arm: Any, base_dir: Path | None = None
+) -> tuple[SortConfig, RegistrationConfig | None]:
+    """`[sorting]` and `[registration]` of a cell document; `[sorting] from_scene = true` takes
+    bins, obstacles and the gripper from the simulated arm's scene (and the floor board, when
+    there is no `[registration]`)."""
+    if "sorting" not in doc:
+        raise ConfigError(
+            "[sorting]: missing; the sorting pipeline needs it (bins, obstacles, cube size, "
+            "home pose; or from_scene = true on the simulated cell)"
+        )
+    section = dict(doc["sorting"])
+    scene = None
+    base = None
+    if section.pop("from_scene", False):
+        scene = getattr(getattr(arm, "cell", None), "scene", None)
+        if scene is None:
+            raise ConfigError("[sorting].from_scene: only with the simulated arm (backend = sim)")
+        base = sim_sort_config(scene)
+    cfg = parse_sort_config(section, base, base_dir)
+    reg: RegistrationConfig | None = None
+    if "registration" in doc:
+        reg = parse_registration_config(doc["registration"])
+    elif scene is not None:
+        reg = sim_registration_config(scene)
+    return cfg, reg
+
+
+# ---- the service's pipeline commands (called by omnisort_hw.cell.Cell) ----------------------
+
+
+class _CellCamera:
+    """The cell's camera through the cell (its lock and its run log)."""
+
+    def __init__(self, cell: Any) -> None:
+        self.cell = cell
+
+    def grab(self, timeout_s: float | None = None) -> Any:
+        return self.cell.grab(timeout_s)
+
+
+class _CellLaser:
+    """The cell's laser switch through the cell (its lock and its status cache)."""
+
+    def __init__(self, cell: Any) -> None:
+        self.cell = cell
+
+    def on(self) -> None:
+        self.cell.set_laser(True)
+
+    def off(self) -> None:
+        self.cell.set_laser(False)
+
+
+def _cell_image(cell: Any, image: str | None, laser: bool) -> np.ndarray:
+    from omnisort_hw.extrinsics_pipeline import read_image
+
+    if image is not None:
+        return read_image(image)
+    if cell.devices.laser is not None:
+        cell.set_laser(laser)
+    try:
+        return np.asarray(cell.grab().image)
+    finally:
+        if laser and cell.devices.laser is not None:
+            cell.set_laser(False)
+
+
+def _need_section(cell: Any, name: str, what: str) -> Mapping[str, Any]:
+    from omnisort_hw.cell import NotAvailableError
+
+    section = cell.config.get(name)
+    if not isinstance(section, Mapping):
+        raise NotAvailableError(
+            f"{what} needs a [{name}] section in the cell configuration"
+            + (
+                " (board, square_mm, offset = [X, Y, Z, RX, RY, RZ] of the board in B)"
+                if name == "registration"
+                else " (bins, obstacles, cube size, home pose; or from_scene = true)"
+            )
+        )
+    return section
+
+
+def service_register_robot(
+    cell: Any, image: str | None, cancel: threading.Event | None = None
+) -> dict[str, Any]:
+    """`register_robot`: T_SB from the floor board in `image` (or a laser-off capture), saved
+    as `robot_base` in the store's system.json."""
+    rc = parse_registration_config(_need_section(cell, "registration", "the robot registration"))
+    payload = dict(cell.store.load_system())
+    calib = SystemCalibration.from_json(payload, source=str(cell.store.path("system")))
+    img = _cell_image(cell, image, laser=False)
+    if cancel is not None and cancel.is_set():
+        raise MotionRefusedError("register_robot cancelled")
+    reg = register_robot(
+        img, calib.model, calib.R_SC, rc.board, rc.T_B_board, rc.level, rc.camera_height_mm
+    )
+    log = cell.runlog
+    log.image("registration/image", img)
+    log_registration(log, reg)
+    record = reg.record()
+    record["offset"] = list(rc.offset)
+    record["board"] = {
+        "inner_corners": [rc.board.cols, rc.board.rows],
+        "square_mm": rc.board.square_mm,
+    }
+    record["image"] = image or "capture"
+    payload["robot_base"] = record
+    path = cell.store.save_system(payload)
+    return {"robot_base": record, "path": str(path)}
+
+
+def service_locate(
+    cell: Any, image: str | None, colors: list[str] | None, cancel: threading.Event | None = None
+) -> dict[str, Any]:
+    """`locate`: the cubes in `image` (or laser-off and laser-on captures), in S and B."""
+    cfg, _ = configs_from_cell(
+        {"sorting": _need_section(cell, "sorting", "the colour-blob location")},
+        cell.devices.arm,
+    )
+    calib = SystemCalibration.from_json(
+        cell.store.load_system(), source=str(cell.store.path("system"))
+    )
+    robot_base_T(calib, str(cell.store.path("system")))
+    colour = _cell_image(cell, image, laser=False)
+    laser_img = None
+    if image is None and cfg.use_laser and cell.devices.laser is not None:
+        laser_img = _cell_image(cell, None, laser=True)
+    sorter = Sorter(_CellCamera(cell), None, None, MemoryCalibration(calib), cfg, log=cell.runlog)
+    loc = sorter.locate(images=(colour, laser_img), calib=calib)
+    cubes = [c.summary() for c in loc.cubes if colors is None or c.color in colors]
+    return {"cubes": cubes, "count": len(cubes)}
+
+
+def service_sort(
+    cell: Any,
+    max_objects: int | None,
+    colors: list[str] | None,
+    cancel: threading.Event | None = None,
+    progress: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """`sort`: the whole pipeline on the cell's devices, gated by the calibration store."""
+    doc = {"sorting": _need_section(cell, "sorting", "the sorting pipeline")}
+    if isinstance(cell.config.get("registration"), Mapping):
+        doc["registration"] = cell.config["registration"]
+    cfg, reg = configs_from_cell(doc, cell.devices.arm)
+    if cell.devices.camera is None or cell.devices.arm is None:
+        raise MotionRefusedError("sort: the cell needs a camera and an arm")
+    laser = _CellLaser(cell) if cell.devices.laser is not None else None
+    sorter = Sorter(
+        _CellCamera(cell),  # type: ignore[arg-type]
+        cell.devices.arm,
+        laser,  # type: ignore[arg-type]
+        StoreCalibration(cell.store),
+        cfg,
+        reg,
+        log=cell.runlog,
+        cancel=cancel,
+        progress=progress,
+    )
+    return sorter.run(max_objects, colors).to_dict()
 
 
 # ---- simulation harness (verification and the random-scene experiment) ----------------------

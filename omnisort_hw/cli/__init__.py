@@ -14,6 +14,7 @@ from omnisort_hw.errors import OmnisortError
 COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.intrinsics_cmd",
     "omnisort_hw.cli.extrinsics_cmd",
+    "omnisort_hw.cli.robot_cmd",
     "omnisort_hw.cli.evaluate_cmd",
     "omnisort_hw.cli.demo_cmd",
     "omnisort_hw.cli.serve_cmd",

@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli import robot_cmd
+
 
 def register(sub: Any) -> None:
     ev = sub.add_parser("evaluate", help="reproduce the published experiments on the simulator")
@@ -30,7 +32,7 @@ def register(sub: Any) -> None:
 
 
 # Other experiments register here: each adds its own parser to the `evaluate` group.
-EXTENSIONS: list[Any] = []
+EXTENSIONS: list[Any] = [robot_cmd.add_sorting_evaluation]
 
 
 def _matching(data: Path, n: int, seed: int, degraded: bool) -> bool:

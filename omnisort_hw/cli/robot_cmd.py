@@ -1,0 +1,361 @@
+"""`omnisort register-robot`, `locate`, `sort` and `evaluate sorting`: the robot side of the cell.
+
+    omnisort register-robot IMAGE --system system.json --board 9x6 --square 40 \\
+        --offset 200,-180,2,180,0,90
+    omnisort locate IMAGE --system system.json [--laser-image IMAGE] [--json]
+    omnisort sort --config cell.toml [--system system.json] [--register] [--json]
+    omnisort evaluate sorting --scenes 50 --seed 0 [--json]
+
+`--offset X,Y,Z,RX,RY,RZ` is the floor board's pose in the robot base frame B (mm, degrees,
+R = Rz(RZ) Ry(RY) Rx(RX)); the board frame has its origin at the first inner corner, x along
+the first row of corners, y towards the next row, z into the printed face (so a board lying
+face up has RX = 180). See `omnisort_hw.core.registration`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from omnisort_hw.errors import ConfigError, InputError
+
+
+def register(sub: Any) -> None:
+    reg = sub.add_parser(
+        "register-robot", help="robot base pose T_SB from the floor checkerboard in one image"
+    )
+    reg.add_argument("image", type=Path)
+    reg.add_argument(
+        "--system", type=Path, required=True, help="system.json (read, robot_base written)"
+    )
+    reg.add_argument("--board", default="9x6", help="inner corners COLSxROWS (default 9x6)")
+    reg.add_argument("--square", type=float, required=True, help="square size, mm")
+    reg.add_argument(
+        "--offset",
+        required=True,
+        help="X,Y,Z,RX,RY,RZ: the board frame in the robot base frame (mm, deg, Z-Y-X)",
+    )
+    reg.add_argument(
+        "--free", action="store_true", help="fit the board's full 6-DOF pose (default: level)"
+    )
+    reg.add_argument("--camera-height", type=float, default=1200.0, help="nominal, mm")
+    reg.add_argument("--model", default=None, help="robot model to note in robot_base (UR5e...)")
+    reg.add_argument("--dry-run", action="store_true", help="do not write system.json")
+    reg.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    reg.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    reg.set_defaults(func=cmd_register)
+
+    loc = sub.add_parser("locate", help="find the cubes: colour, centre and yaw in S and B")
+    loc.add_argument("image", type=Path, help="colour image (laser off)")
+    loc.add_argument("--system", type=Path, required=True, help="system.json with robot_base")
+    loc.add_argument("--laser-image", type=Path, default=None, help="same view, laser on")
+    loc.add_argument("--cube-size", type=float, default=100.0, help="cube edge, mm")
+    loc.add_argument("--colors", type=Path, default=None, help="colour table (TOML or JSON)")
+    loc.add_argument(
+        "--region", default=None, help="xmin,xmax,ymin,ymax in S, mm (default: between walls)"
+    )
+    loc.add_argument("--json", action="store_true")
+    loc.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    loc.set_defaults(func=cmd_locate)
+
+    srt = sub.add_parser("sort", help="locate the cubes and put each in the bin of its colour")
+    srt.add_argument("--config", type=Path, required=True, help="cell.toml")
+    srt.add_argument(
+        "--system",
+        type=Path,
+        default=None,
+        help="system.json (default: the calibration store of the config's [storage])",
+    )
+    srt.add_argument(
+        "--register", action="store_true", help="register the robot from the capture first"
+    )
+    srt.add_argument("--max", type=int, default=None, help="pick at most this many cubes")
+    srt.add_argument("--colors", default=None, help="only these colours, comma separated")
+    srt.add_argument("--json", action="store_true")
+    srt.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    srt.set_defaults(func=cmd_sort)
+
+
+def add_sorting_evaluation(esub: Any) -> None:
+    """`omnisort evaluate sorting` (called by the `evaluate` command group)."""
+    ev = esub.add_parser(
+        "sorting", help="random scenes on the simulated cell: register, locate, sort, verify"
+    )
+    ev.add_argument("--scenes", type=int, default=50, help="number of random scenes")
+    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument("--width", type=int, default=960, help="render size (default 960)")
+    ev.add_argument(
+        "--calibration",
+        choices=("truth", "perturbed"),
+        default="truth",
+        help="true camera/laser calibration, or one with the joint method's typical errors",
+    )
+    ev.add_argument("--max-angle", type=float, default=10.0, help="camera angles, +-deg")
+    ev.add_argument("--out", type=Path, default=None, help="also write the result JSON here")
+    ev.add_argument("--json", action="store_true", help="print one JSON object")
+    ev.set_defaults(func=cmd_evaluate_sorting)
+
+
+def _numbers(text: str, n: int, what: str) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"{what} must be {n} comma-separated numbers, got {text!r}") from None
+    if len(vals) != n:
+        raise InputError(f"{what} must be {n} comma-separated numbers, got {text!r}")
+    return vals
+
+
+def cmd_register(args: argparse.Namespace) -> int:
+    from omnisort_hw.cli.extrinsics_cmd import load_system
+    from omnisort_hw.core.checkerboard import BoardSpec
+    from omnisort_hw.core.registration import pose_from_offset, register_robot
+    from omnisort_hw.extrinsics_pipeline import read_image
+    from omnisort_hw.runlog import RunLog
+    from omnisort_hw.sorting import log_registration, write_robot_base
+
+    try:
+        board = BoardSpec.parse(args.board, args.square)
+    except ValueError as exc:
+        raise InputError(f"--board/--square: {exc}") from None
+    offset = _numbers(args.offset, 6, "--offset")
+    calib = load_system(args.system)
+    image = read_image(args.image)
+    with RunLog(args.log) as log:
+        log.image("registration/image", image)
+        reg = register_robot(
+            image,
+            calib.model,
+            calib.R_SC,
+            board,
+            pose_from_offset(offset),
+            level=not args.free,
+            camera_height_mm=args.camera_height,
+        )
+        log_registration(log, reg)
+    record = reg.record(args.model)
+    record["offset"] = list(offset)
+    record["board"] = {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm}
+    record["image"] = str(args.image)
+    written = None if args.dry_run else write_robot_base(args.system, record)
+    if args.json:
+        print(json.dumps({**record, "written": str(written) if written else None}))
+    else:
+        x, y, z = record["xyz_mm"]
+        r, p, w = record["rpy_deg"]
+        std = reg.std
+        print(
+            f"robot base T_SB: xyz ({x:.2f}, {y:.2f}, {z:.2f}) mm, "
+            f"rpy ({r:.3f}, {p:.3f}, {w:.3f}) deg"
+        )
+        print(
+            f"  1-sigma: x {std['x_mm']:.2f}, y {std['y_mm']:.2f}, z {std['z_mm']:.2f} mm, "
+            f"yaw {std['yaw_deg']:.3f} deg; corner rms {reg.rms_px:.3f} px; "
+            f"free-fit tilt {reg.free_tilt_deg:.3f} deg"
+        )
+        print(f"written to {written}" if written else "not written (--dry-run)")
+    return 0
+
+
+def cmd_locate(args: argparse.Namespace) -> int:
+    from omnisort_hw.cli.extrinsics_cmd import load_system
+    from omnisort_hw.core.laser_stripe import laser_stripe_points
+    from omnisort_hw.core.mapping import pixels_to_plane
+    from omnisort_hw.core.objects import ColorTable, LocateSettings, locate_cubes
+    from omnisort_hw.extrinsics_pipeline import read_image
+    from omnisort_hw.runlog import RunLog
+    from omnisort_hw.sorting import board_exclusion, default_region, log_cubes, robot_base_T
+
+    calib = load_system(args.system)
+    T_SB = robot_base_T(calib, str(args.system))
+    image = read_image(args.image)
+    colors = ColorTable.load(args.colors) if args.colors else ColorTable.default()
+    region = _numbers(args.region, 4, "--region") if args.region else default_region(calib.target)
+    if args.cube_size <= 0:
+        raise InputError(f"--cube-size must be positive, got {args.cube_size}")
+    settings = LocateSettings(
+        cube_size_mm=args.cube_size,
+        region_S_mm=region,  # type: ignore[arg-type]
+        exclude_S_mm=tuple(board_exclusion(calib.robot_base)),
+    )
+    lp = None
+    if args.laser_image is not None:
+        lp = pixels_to_plane(laser_stripe_points(read_image(args.laser_image)), calib)
+    cubes, diag = locate_cubes(image, calib.model, calib.R_SC, T_SB, colors, settings, lp)
+    with RunLog(args.log) as log:
+        log.image("locate/image", image)
+        log_cubes(log, "locate", cubes, diag)
+    result = {
+        "cubes": [c.summary() for c in cubes],
+        "rejected": [r for r in diag["rejected"] if r["reason"] != "outside the search region"],
+    }
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"{len(cubes)} cubes")
+    for i, c in enumerate(cubes):
+        s, b = c.center_S, c.center_B
+        print(
+            f"  {i}: {c.color:<8} S ({s[0]:8.1f}, {s[1]:8.1f}, {s[2]:8.1f})  "
+            f"B ({b[0]:8.1f}, {b[1]:8.1f}, {b[2]:8.1f}) mm  yaw {c.yaw_B_deg:6.1f} deg (B)  "
+            f"+- {c.sigma_mm:.2f} mm" + (f"  [{'; '.join(c.notes)}]" if c.notes else "")
+        )
+    return 0
+
+
+def load_cell(config: Path) -> tuple[dict[str, Any], Any]:
+    """The cell document and its devices (unconnected)."""
+    import tomllib
+
+    from omnisort_hw.devices import open_devices
+
+    try:
+        doc = tomllib.loads(config.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{config}: cell configuration file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{config}: not valid TOML ({exc})") from None
+    return doc, open_devices(doc, config)
+
+
+def cmd_sort(args: argparse.Namespace) -> int:
+    from omnisort_hw.runlog import RunLog
+    from omnisort_hw.sorting import (
+        FileCalibration,
+        SimVerifier,
+        Sorter,
+        StoreCalibration,
+        configs_from_cell,
+    )
+
+    doc, devices = load_cell(args.config)
+    cfg, reg_cfg = configs_from_cell(doc, devices.arm, args.config.resolve().parent)
+    if devices.camera is None or devices.arm is None:
+        raise ConfigError("[camera] and [arm] sections are needed to sort")
+    storage = doc.get("storage", {})
+    max_age = storage.get("max_age_days")
+    if args.system is not None:
+        calibration: Any = FileCalibration(args.system, max_age or None)
+    else:
+        from omnisort_hw.storage import CalibrationStore, StorageConfig
+
+        store_cfg = StorageConfig.from_mapping(storage, args.config.resolve().parent)
+        store = CalibrationStore.from_config(store_cfg)
+        calibration = StoreCalibration(store)
+    colors = [c.strip() for c in args.colors.split(",")] if args.colors else None
+    if args.max is not None and args.max < 1:
+        raise InputError(f"--max must be at least 1, got {args.max}")
+    connected = []
+    try:
+        for dev in (devices.camera, devices.laser, devices.arm):
+            if dev is not None:
+                dev.connect()
+                connected.append(dev)
+        if args.system is None and store.expected_serial is None:
+            store.expected_serial = devices.camera.serial
+        verifier = SimVerifier(devices.arm) if hasattr(devices.arm, "cell") else None
+        if verifier is not None:
+            verifier.start()
+        with RunLog(args.log) as log:
+            sorter = Sorter(
+                devices.camera,
+                devices.arm,
+                devices.laser,
+                calibration,
+                cfg,
+                reg_cfg,
+                log,
+                progress=None if args.json else _print_progress,
+            )
+            report = sorter.run(args.max, colors, register=args.register, verifier=verifier)
+        if verifier is not None:
+            verifier.stop()
+    finally:
+        for dev in reversed(connected):
+            dev.close()
+    _print_report(report.to_dict(), args.json)
+    return 0
+
+
+def _print_progress(event: dict[str, Any]) -> None:
+    print(f"  cube {event['cube']} ({event['color']}): {event['status']}", file=sys.stderr)
+
+
+def _print_report(result: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result))
+        return
+    for c in result["cubes"]:
+        err = f"  error {c['error_mm']:.2f} mm" if "error_mm" in c else ""
+        ok = ""
+        if "in_right_bin" in c:
+            ok = "  in its bin" if c["in_right_bin"] else "  NOT in its bin"
+        where = c["center_B_mm"]
+        print(
+            f"cube {c['index']}: {c['color']:<8} {c['status']:<8} B ({where[0]:.1f}, "
+            f"{where[1]:.1f}, {where[2]:.1f}) mm{err}{ok}"
+            + (f"  - {c['reason']}" if c["reason"] else "")
+        )
+    t = result["totals"]
+    print(
+        f"totals: {t['cubes']} cubes, {t['sorted']} sorted, {t['skipped']} skipped, "
+        f"{t['failed']} failed; motion {t['motion_s']:.1f} s; wall {t['wall_s']:.1f} s"
+        + (
+            f"; verified: {t['sorted_ok']} in the right bin, {t['collisions']} collisions, "
+            f"mean position error {t['mean_position_error_mm']} mm"
+            if "sorted_ok" in t
+            else ""
+        )
+    )
+
+
+def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
+    from omnisort_hw.fileio import atomic_write_json
+    from omnisort_hw.sorting import evaluate_sorting
+
+    if args.scenes < 1:
+        raise InputError(f"--scenes must be at least 1, got {args.scenes}")
+
+    def progress(k: int, row: dict[str, Any]) -> None:
+        if args.json:
+            return
+        state = row.get("error") or f"{row['sorted_ok']}/{row['cubes']} sorted"
+        print(f"  scene {k + 1}/{args.scenes}: {state}", file=sys.stderr, flush=True)
+
+    result = evaluate_sorting(
+        scenes=args.scenes,
+        seed=args.seed,
+        width=args.width,
+        calibration=args.calibration,
+        max_angle_deg=args.max_angle,
+        progress=progress,
+    )
+    if args.out is not None:
+        atomic_write_json(args.out, result, keep_history=False)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    keys = (
+        "scenes",
+        "cubes",
+        "sorted_ok",
+        "success_rate",
+        "collisions",
+        "mean_position_error_mm",
+        "max_position_error_mm",
+        "mean_position_error_B_mm",
+        "mean_registration_error_mm",
+        "max_registration_error_mm",
+        "mean_registration_error_deg",
+        "motion_s_per_pick",
+        "wall_s_per_pick",
+        "wall_s",
+    )
+    for k in keys:
+        print(f"{k:<28} {result[k]}")
+    for item in result["not_sorted"]:
+        print(f"  scene {item['scene']}: {item['error'] or '; '.join(item['reasons'])}")
+    return 0
