@@ -39,7 +39,8 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-STATUS_CACHE_S = 0.2
+STATUS_CACHE_S = 0.05
+STATUS_POLL_S = 0.1
 CALIBRATION_CACHE_S = 1.0
 LASER_CACHE_S = 1.0
 DEVICE_LOCK_TIMEOUT_S = 5.0
@@ -118,6 +119,10 @@ class Cell:
         self._caches = _Caches()
         self._connected = False
         self._motion_count = 0
+        self._snapshot: dict[str, Any] | None = None
+        self._snapshot_at = 0.0
+        self._poller_stop = threading.Event()
+        self._poller: threading.Thread | None = None
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -169,6 +174,10 @@ class Cell:
             self.store.expected_serial = cam.serial
         self.store.remove_stale_temps()
         self._connected = True
+        self.refresh_status()
+        self._poller_stop.clear()
+        self._poller = threading.Thread(target=self._poll_status, name="status-poll", daemon=True)
+        self._poller.start()
         self.runlog.event("service/devices", f"connected: {self.device_names()}")
 
     def device_names(self) -> dict[str, str | None]:
@@ -179,6 +188,12 @@ class Cell:
 
         Returns the problems met (also logged), so the caller can report them.
         """
+        self._poller_stop.set()
+        if self._poller is not None:
+            self._poller.join(timeout=2.0)
+            self._poller = None
+        with self._cache_lock:
+            self._snapshot = None
         problems = self.make_safe()
         for name, dev in self.devices.items():
             if dev is None:
@@ -331,8 +346,8 @@ class Cell:
                 out.update(_error_text(exc))
         return out
 
-    def status(self) -> dict[str, Any]:
-        """Devices and calibration, cheap enough to poll many times a second."""
+    def read_status(self) -> dict[str, Any]:
+        """Devices and calibration read now (device calls; the poller thread calls this)."""
         return {
             "devices": {
                 "camera": self._camera_status(),
@@ -342,6 +357,34 @@ class Cell:
             "calibration": self.calibration_status(),
             "rrd": str(self.runlog_path) if self.runlog_path else None,
         }
+
+    def status(self) -> dict[str, Any]:
+        """The latest status snapshot, never waiting for a device: the poller thread refreshes
+        it every STATUS_POLL_S; `status_age_s` says how old it is. Without a poller (not
+        connected) it is read now."""
+        with self._cache_lock:
+            snap, at = self._snapshot, self._snapshot_at
+        if snap is None:
+            return self.read_status()
+        out = dict(snap)
+        out["status_age_s"] = round(time.monotonic() - at, 3)
+        return out
+
+    def _poll_status(self) -> None:
+        while not self._poller_stop.wait(STATUS_POLL_S):
+            try:
+                snap = self.read_status()
+            except Exception as exc:
+                log.warning("status poll failed: %s", exc)
+                continue
+            with self._cache_lock:
+                self._snapshot, self._snapshot_at = snap, time.monotonic()
+
+    def refresh_status(self) -> None:
+        """Read the status now into the snapshot (after a command changed something)."""
+        snap = self.read_status()
+        with self._cache_lock:
+            self._snapshot, self._snapshot_at = snap, time.monotonic()
 
     # -- quick commands --------------------------------------------------------------------
 

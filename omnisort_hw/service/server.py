@@ -24,6 +24,7 @@ import logging
 import os
 import queue
 import signal
+import sys
 import threading
 import time
 from collections import deque
@@ -45,6 +46,7 @@ from omnisort_hw.service.systemd import Notifier
 log = logging.getLogger("omnisort.service")
 
 TOO_LONG = object()
+SWITCH_INTERVAL_S = 0.001
 WRITE_TIMEOUT_S = 30.0
 READ_CHUNK = 65536
 
@@ -493,6 +495,10 @@ class Service:
         if req.cmd == "shutdown":
             self.request_shutdown(f"shutdown requested (request {req.id})")
             return proto.ok_reply(req.id, {"shutting_down": True})
+        if req.cmd == "status":
+            # Answered in the event loop from the cell's snapshot: no device, no pool.
+            ctx = Context(self.cell, threading.Event(), self.service_status)
+            return proto.ok_reply(req.id, HANDLERS["status"](ctx, req.args))
         if req.cmd == "laser" and self._job is not None:
             raise proto.ProtocolError(
                 proto.BUSY, f"laser is in use by the running {self._job.cmd}; send stop first"
@@ -506,7 +512,7 @@ class Service:
     async def _in_pool(
         self, pool: DaemonPool, req: proto.Request, fn: Callable[[], dict[str, Any]], timeout: float
     ) -> dict[str, Any]:
-        fut = asyncio.wrap_future(pool.submit(fn))
+        fut = asyncio.wrap_future(pool.submit(lambda: self._then_refresh(fn)))
         try:
             result = await asyncio.wait_for(fut, timeout)
         except TimeoutError:
@@ -520,6 +526,17 @@ class Service:
             code, msg, details = error_from_exception(exc)
             return proto.error_reply(req.id, code, msg, **details)
         return proto.ok_reply(req.id, result)
+
+    def _then_refresh(self, fn: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+        """Run `fn`, then refresh the status snapshot so that the next `status` shows its effect
+        (a new calibration, the laser state) whether it succeeded or failed."""
+        try:
+            return fn()
+        finally:
+            try:
+                self.cell.refresh_status()
+            except Exception as exc:
+                log.warning("status refresh failed: %s", exc)
 
     def _stop(self) -> dict[str, Any]:
         job = self._job
@@ -633,7 +650,7 @@ class Service:
     ) -> None:
         reply: dict[str, Any]
         try:
-            result = HANDLERS[req.cmd](ctx, req.args)
+            result = self._then_refresh(lambda: HANDLERS[req.cmd](ctx, req.args))
             if job.cancel.is_set():
                 reply = self._stopped_reply(job, req)
             else:
@@ -733,7 +750,10 @@ def serve(
         port=port if port is not None else settings.service.port,
     )
     # `kill -USR1 PID` prints every thread's stack to stderr (journald): for a stuck device.
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
+    with contextlib.suppress(AttributeError, ValueError, OSError):
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
+    # A shorter GIL switch interval keeps the event loop answering while a job computes.
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     notifier = Notifier()
     notifier.status("opening devices")
     cell = cell or Cell.from_settings(settings)

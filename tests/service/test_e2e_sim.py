@@ -11,13 +11,8 @@ from __future__ import annotations
 
 import itertools
 import json
-import os
-import re
 import signal
-import socket
 import subprocess
-import sys
-import threading
 import time
 from pathlib import Path
 
@@ -26,6 +21,7 @@ import pytest
 
 from omnisort_hw.runlog import entity_paths
 from omnisort_hw.service.client import Client
+from tests.service.procs import start_serve
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
@@ -36,48 +32,6 @@ SCENE = "sorting"
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 # Typed errors of the core a stage may answer with (the service passes them through).
 CORE_ERRORS = {"not_available", "feature_not_found", "calibration_failed", "bad_input"}
-
-
-def _start(cfg: Path, tmp: Path) -> tuple[subprocess.Popen[bytes], int, socket.socket]:
-    sock_path = str(tmp / "notify.sock")
-    rx = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    rx.bind(sock_path)
-    rx.settimeout(120)
-    env = {k: v for k, v in os.environ.items() if k not in {"WATCHDOG_USEC", "WATCHDOG_PID"}}
-    env.update(NOTIFY_SOCKET=sock_path, PYTHONPATH=str(PROJECT_ROOT))
-    with open(tmp / "serve.log", "wb") as log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "omnisort_hw.cli", "serve", "--config", str(cfg), "--port", "0"],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=env,
-            cwd=PROJECT_ROOT,
-        )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        try:
-            msg = rx.recv(4096).decode()
-        except TimeoutError:
-            break
-        m = re.search(r"READY=1[\s\S]*listening on [\d.]+:(\d+)", msg)
-        if m:
-            threading.Thread(target=_drain, args=(rx,), daemon=True).start()
-            return proc, int(m.group(1)), rx
-    proc.kill()
-    proc.wait(10)
-    raise AssertionError("service not ready: " + (tmp / "serve.log").read_text()[-3000:])
-
-
-def _drain(rx: socket.socket) -> None:
-    """Keep reading the notify socket (STATUS= on every state change) until it is closed."""
-    rx.settimeout(1.0)
-    while True:
-        try:
-            rx.recv(4096)
-        except TimeoutError:
-            continue
-        except OSError:
-            return
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -143,7 +97,7 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
     ran: dict[str, str] = {}
     figures: dict[str, float] = {}
     core_problems: list[str] = []
-    proc, port, rx = _start(cfg, tmp_path)
+    proc, port, rx = start_serve(cfg, tmp_path)
     try:
         with _Diagnosed(Client("127.0.0.1", port, timeout_s=120), proc, tmp_path) as c:
             st = c.call("status")["result"]
