@@ -276,7 +276,7 @@ def laser_stripe_points_stats(
         if mask.shape[:2] != (h, w):
             raise InputError(f"laser mask is {mask.shape[1]}x{mask.shape[0]}, image is {w}x{h}")
     s = stride if stride is not None else max(1, min(4, round(min(h, w) / 480)))
-    noise = _noise_sigma(bgr, max(16, 16 * s))
+    noise = _noise_sigma(bgr, max(32, 32 * s))
     base = max(_NOISE_K * noise, _FLOOR)
     rows = np.ascontiguousarray(bgr[::s])  # every s-th row, all columns
     cols = cv2.resize(bgr, (-(-w // s), h), interpolation=cv2.INTER_NEAREST)  # every s-th col
