@@ -371,6 +371,18 @@ def test_stripe_threshold_adapts_to_a_dim_stripe_and_ignores_noise() -> None:
     assert laser_stripe_points(noise_only).shape[0] == 0
 
 
+def test_stripe_mask_limits_the_search() -> None:
+    img, _, _ = synthetic_stripe(80.0, 1.0, 90.0, 2.0, seed=4)
+    mask = np.zeros(img.shape[:2], bool)
+    mask[100:, :240] = True  # the stripe's upper half, less its top 100 rows
+    pts = laser_stripe_points(img, mask)
+    every = laser_stripe_points(img)
+    assert 100 < pts.shape[0] < 0.5 * every.shape[0]
+    assert np.all(pts[:, 1] >= 99.5) and np.all(pts[:, 0] < 240.5)
+    with pytest.raises(InputError, match="mask"):
+        laser_stripe_points(img, mask[:100])
+
+
 def test_great_circle_fit_rejects_outliers() -> None:
     model = OcamModel.equidistant(960, 960, 185.0)
     normal = np.array([0.6, -0.2, 0.3])
