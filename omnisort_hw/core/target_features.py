@@ -4,10 +4,14 @@ What is extracted (records in `features.py`, the contract with the calibration m
 
 - Blue markers: adaptive colour segmentation (blue saturation `(b - min(r, g)) / (b + 8)` where
   blue dominates, threshold by Otsu between the image's own background level and its blue
-  pixels), connected components
-  filtered by size and shape, pieces of one marker split by a wall corner merged, and a
-  sub-pixel centre weighted by each pixel's marker coverage (blueness between the local
-  background and the marker's own level, so blur and vignetting do not shift it).
+  pixels), connected components filtered by size and shape, pieces of one marker split by a
+  wall corner merged, and a sub-pixel centre weighted by each pixel's marker coverage
+  (blueness between the local background and the marker's own level, so blur and vignetting
+  do not shift it). It is the centroid of the marker's image, not the image of its centre: on
+  a large, near marker the two differ by up to ~0.5 px (perspective).
+- Two-sided target: a white far wall with a black/white border between the far markers means
+  the image shows the three-sided target, which is an error rather than two walls silently
+  extracted from it.
 - Assignment by geometry, in the nominal system frame S (camera looking down, image up = +Y):
   rays with X < 0 belong to the left wall, X > 0 to the right one. On a side wall at X = const
   the coordinates (Y/|X|, Z/|X|) of its markers form a rectangle whatever the distance: the two
