@@ -12,9 +12,7 @@ missed replies, median, p99 and max round-trip latency.
 
 from __future__ import annotations
 
-import signal
 import statistics
-import subprocess
 import tempfile
 import threading
 import time
@@ -94,8 +92,8 @@ def _phase(port: int, cmd: str, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def run(shared: Path) -> dict[str, Any]:
+    from omnisort_hw.service.launch import start_service
     from sim_backend.dataset import checkerboard_views
-    from tests.service.procs import start_serve
 
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
@@ -108,7 +106,8 @@ def run(shared: Path) -> dict[str, Any]:
             f"[arm]\n{sim}realtime = true\njoint_speed_deg_s = 20.0\n"
             f'[storage]\nstate_dir = "state"\n[logging]\nlog_dir = "logs"\n'
         )
-        proc, port, rx = start_serve(cfg, tmp)
+        svc = start_service(cfg, tmp)
+        port = svc.port
         try:
             cpu = _phase(
                 port, "calibrate", {"what": "intrinsics", "folder": str(views), "square_mm": 116}
@@ -127,13 +126,7 @@ def run(shared: Path) -> dict[str, Any]:
                 else {"skipped": f"extrinsics failed: {ext['error']['message'][:160]}"}
             )
         finally:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                rc = proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                rc = None
-            rx.close()
+            rc = svc.stop()
     out: dict[str, Any] = {
         "devices": f"simulated cell (scene sorting, {WIDTH}x{WIDTH} camera)",
         "clients": CLIENTS,

@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import os
-import re
-import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -56,51 +53,3 @@ def start_service(
     proc.kill()
     proc.wait(10)
     raise AssertionError(f"service did not start: {(tmp / 'stderr.txt').read_text()[-2000:]}")
-
-
-def _drain(rx: socket.socket) -> None:
-    """Keep reading the notify socket (STATUS= on every state change) until it is closed."""
-    rx.settimeout(1.0)
-    while True:
-        try:
-            rx.recv(4096)
-        except TimeoutError:
-            continue
-        except OSError:
-            return
-
-
-def start_serve(
-    cfg: Path, tmp: Path, timeout_s: float = 120.0
-) -> tuple[subprocess.Popen[bytes], int, socket.socket]:
-    """`omnisort serve --config CFG --port 0` as under systemd: READY and the bound port come
-    over a real NOTIFY_SOCKET. Returns (process, port, notify socket); the service's output goes
-    to TMP/serve.log. Close the socket after the process has ended."""
-    sock_path = str(tmp / "notify.sock")
-    rx = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    rx.bind(sock_path)
-    rx.settimeout(timeout_s)
-    env = {k: v for k, v in os.environ.items() if k not in {"WATCHDOG_USEC", "WATCHDOG_PID"}}
-    env.update(NOTIFY_SOCKET=sock_path, PYTHONPATH=str(PROJECT_ROOT))
-    with open(tmp / "serve.log", "wb") as log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "omnisort_hw.cli", "serve", "--config", str(cfg), "--port", "0"],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=env,
-            cwd=PROJECT_ROOT,
-        )
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        try:
-            msg = rx.recv(4096).decode()
-        except TimeoutError:
-            break
-        m = re.search(r"READY=1[\s\S]*listening on [\d.]+:(\d+)", msg)
-        if m:
-            threading.Thread(target=_drain, args=(rx,), daemon=True).start()
-            return proc, int(m.group(1)), rx
-    proc.kill()
-    proc.wait(10)
-    rx.close()
-    raise AssertionError("service not ready: " + (tmp / "serve.log").read_text()[-3000:])

@@ -22,7 +22,7 @@ import pytest
 
 from omnisort_hw.runlog import entity_paths
 from omnisort_hw.service.client import Client
-from tests.service.procs import start_serve
+from omnisort_hw.service.launch import start_service
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
@@ -135,7 +135,8 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
     ran: dict[str, str] = {}
     figures: dict[str, float] = {}
     core_problems: list[str] = []
-    proc, port, rx = start_serve(cfg, tmp_path)
+    svc = start_service(cfg, tmp_path)
+    proc, port = svc.proc, svc.port
     try:
         with _Diagnosed(Client("127.0.0.1", port, timeout_s=120), proc, tmp_path) as c:
             st = c.call("status")["result"]
@@ -283,10 +284,7 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=60) == 0
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-        rx.close()
+        svc.stop()
     log = (tmp_path / "serve.log").read_text()
     assert "stopped cleanly" in log and "Traceback" not in log
     rrds = sorted((tmp_path / "logs").glob("*.rrd"))
