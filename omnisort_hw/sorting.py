@@ -55,6 +55,7 @@ from omnisort_hw.core.registration import (
     invert,
     pose_from_offset,
     register_robot,
+    tilt_prior_from_std,
 )
 from omnisort_hw.errors import (
     CalibrationFileError,
@@ -103,12 +104,30 @@ class RegistrationConfig:
 
     board: BoardSpec
     offset: tuple[float, float, float, float, float, float]
-    level: bool = True
+    fit: str = "auto"  # "auto" (tilt prior from the calibration's std), "level" or "free"
     camera_height_mm: float = 1200.0
 
     @property
     def T_B_board(self) -> np.ndarray:
         return pose_from_offset(self.offset)
+
+    def tilt_prior(self, calib: SystemCalibration) -> float | None:
+        """The board-tilt prior for `register_robot` (see `core.registration`)."""
+        return tilt_prior(self.fit, calib)
+
+
+FITS = ("auto", "level", "free")
+
+
+def tilt_prior(fit: str, calib: SystemCalibration) -> float | None:
+    """ "level" -> 0, "free" -> None, "auto" -> the calibration's camera roll/pitch 1-sigma."""
+    if fit not in FITS:
+        raise ConfigError(f"registration fit must be one of {', '.join(FITS)}, got {fit!r}")
+    if fit == "level":
+        return 0.0
+    if fit == "free":
+        return None
+    return tilt_prior_from_std(calib.std)
 
 
 @dataclass(frozen=True)
@@ -297,9 +316,9 @@ def parse_sort_config(
 
 
 def parse_registration_config(data: Mapping[str, Any]) -> RegistrationConfig:
-    """`[registration]`: board = "9x6", square_mm, offset = [X, Y, Z, RX, RY, RZ], level."""
+    """`[registration]`: board = "9x6", square_mm, offset = [X, Y, Z, RX, RY, RZ], fit."""
     path = "[registration]"
-    known = {"board", "square_mm", "offset", "level", "camera_height_mm"}
+    known = {"board", "square_mm", "offset", "fit", "camera_height_mm"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ConfigError(f"{path}.{unknown[0]}: unknown key (known: {', '.join(sorted(known))})")
@@ -312,13 +331,13 @@ def parse_registration_config(data: Mapping[str, Any]) -> RegistrationConfig:
         )
     except ValueError as exc:
         raise ConfigError(f"{path}.board: {exc}") from None
-    level = data.get("level", True)
-    if not isinstance(level, bool):
-        raise ConfigError(f"{path}.level: expected true or false")
+    fit = data.get("fit", "auto")
+    if fit not in FITS:
+        raise ConfigError(f"{path}.fit: one of {', '.join(FITS)}, got {fit!r}")
     return RegistrationConfig(
         board,
         _floats(data["offset"], 6, f"{path}.offset"),  # type: ignore[arg-type]
-        level,
+        str(fit),
         _number(data, "camera_height_mm", 1200.0, path, 1.0),
     )
 
@@ -977,7 +996,7 @@ class Sorter:
                 calib.R_SC,
                 rc.board,
                 rc.T_B_board,
-                rc.level,
+                rc.tilt_prior(calib),
                 rc.camera_height_mm,
             )
             log_registration(self.log, reg)
@@ -1406,7 +1425,13 @@ def service_register_robot(
     if cancel is not None and cancel.is_set():
         raise MotionRefusedError("register_robot cancelled")
     reg = register_robot(
-        img, calib.model, calib.R_SC, rc.board, rc.T_B_board, rc.level, rc.camera_height_mm
+        img,
+        calib.model,
+        calib.R_SC,
+        rc.board,
+        rc.T_B_board,
+        rc.tilt_prior(calib),
+        rc.camera_height_mm,
     )
     log = cell.runlog
     log.image("registration/image", img)
@@ -1764,7 +1789,7 @@ def sim_registration_config(scene: Any) -> RegistrationConfig:
         fb.yaw_base_deg,
     )
     board = BoardSpec(fb.inner_corners[0], fb.inner_corners[1], fb.square_mm)
-    return RegistrationConfig(board, offset, True, scene.camera.height_mm)  # type: ignore[arg-type]
+    return RegistrationConfig(board, offset, "auto", scene.camera.height_mm)  # type: ignore[arg-type]
 
 
 EVAL_COLORS = ("red", "green", "blue", "black")

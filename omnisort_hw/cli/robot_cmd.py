@@ -39,7 +39,11 @@ def register(sub: Any) -> None:
         help="X,Y,Z,RX,RY,RZ: the board frame in the robot base frame (mm, deg, Z-Y-X)",
     )
     reg.add_argument(
-        "--free", action="store_true", help="fit the board's full 6-DOF pose (default: level)"
+        "--fit",
+        choices=("auto", "level", "free"),
+        default="auto",
+        help="board on a level floor in S, free 6-DOF, or auto: weighed by the calibration's "
+        "camera roll/pitch 1-sigma (default)",
     )
     reg.add_argument("--camera-height", type=float, default=1200.0, help="nominal, mm")
     reg.add_argument("--model", default=None, help="robot model to note in robot_base (UR5e...)")
@@ -115,7 +119,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     from omnisort_hw.core.registration import pose_from_offset, register_robot
     from omnisort_hw.extrinsics_pipeline import read_image
     from omnisort_hw.runlog import RunLog
-    from omnisort_hw.sorting import log_registration, write_robot_base
+    from omnisort_hw.sorting import log_registration, tilt_prior, write_robot_base
 
     try:
         board = BoardSpec.parse(args.board, args.square)
@@ -132,7 +136,7 @@ def cmd_register(args: argparse.Namespace) -> int:
             calib.R_SC,
             board,
             pose_from_offset(offset),
-            level=not args.free,
+            tilt_prior(args.fit, calib),
             camera_height_mm=args.camera_height,
         )
         log_registration(log, reg)

@@ -5,8 +5,9 @@ The checkerboard lies on the floor at a known, fixed pose in the robot base fram
 perspective view of the floor (through the camera model and R_SC) makes the small, distorted
 board look like an ordinary checkerboard for detection; the corners are mapped back and refined
 on the fisheye image; their rays give the board pose in C (`method2.board_pose`), rotated into
-S with the calibrated R_SC; with the floor level in S (the default) the pose is refined with
-four parameters (position and yaw). Then T_SB = T_S_board . inv(T_B_board).
+S with the calibrated R_SC, and refined on the corner rays with a prior that the floor is level
+in S, as strong as the camera rotation is sure (exactly level, free, or in between). Then
+T_SB = T_S_board . inv(T_B_board).
 
 Board frame (the same as the simulator's truth `checkerboards[].pose_*`): origin at the first
 inner corner, x along the first row of corners, y along the first column (towards the next
@@ -29,6 +30,7 @@ from typing import Any
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec, detect_corners, to_gray
@@ -88,8 +90,6 @@ def pose_record(T: np.ndarray) -> dict[str, Any]:
 
 def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
     """Translation error (mm) and rotation angle between two poses (deg)."""
-    from scipy.spatial.transform import Rotation
-
     dt = float(np.linalg.norm(T_est[:3, 3] - T_true[:3, 3]))
     R = Rotation.from_matrix(T_est[:3, :3].T @ T_true[:3, :3])
     return dt, float(np.degrees(R.magnitude()))
@@ -284,20 +284,40 @@ def order_corners(
 
 
 _R_LEVEL = np.diag([1.0, -1.0, -1.0])  # board frame with z down, x along X_S at yaw 0
+_DOWN = np.array([0.0, 0.0, -1.0])
 
 
-def _level_pose(x: np.ndarray) -> np.ndarray:
+def _pose(x: np.ndarray, level: bool) -> np.ndarray:
+    """Board pose in S from parameters: (t, yaw) when level, (rotation vector, t) otherwise."""
     T = np.eye(4)
-    T[:3, :3] = rot_z(x[3]) @ _R_LEVEL
-    T[:3, 3] = x[:3]
+    if level:
+        T[:3, :3] = rot_z(x[3]) @ _R_LEVEL
+        T[:3, 3] = x[:3]
+    else:
+        T[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix()
+        T[:3, 3] = x[3:]
     return T
 
 
-def _level_residuals(x: np.ndarray, rays_S: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    T = _level_pose(x)
+def _residuals(
+    x: np.ndarray, rays_S: np.ndarray, pts: np.ndarray, level: bool, prior_w: float
+) -> np.ndarray:
+    """Corner rays vs predicted directions (sines of the angles), plus the tilt prior."""
+    T = _pose(x, level)
     p = pts @ T[:3, :3].T + T[:3, 3]
     p /= np.linalg.norm(p, axis=1, keepdims=True)
-    return np.cross(rays_S, p).ravel()
+    r = np.cross(rays_S, p).ravel()
+    if level or prior_w <= 0.0:
+        return r
+    return np.concatenate([r, prior_w * (T[:2, 2] - _DOWN[:2])])
+
+
+def tilt_prior_from_std(std: dict[str, float], floor_deg: float = 0.05) -> float:
+    """The board-tilt prior (deg) that matches a calibration's camera roll/pitch 1-sigma: an
+    uncertain camera rotation lets the board's own plane decide, a sure one keeps it level."""
+    roll = float(std.get("cam_roll_deg", 0.0) or 0.0)
+    pitch = float(std.get("cam_pitch_deg", 0.0) or 0.0)
+    return max(float(np.hypot(roll, pitch)), floor_deg)
 
 
 @dataclass
@@ -310,10 +330,14 @@ class Registration:
     corners_px: np.ndarray = field(repr=False)
     rms_deg: float
     rms_px: float
-    level: bool
+    tilt_prior_deg: float | None
     free_tilt_deg: float
     board_extent_S: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     std: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def level(self) -> bool:
+        return self.tilt_prior_deg == 0.0
 
     def record(self, model_name: str | None = None) -> dict[str, Any]:
         """The `robot_base` entry of system.json (keys shared with truth.json first)."""
@@ -322,7 +346,8 @@ class Registration:
             out["model"] = model_name
         out.update(
             {
-                "method": "floor_board_level" if self.level else "floor_board",
+                "method": "floor_board",
+                "tilt_prior_deg": self.tilt_prior_deg,
                 "board_pose_S": pose_record(self.T_S_board),
                 "offset_T_B_board": pose_record(self.T_B_board),
                 "rms_deg": round(self.rms_deg, 6),
@@ -342,12 +367,14 @@ def register_from_corners(
     R_SC: np.ndarray,
     board: BoardSpec,
     T_B_board: np.ndarray,
-    level: bool = True,
+    tilt_prior_deg: float | None = 0.0,
 ) -> Registration:
     """T_SB from detected floor-board corners (any of the orderings `detect_floor_board` gives).
 
-    With `level`, the board is taken to lie on a level floor (its normal along Z of S) and
-    its position and yaw are fitted to the corner rays; otherwise the free 6-DOF pose is used.
+    `tilt_prior_deg`: how far the board's normal may be from Z of S a priori (the floor is
+    level, but S is only as level as the calibrated camera rotation). 0 fits position and yaw
+    on a level floor; None fits the free 6-DOF pose; a value in between weighs the two (use
+    the calibration's own roll/pitch 1-sigma, `tilt_prior_from_std`).
     """
     ordered, T_CB, rms = order_corners(image, corners_px, model, board)
     R_S = np.eye(4)
@@ -356,10 +383,7 @@ def register_from_corners(
     free_tilt = float(np.degrees(np.arccos(np.clip(-T_free[2, 2], -1.0, 1.0))))
     pts = board.object_points()
     rays_S = model.pixel_to_ray(ordered) @ R_SC.T
-    x0 = np.concatenate([T_free[:3, 3], [np.arctan2(T_free[1, 0], T_free[0, 0])]])
-    sol = least_squares(_level_residuals, x0, args=(rays_S, pts), method="lm")
-    dof = max(1, sol.fun.size - 4)
-    sigma2 = float(sol.fun @ sol.fun) / dof
+    level = tilt_prior_deg == 0.0
     if level:
         if free_tilt > MAX_LEVEL_TILT_DEG:
             raise CalibrationError(
@@ -367,39 +391,48 @@ def register_from_corners(
                 f"{MAX_LEVEL_TILT_DEG} deg): the board is not flat on the floor or the camera "
                 "rotation in system.json is wrong"
             )
-        T_S_board = _level_pose(sol.x)
-        rms = float(np.sqrt(np.mean(sol.fun**2) * 3 / 2))
+        x0 = np.concatenate([T_free[:3, 3], [np.arctan2(T_free[1, 0], T_free[0, 0])]])
+        prior_w = 0.0
     else:
-        T_S_board = T_free
-    T_SB = T_S_board @ invert(T_B_board)
-    # 1-sigma of the base position and yaw from the level fit's covariance.
-    J = sol.jac
+        x0 = np.concatenate([Rotation.from_matrix(T_free[:3, :3]).as_rotvec(), T_free[:3, 3]])
+        # Corner residuals are sines of angles with scatter ~rms; the prior is weighed so that
+        # one unit of tilt (rad) counts as (rms / prior)^2 against them.
+        prior_w = 0.0 if tilt_prior_deg is None else max(rms, 1e-7) / np.radians(tilt_prior_deg)
+    sol = least_squares(_residuals, x0, args=(rays_S, pts, level, prior_w), method="lm")
+    T_S_board = _pose(sol.x, level)
+    n_par = sol.x.size
+    n_corner = 3 * len(pts)
+    fit = sol.fun[:n_corner]
+    rms = float(np.sqrt(np.mean(fit**2) * 3 / 2))
+    T_board_B = invert(T_B_board)
+    T_SB = T_S_board @ T_board_B
+    # 1-sigma of the base position and yaw: the fit's covariance through numeric derivatives.
+    sigma2 = float(fit @ fit) / max(1, n_corner - n_par)
     try:
-        cov = sigma2 * np.linalg.inv(J.T @ J)
+        cov = sigma2 * np.linalg.inv(sol.jac.T @ sol.jac)
     except np.linalg.LinAlgError:
-        cov = np.full((4, 4), np.nan)
-    c = invert(T_B_board)[:3, 3]
-    psi = sol.x[3]
-    dR = rot_z(psi + np.pi / 2) @ _R_LEVEL
-    dpos = np.zeros((3, 4))
-    dpos[:, :3] = np.eye(3)
-    dpos[:2, 3] = (dR @ c)[:2]
-    dpos[2, 3] = 0.0
-    cov_p = dpos @ cov @ dpos.T
+        cov = np.full((n_par, n_par), np.nan)
+
+    def base(x: np.ndarray) -> np.ndarray:
+        T = _pose(x, level) @ T_board_B
+        return np.array([*T[:3, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+    h = 1e-6
+    D = np.stack([(base(sol.x + h * e) - base(sol.x - h * e)) / (2 * h) for e in np.eye(n_par)], 1)
+    cov_b = D @ cov @ D.T
     std = {
-        "x_mm": float(np.sqrt(cov_p[0, 0])),
-        "y_mm": float(np.sqrt(cov_p[1, 1])),
-        "z_mm": float(np.sqrt(cov_p[2, 2])),
-        "yaw_deg": float(np.degrees(np.sqrt(cov[3, 3]))),
+        "x_mm": float(np.sqrt(cov_b[0, 0])),
+        "y_mm": float(np.sqrt(cov_b[1, 1])),
+        "z_mm": float(np.sqrt(cov_b[2, 2])),
+        "yaw_deg": float(np.degrees(np.sqrt(cov_b[3, 3]))),
     }
-    rms_px = float(rms * _centre_density(model))
     # The board's area in S (inner corners grown by 1.5 squares: its outer squares and margin).
-    s = board.square_mm
+    sq = board.square_mm
     outline = np.array(
         [
             [x, y, 0.0]
-            for x in (-1.5 * s, (board.cols + 0.5) * s)
-            for y in (-1.5 * s, (board.rows + 0.5) * s)
+            for x in (-1.5 * sq, (board.cols + 0.5) * sq)
+            for y in (-1.5 * sq, (board.rows + 0.5) * sq)
         ]
     )
     pts_S = outline @ T_S_board[:3, :3].T + T_S_board[:3, 3]
@@ -410,8 +443,8 @@ def register_from_corners(
         T_B_board=np.asarray(T_B_board, float),
         corners_px=ordered,
         rms_deg=float(np.degrees(rms)),
-        rms_px=rms_px,
-        level=level,
+        rms_px=float(rms * _centre_density(model)),
+        tilt_prior_deg=tilt_prior_deg,
         free_tilt_deg=free_tilt,
         board_extent_S=(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])),
         std=std,
@@ -424,10 +457,11 @@ def register_robot(
     R_SC: np.ndarray,
     board: BoardSpec,
     T_B_board: np.ndarray,
-    level: bool = True,
+    tilt_prior_deg: float | None = 0.0,
     camera_height_mm: float = 1200.0,
 ) -> Registration:
-    """Detect the floor board in `image` and return the robot base pose T_SB (see module)."""
+    """Detect the floor board in `image` and return the robot base pose T_SB (see module);
+    `tilt_prior_deg` as in `register_from_corners`."""
     img = np.asarray(image)
     if img.ndim not in (2, 3) or img.dtype != np.uint8:
         raise InputError(f"image: expected an 8-bit image, got {img.dtype} {img.shape}")
@@ -437,7 +471,7 @@ def register_robot(
             f"{model.image_size[0]}x{model.image_size[1]}"
         )
     corners = detect_floor_board(img, model, R_SC, board, camera_height_mm)
-    return register_from_corners(img, corners, model, R_SC, board, T_B_board, level)
+    return register_from_corners(img, corners, model, R_SC, board, T_B_board, tilt_prior_deg)
 
 
 __all__ = [
@@ -452,4 +486,5 @@ __all__ = [
     "register_from_corners",
     "register_robot",
     "rpy_deg",
+    "tilt_prior_from_std",
 ]
