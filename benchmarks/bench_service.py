@@ -12,6 +12,7 @@ missed replies, median, p99 and max round-trip latency.
 
 from __future__ import annotations
 
+import os
 import statistics
 import tempfile
 import threading
@@ -92,39 +93,30 @@ def _phase(port: int, cmd: str, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def run(shared: Path) -> dict[str, Any]:
+    from omnisort_hw.service.client import Client
+    from omnisort_hw.service.demo import write_config
     from omnisort_hw.service.launch import start_service
     from sim_backend.dataset import checkerboard_views
 
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         views = tmp / "views"
         checkerboard_views(views, n=12, seed=2, width=WIDTH, progress=False)
-        sim = 'backend = "sim"\nscene = "sorting"\n'
-        cfg = tmp / "cell.toml"
-        cfg.write_text(
-            f"[camera]\n{sim}width = {WIDTH}\nheight = {WIDTH}\n[laser]\n{sim}"
-            f"[arm]\n{sim}realtime = true\njoint_speed_deg_s = 20.0\n"
-            f'[storage]\nstate_dir = "state"\n[logging]\nlog_dir = "logs"\n'
-        )
+        cfg = write_config(tmp, WIDTH)
         svc = start_service(cfg, tmp)
         port = svc.port
         try:
             cpu = _phase(
                 port, "calibrate", {"what": "intrinsics", "folder": str(views), "square_mm": 116}
             )
-            # A move needs a usable calibration; the sim's own truth is not used: the
-            # intrinsics just measured plus an extrinsic calibration from a fresh capture.
-            from omnisort_hw.service.client import Client
-
             with Client("127.0.0.1", port, timeout_s=300) as c:
-                ext = c.call("calibrate", {"what": "extrinsics", "target": "two-sided"})
-                start = c.call("status")["result"]["devices"]["arm"]["joints_deg"]
-            target = [start[0] - 60.0, *start[1:]]
-            move = (
-                _phase(port, "move", {"joints_deg": target})
-                if ext.get("ok")
-                else {"skipped": f"extrinsics failed: {ext['error']['message'][:160]}"}
-            )
+                prep = [
+                    c.call("calibrate", {"what": "extrinsics", "target": "two-sided"}),
+                    c.call("register_robot"),
+                ]
+            failed = [r["error"]["message"][:160] for r in prep if not r.get("ok")]
+            sort = _phase(port, "sort", {}) if not failed else {"skipped": failed}
         finally:
             rc = svc.stop()
     out: dict[str, Any] = {
@@ -132,7 +124,8 @@ def run(shared: Path) -> dict[str, Any]:
         "clients": CLIENTS,
         "rate_hz_per_client": RATE_HZ,
         "service_exit_code_after_sigterm": rc,
+        "load_avg_1min_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
     out.update({f"during_intrinsics.{k}": v for k, v in cpu.items()})
-    out.update({f"during_move.{k}": v for k, v in move.items()})
+    out.update({f"during_sort.{k}": v for k, v in sort.items()})
     return out
