@@ -314,30 +314,6 @@ def test_calibrate_intrinsics_errors_are_typed(service: Harness, tmp_path) -> No
         assert st["calibration"]["files"]["camera"]["health"] == "ok"
 
 
-@pytest.mark.reference
-def test_calibrate_intrinsics_through_the_service(make_service, reference_dir, tmp_path) -> None:
-    """The reference checkerboard set, calibrated through the protocol, lands in camera.json."""
-    h = make_service(calibrated=False)
-    folder = reference_dir / "intrinsics"
-    with h.client(timeout_s=120) as c:
-        r = c.call("calibrate", {"what": "intrinsics", "folder": str(folder), "square_mm": 116.0})
-        assert r["ok"], r
-        res = r["result"]
-        assert res["images_used"] == 9 and res["rms_px"] < 0.3
-        assert res["camera_serial"] == "FAKE-CAM-1"
-        st = c.call("status")["result"]
-        cam = st["calibration"]["files"]["camera"]
-        assert cam["health"] == "ok" and cam["camera_serial"] == "FAKE-CAM-1"
-        assert st["calibration"]["files"]["system"]["health"] == "missing"
-        assert st["motion_allowed"] is False
-    model = h.cell.store.camera_model()
-    assert model.image_size == (1920, 1920)
-    h.running.stop()
-    paths = entity_paths(h.cell.runlog_path or "")
-    assert {"/calibration/intrinsics/rms_px", "/calibration/intrinsics/parameters"} <= paths
-    assert "/intrinsics/image" in paths
-
-
 def test_extrinsics_and_map_need_their_inputs(service: Harness) -> None:
     with service.client() as c:
         r = c.call("calibrate", {"what": "extrinsics"})
@@ -350,11 +326,9 @@ def test_extrinsics_and_map_need_their_inputs(service: Harness) -> None:
 
 
 @pytest.mark.reference
-def test_calibrate_extrinsics_and_map_reference_images(make_service, reference_dir) -> None:
+def test_calibration_and_map_on_the_reference_images(make_service, reference_dir) -> None:
     """Intrinsics, then extrinsics from the two-sided target, then a laser map, all through
     the protocol on the third-party reference images."""
-    pytest.importorskip("omnisort_hw.core.target_features", reason="target features not built")
-    pytest.importorskip("omnisort_hw.core.laser_stripe", reason="laser stripe not built")
     h = make_service(calibrated=False)
     with h.client(timeout_s=300) as c:
         r = c.call(
@@ -362,6 +336,15 @@ def test_calibrate_extrinsics_and_map_reference_images(make_service, reference_d
             {"what": "intrinsics", "folder": str(reference_dir / "intrinsics"), "square_mm": 116},
         )
         assert r["ok"], r
+        res = r["result"]
+        assert res["images_used"] == 9 and res["rms_px"] < 0.3
+        assert res["camera_serial"] == "FAKE-CAM-1"
+        st = c.call("status")["result"]
+        cam = st["calibration"]["files"]["camera"]
+        assert cam["health"] == "ok" and cam["camera_serial"] == "FAKE-CAM-1"
+        assert st["calibration"]["files"]["system"]["health"] == "missing"
+        assert st["motion_allowed"] is False
+        assert h.cell.store.camera_model().image_size == (1920, 1920)
         r = c.call(
             "calibrate",
             {
@@ -382,3 +365,5 @@ def test_calibrate_extrinsics_and_map_reference_images(make_service, reference_d
     h.running.stop()
     paths = entity_paths(h.cell.runlog_path or "")
     assert {"/extrinsics/image", "/map/points_S", "/map/image/laser"} <= paths
+    assert {"/calibration/intrinsics/rms_px", "/calibration/intrinsics/parameters"} <= paths
+    assert "/intrinsics/image" in paths

@@ -179,9 +179,9 @@ WRITER = textwrap.dedent(
     import sys
     from pathlib import Path
     from omnisort_hw.storage import CalibrationStore
-    from omnisort_hw.core.camera_model import OcamModel
+    import json
     store = CalibrationStore(Path(sys.argv[1]), history_keep=4, expected_serial="CAM-1")
-    model = OcamModel.equidistant(640, 480).to_dict()
+    model = json.loads(Path(sys.argv[3]).read_text())
     big = [float(i) * 0.5 for i in range(150_000)]
     tag = int(sys.argv[2])
     print("ready", flush=True)
@@ -199,6 +199,8 @@ def test_sigkill_during_write_keeps_a_loadable_calibration(tmp_path: Path) -> No
     store = CalibrationStore(state, history_keep=4, expected_serial="CAM-1")
     store.save_camera({**MODEL, "tag": 0, "table": []})
     rng = random.Random(7)
+    model_file = tmp_path / "model.json"
+    model_file.write_text(json.dumps(MODEL))
     env = dict(os.environ, PYTHONPATH=str(PROJECT_ROOT))
     last_tag = 0
     kills = 0
@@ -206,7 +208,7 @@ def test_sigkill_during_write_keeps_a_loadable_calibration(tmp_path: Path) -> No
     for run in range(12):
         start = (run + 1) * 1_000_000
         proc = subprocess.Popen(
-            [sys.executable, "-c", WRITER, str(state), str(start)],
+            [sys.executable, "-c", WRITER, str(state), str(start), str(model_file)],
             stdout=subprocess.PIPE,
             env=env,
         )
