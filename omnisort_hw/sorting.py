@@ -783,6 +783,34 @@ class Planner:
         plan.refused = f"{kind}: {errors[0]}" if errors else kind
         return plan
 
+    def _first_path(
+        self,
+        q0: np.ndarray,
+        poses: Sequence[np.ndarray],
+        obstacles: list[Box | FloorPlane],
+        what: str,
+    ) -> list[Move]:
+        """The first collision-free joint path (holding the cube) to any of `poses`, trying
+        for each the inverse kinematics nearest the start, the folded start and home."""
+        last: MotionRefusedError | None = None
+        for T in poses:
+            tried: list[np.ndarray] = []
+            for ref in (q0, self.fold(q0), self.home):
+                try:
+                    q1 = self.ik(T, ref)
+                except MotionRefusedError as exc:
+                    last = exc
+                    continue
+                if any(np.allclose(q1, t, atol=1e-6) for t in tried):
+                    continue
+                tried.append(q1)
+                try:
+                    return self.plan_joint_via(q0, q1, obstacles, what, holding=True)
+                except MotionRefusedError as exc:
+                    last = exc
+        assert last is not None
+        raise last
+
     def _wrist_yaw(self, q: np.ndarray) -> float:
         T = forward(self.model, np.asarray(q, float), self.tool)
         return math.degrees(math.atan2(T[1, 0], T[0, 0]))
@@ -807,21 +835,14 @@ class Planner:
             plan.descend.q_target, T_lift, free, "lift the cube", holding=True, held_on_floor=True
         )
         q_lift = plan.lift.q_target
-        last: MotionRefusedError | None = None
         base = bin_yaw + 90.0 * round((yaw - bin_yaw) / 90.0)
-        for dyaw in (0.0, 90.0, -90.0, 180.0):
-            T_rel = _tool_pose(targets["release"], base + dyaw)
-            try:
-                q_rel = self.ik(T_rel, q_lift)
-                plan.carry = self.plan_joint_via(
-                    q_lift, q_rel, free, "carry the cube to its bin", holding=True
-                )
-                break
-            except MotionRefusedError as exc:
-                last = exc
-        else:
-            assert last is not None
-            raise last
+        carry = self._first_path(
+            q_lift,
+            [_tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)],
+            free,
+            "carry the cube to its bin",
+        )
+        plan.carry = carry
         plan.back = self.plan_joint_via(plan.carry[-1].q_target, self.home, free, "return home")
 
 
