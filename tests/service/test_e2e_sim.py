@@ -135,6 +135,7 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
     ran: dict[str, str] = {}
     figures: dict[str, float] = {}
     core_problems: list[str] = []
+    sorted_any = False
     svc = start_service(cfg, tmp_path)
     proc, port = svc.proc, svc.port
     try:
@@ -267,6 +268,7 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
                 for colour in sorted_colours:
                     if colour in left:
                         assert np.linalg.norm(left[colour] - true_cubes[colour]) > 50.0, colour
+                sorted_any = totals["sorted"] > 0
                 ran["sort"] = (
                     f"{totals['sorted']}/{totals['cubes']} sorted, {totals['skipped']} skipped, "
                     f"{totals['failed']} failed; {len(left)} cubes left in view; status polled "
@@ -290,9 +292,18 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
     rrds = sorted((tmp_path / "logs").glob("*.rrd"))
     paths = entity_paths(rrds[-1])
     assert {"/service/state", "/calibration/intrinsics/rms_px", "/intrinsics/image"} <= paths
-    if "base_mm" in figures:
-        assert "/registration/image" in paths
-    assert "/map/points_S" in paths or "map" not in figures
+    # Each stage that ran left its entities in the run's .rrd file.
+    stage_entities = {
+        "rotation_deg": {"/extrinsics/image", "/extrinsics/joint/result"},
+        "map_median_mm": {"/map/image/laser", "/map/points_S"},
+        "base_mm": {"/registration/image", "/registration/T_SB"},
+        "locate_mm": {"/sorting/image", "/sorting/cubes_S"},
+    }
+    for figure, entities in stage_entities.items():
+        if figure in figures:
+            assert entities <= {p.rsplit("/", 1)[0] for p in paths} | paths, (figure, entities)
+    if sorted_any:
+        assert {"/sorting/planned/moves", "/sorting/executed/tcp", "/arm/command"} <= paths
     print("\n" + "\n".join(f"{k:>15}: {v}" for k, v in ran.items()))
     # Accuracy of the core on this scene (not of the service): reported, and an expected
     # failure with the figures until the core meets it, so that it is neither hidden nor lost.
