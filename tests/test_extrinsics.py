@@ -183,3 +183,22 @@ def test_joint_rejects_stray_points() -> None:
     b = errors(calibrate_joint(dirty, MODEL, sc.separation), sc.angles_deg)
     # Without rejection 7% outliers at 10 px would move the laser angles by ~0.1 deg.
     assert np.all(np.abs(b[:5] - a[:5]) < 0.01) and abs(b[5] - a[5]) < 0.3
+
+
+def test_floor_lines_used_when_consistent_and_refused_when_off_the_wall_plane() -> None:
+    sc = scenes(1, seed=9)[0]
+    feats = two_sided(MODEL, sc, seed=4, noise=NOISE)
+    calib = calibrate_joint(feats, MODEL, sc.separation)
+    assert calib.residuals["floor_lines"] == "used"
+    # A 10 mm plinth on the left wall only: its white face meets the floor off the wall plane
+    # (a symmetric offset is absorbed exactly by the floor height and biases nothing).
+    shifted = two_sided(MODEL, sc, seed=4, noise=NOISE)
+    ys = np.linspace(sc.y_near + 30, sc.y_near + sc.length - 30, 120)
+    pts = np.stack(
+        [np.full_like(ys, -sc.separation / 2 + 10), ys, np.full_like(ys, sc.floor_z)], axis=1
+    )
+    shifted.walls["left"].floor_px = MODEL.ray_to_pixel(pts @ sc.R)
+    calib = calibrate_joint(shifted, MODEL, sc.separation)
+    assert calib.residuals["floor_lines"].startswith("not used")
+    # Used, it would put ~0.7 deg into pitch; without it the markers give the usual accuracy.
+    assert np.all(np.abs(errors(calib, sc.angles_deg)[:5]) < 0.1)
