@@ -22,6 +22,7 @@ class Context:
     cell: Cell
     cancel: threading.Event
     service_status: Callable[[], dict[str, Any]]
+    progress: Callable[[dict[str, Any]], None] | None = None
 
 
 Handler = Callable[[Context, dict[str, Any]], dict[str, Any]]
@@ -88,7 +89,7 @@ def move(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def sort(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.sort(args["max_objects"], args["colors"], ctx.cancel)
+    return ctx.cell.sort(args["max_objects"], args["colors"], ctx.cancel, ctx.progress)
 
 
 HANDLERS: dict[str, Handler] = {

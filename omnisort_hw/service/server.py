@@ -170,6 +170,12 @@ class Job:
     cancel: threading.Event = field(default_factory=threading.Event)
     started: float = field(default_factory=time.monotonic)
     stopped_by: str | None = None
+    progress: list[dict[str, Any]] = field(default_factory=list)
+
+    def report(self, event: dict[str, Any]) -> None:
+        """Progress from the running job (e.g. each cube sorted); `status` shows it."""
+        self.progress.append(dict(event))
+        del self.progress[:-50]
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -177,6 +183,7 @@ class Job:
             "request_id": self.request_id,
             "running_s": round(time.monotonic() - self.started, 3),
             "cancelled": self.cancel.is_set(),
+            "progress": list(self.progress),
         }
 
 
@@ -618,7 +625,7 @@ class Service:
         self.cell.runlog.event("service/requests", f"{req.cmd} {req.args}")
         loop = asyncio.get_running_loop()
         done: asyncio.Future[dict[str, Any]] = loop.create_future()
-        ctx = Context(self.cell, job.cancel, self.service_status)
+        ctx = Context(self.cell, job.cancel, self.service_status, job.report)
         thread = threading.Thread(
             target=self._job_thread,
             args=(job, req, ctx, resting, loop, done),

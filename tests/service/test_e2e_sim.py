@@ -67,7 +67,7 @@ class _Diagnosed:
 
 def _poll_status_while(port: int, action) -> tuple[dict, list[str]]:
     """Run `action` while another connection polls `status` every 50 ms."""
-    seen: dict = {"states": set(), "count": 0}
+    seen: dict = {"states": set(), "count": 0, "progress_max": 0}
     errors: list[str] = []
     stop = threading.Event()
 
@@ -83,6 +83,9 @@ def _poll_status_while(port: int, action) -> tuple[dict, list[str]]:
                     errors.append(str(reply))
                 seen["states"].add(reply["result"]["state"])
                 seen["count"] += 1
+                job = reply["result"]["job"]
+                if job is not None:
+                    seen["progress_max"] = max(seen["progress_max"], len(job["progress"]))
                 time.sleep(0.05)
 
     t = threading.Thread(target=poll, daemon=True)
@@ -269,6 +272,8 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
                     if colour in left:
                         assert np.linalg.norm(left[colour] - true_cubes[colour]) > 50.0, colour
                 sorted_any = totals["sorted"] > 0
+                if totals["cubes"] >= 2:
+                    assert seen["progress_max"] >= 1, "no sort progress seen in status"
                 ran["sort"] = (
                     f"{totals['sorted']}/{totals['cubes']} sorted, {totals['skipped']} skipped, "
                     f"{totals['failed']} failed; {len(left)} cubes left in view; status polled "
