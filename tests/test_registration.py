@@ -18,9 +18,9 @@ from scipy.spatial.transform import Rotation
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
-from omnisort_hw.core.checkerboard import BoardSpec  # noqa: E402
-from omnisort_hw.core.extrinsics.common import SystemCalibration  # noqa: E402
-from omnisort_hw.core.registration import (  # noqa: E402
+from omnisort_hw.core.checkerboard import BoardSpec
+from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.registration import (
     invert,
     order_corners,
     pose_error,
@@ -31,8 +31,8 @@ from omnisort_hw.core.registration import (  # noqa: E402
     rpy_deg,
     tilt_prior_from_std,
 )
-from omnisort_hw.errors import FeatureNotFoundError, InputError  # noqa: E402
-from omnisort_hw.sorting import SortConfig, sim_registration_config  # noqa: E402
+from omnisort_hw.errors import FeatureNotFoundError, InputError
+from omnisort_hw.sorting import SortConfig, sim_registration_config
 
 WIDTH = 1280
 SORTING_OFFSET = (200.0, -180.0, 2.0, 180.0, 0.0, 90.0)
