@@ -1005,7 +1005,9 @@ class Sorter:
         from omnisort_hw.core.mapping import pixels_to_plane
 
         calib = calib or self.calibration.system()
+        t0 = time.perf_counter()
         colour, laser_img = images if images is not None else self.capture()
+        t1 = time.perf_counter()
         reg = None
         if register:
             if self.registration is None:
@@ -1024,6 +1026,7 @@ class Sorter:
             T_SB = reg.T_SB
         else:
             T_SB = robot_base_T(calib)
+        t2 = time.perf_counter()
         lp = None
         if laser_img is not None:
             px = laser_stripe_points(laser_img)
@@ -1037,6 +1040,11 @@ class Sorter:
             colour, calib.model, calib.R_SC, T_SB, self.cfg.colors, settings, lp
         )
         log_cubes(self.log, "sorting", cubes, diag)
+        diag["timings_s"] = {
+            "capture": t1 - t0,
+            "register": t2 - t1,
+            "locate": time.perf_counter() - t2,
+        }
         return Located(cubes, T_SB, calib, reg, diag, colour)
 
     # -- the run ----------------------------------------------------------------------------
@@ -1083,6 +1091,7 @@ class Sorter:
                 loc = self.locate(calib=calib, register=True)
         if verifier is not None:
             verifier.snapshot()
+        t_plan = time.perf_counter()
         planner = self._planner(loc.T_SB)
         outcomes: list[CubeOutcome] = []
         plans: list[PickPlan] = []
@@ -1117,6 +1126,8 @@ class Sorter:
         # Pick what can be picked; then re-plan the cubes that only another cube blocked
         # (it may be gone now), until nothing changes. A re-plan is still a full plan made
         # before the first move towards that cube.
+        t_exec = time.perf_counter()
+        t_plan = t_exec - t_plan
         picked: set[int] = set()
         done = 0
         queue = [i for i, p in enumerate(plans) if p.refused is None]
@@ -1160,6 +1171,11 @@ class Sorter:
             registration=loc.registration.record() if loc.registration else None,
             rejected_blobs=len(loc.diagnostics.get("rejected", [])),
         )
+        report.extra["timings_s"] = {
+            **{k: round(v, 3) for k, v in loc.diagnostics.get("timings_s", {}).items()},
+            "plan": round(t_plan, 3),
+            "execute": round(time.perf_counter() - t_exec, 3),
+        }
         if verifier is not None:
             verifier.verify(report, loc)
         report.wall_s = time.perf_counter() - t0
@@ -1946,6 +1962,7 @@ def evaluate_sorting(
                     o.reason for o in report.outcomes if o.status in ("skipped", "missed", "failed")
                 ],
                 collision_events=report.extra.get("collision_events", []),
+                timings_s=report.extra.get("timings_s", {}),
             )
         except (OmnisortError, Exception) as exc:
             row.update(sorted_ok=0, collisions=None, error=f"{type(exc).__name__}: {exc}")
@@ -1971,7 +1988,9 @@ def perturb_calibration(calib: SystemCalibration, rng: np.random.Generator) -> S
         "laser_distance_mm": 3.0,
     }
     noisy = {k: v + float(rng.normal(0.0, sd[k])) for k, v in p.items()}
-    return SystemCalibration.from_angles(calib.model, noisy, "perturbed", target=calib.target)
+    return SystemCalibration.from_angles(
+        calib.model, noisy, "perturbed", target=calib.target, std=dict(sd)
+    )
 
 
 def summarize_sorting(
@@ -1990,6 +2009,11 @@ def summarize_sorting(
 
     def mean(v: Sequence[float]) -> float | None:
         return round(float(np.mean(v)), 4) if v else None
+
+    stages = sorted({k for r in rows for k in r.get("timings_s", {})})
+    timings = {
+        k: mean([r["timings_s"][k] for r in rows if k in r.get("timings_s", {})]) for k in stages
+    }
 
     def pmax(v: Sequence[float]) -> float | None:
         return round(float(np.max(v)), 4) if v else None
@@ -2013,6 +2037,7 @@ def summarize_sorting(
         "motion_s_per_pick": mean(per_pick),
         "wall_s_per_pick": mean(wall_pick),
         "wall_s": round(wall_s, 1),
+        "stage_wall_s_per_scene": timings,
         "not_sorted": [
             {"scene": r["scene"], "reasons": r.get("skipped", []), "error": r.get("error")}
             for r in rows
