@@ -343,3 +343,54 @@ def test_evaluation_totals_have_the_documented_keys() -> None:
     assert out["success_rate"] == pytest.approx(6 / 7, abs=1e-4)
     assert out["mean_position_error_mm"] == pytest.approx(1.0)
     assert out["not_sorted"][0]["scene"] == 1
+
+
+def test_service_commands_through_the_cell(tmp_path: Path) -> None:
+    """register_robot, locate and sort as the service runs them: the cell's devices and its
+    calibration store (robot_base written there), on the simulated cell."""
+    import threading
+
+    from omnisort_hw.cell import Cell, CellDevices
+    from omnisort_hw.core.camera_io import camera_record
+    from omnisort_hw.storage import CalibrationStore
+    from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
+    from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
+
+    scene = sized(load_scene("sorting"), WIDTH).replace(
+        robot={"home_deg": SortConfig().home_deg},
+        cubes=(CubeSpec(Color("blue", NAMED_COLORS["blue"]), 100.0, (100.0, 620.0), 30.0),),
+    )
+    sim = SimCell(scene, seed=5)
+    devices = CellDevices(SimCamera(sim), SimLaserSwitch(sim), SimArm(sim))
+    truth = _truth_payload(sim)
+    store = CalibrationStore(state_dir=tmp_path / "state")
+    serial = devices.camera.serial  # type: ignore[union-attr]
+    store.save_camera(camera_record(sim.model), camera_serial=serial)
+    payload = {k: truth[k] for k in ("camera", "camera_rotation", "laser_plane", "target")}
+    payload.update(robot_base=None, method="truth", residuals={}, std={}, image=None, created="now")
+    store.save_system(payload, camera_serial=serial)
+    config = {
+        "registration": {"board": "9x6", "square_mm": 40.0, "offset": [200, -180, 2, 180, 0, 90]},
+        "sorting": {"from_scene": True},
+    }
+    cell = Cell(devices, store, config=config)
+    cell.connect()
+    try:
+        cancel = threading.Event()
+        reg = cell.register_robot(None, cancel)
+        rb = store.load_system()["robot_base"]
+        assert rb == json.loads(json.dumps(reg["robot_base"]))
+        np.testing.assert_allclose(rb["xyz_mm"], truth["robot_base"]["xyz_mm"], atol=3.0)
+        located = cell.locate(None, None, cancel)
+        assert located["count"] == 1 and located["cubes"][0]["color"] == "blue"
+        np.testing.assert_allclose(
+            located["cubes"][0]["center_B_mm"], truth["cubes"][0]["center_B_mm"], atol=3.0
+        )
+        result = cell.sort(None, None, cancel)
+        assert result["totals"]["sorted"] == 1, result
+        verifier = SimVerifier(devices.arm)
+        final = verifier.true_cubes()[0]
+        assert verifier.bin_of(final.center_S) == "blue"
+    finally:
+        cell.close()
+        sim.close()
