@@ -158,3 +158,22 @@ def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Pat
         assert max(values) - min(values) <= 0.3, (key, values)
     walls = [params[m]["laser_distance_mm"] for m in ("joint", "paper", "method1")]
     assert max(walls) - min(walls) < 5.0
+
+
+def test_blue_cubes_and_bins_are_not_taken_for_markers() -> None:
+    """The sorting cell has blue cubes and bins near the walls and the laser low over the
+    floor: the calibration image of a real cell, not a bare target."""
+    from omnisort_hw.evaluation import truth_parameters
+    from omnisort_hw.extrinsics_pipeline import calibrate_system
+    from sim_backend.api import render_scene
+    from sim_backend.scene import load_scene, sized
+
+    image, truth = render_scene(sized(load_scene("sorting"), 960), seed=1)
+    model = OcamModel.from_dict(truth["camera"])
+    calib = calibrate_system(
+        image, model, "two-sided", "joint", separation_mm=truth["target"]["separation_mm"]
+    )
+    want = truth_parameters(truth)
+    got = calib.parameters()
+    for key in want:
+        assert got[key] == pytest.approx(want[key], abs=0.5 if key.endswith("_mm") else 0.03), key

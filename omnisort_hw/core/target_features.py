@@ -47,6 +47,7 @@ whose size differs from the camera model's raises `InputError`; nothing is retur
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import combinations
 
 import cv2
 import numpy as np
@@ -276,6 +277,31 @@ def _columns(S: np.ndarray, idx: np.ndarray) -> dict[str, int]:
     return names
 
 
+_RECTANGLE_CANDIDATES = 10
+
+
+def _rectangle_cost(S: np.ndarray, quad: np.ndarray) -> float:
+    """How far four marker directions are from a wall's marker rectangle: on the wall plane
+    X = x_w, (Y/|X|, Z/|X|) are the plane's own coordinates scaled by 1/|x_w|; the two markers
+    of each end share Y, the two of each height share Z (nearly so for a tilted camera)."""
+    n = _columns(S, quad)
+    a = {k: S[i, 1] / abs(S[i, 0]) for k, i in n.items()}
+    h = {k: S[i, 2] / abs(S[i, 0]) for k, i in n.items()}
+    span_a = abs(a["border_far"] + a["floor_far"] - a["border_near"] - a["floor_near"]) / 2
+    span_h = abs(h["border_near"] + h["border_far"] - h["floor_near"] - h["floor_far"]) / 2
+    if span_a < 1e-6 or span_h < 1e-6:
+        return np.inf
+    ends = abs(a["border_near"] - a["floor_near"]) + abs(a["border_far"] - a["floor_far"])
+    levels = abs(h["border_near"] - h["border_far"]) + abs(h["floor_near"] - h["floor_far"])
+    return float(ends / span_a + levels / span_h)
+
+
+def _best_rectangle(S: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """The four candidates that best form a wall's marker rectangle."""
+    quads = [np.array(q) for q in combinations(candidates.tolist(), 4)]
+    return quads[int(np.argmin([_rectangle_cost(S, q) for q in quads]))]
+
+
 def assign_markers(
     blobs: list[Blob], model: OcamModel, kind: str
 ) -> tuple[dict[str, dict[str, Blob]], list[Blob]]:
@@ -296,11 +322,17 @@ def assign_markers(
     for side, idx in sides.items():
         if idx.size > max(allowed):
             # surplus: specks of JPEG chroma noise or blue clutter, pale next to the markers;
-            # then, if still too many, the most marker-like (contrast x size) are kept
+            # then, if still too many, the most marker-like (contrast x size) are kept, and for
+            # the two-sided target the four of them that best form the markers' rectangle on
+            # the wall plane (blue objects on the floor, a bin or a cube, do not)
             contrast = np.array([blobs[i].contrast for i in idx])
             idx = idx[contrast >= 0.3 * np.median(contrast)]
             score = np.array([blobs[i].contrast * np.sqrt(blobs[i].area) for i in idx])
-            sides[side] = np.sort(idx[np.argsort(-score)[: max(allowed)]])
+            ranked = idx[np.argsort(-score)]
+            if kind == "two-sided" and ranked.size > 4:
+                sides[side] = np.sort(_best_rectangle(S, ranked[:_RECTANGLE_CANDIDATES]))
+            else:
+                sides[side] = np.sort(ranked[: max(allowed)])
     counts = {s: int(i.size) for s, i in sides.items()}
     bad = [s for s in SIDES if counts[s] not in allowed]
     if kind == "three-sided" and not bad and counts["left"] != counts["right"]:
