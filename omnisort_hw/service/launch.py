@@ -73,6 +73,8 @@ def start_service(
     The child's stdout and stderr go to WORKDIR/serve.log; the notify socket is
     WORKDIR/notify.sock. Raises RuntimeError with the log's tail if it does not get ready.
     """
+    # NOTIFY_SOCKET must be absolute (or abstract): systemd's protocol ignores relative paths.
+    workdir = workdir.resolve()
     workdir.mkdir(parents=True, exist_ok=True)
     sock_path = workdir / "notify.sock"
     sock_path.unlink(missing_ok=True)
