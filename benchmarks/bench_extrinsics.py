@@ -1,12 +1,9 @@
-"""Camera-laser calibration: speed of one calibration and of one map, the Table 3 comparison
-(clean and degraded), and every method on the third-party reference images.
-
-Environment: OMNISORT_BENCH_N (configurations, default 35), OMNISORT_BENCH_SEED (default 0).
+"""Camera-laser calibration: speed of one calibration and of one map, and every method on the
+third-party reference images. (The Table 3 comparison is bench_table3.py.)
 """
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -19,10 +16,7 @@ from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane, segments
-from omnisort_hw.evaluation import evaluate_dataset
 from omnisort_hw.extrinsics_pipeline import calibrate_system
-
-BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
 
 
 def _best(fn: Any, repeat: int = 5) -> float:
@@ -57,33 +51,14 @@ def _speed() -> dict[str, Any]:
     }
 
 
-def _table3(n: int, seed: int, degraded: bool) -> dict[str, Any]:
-    from sim_backend.dataset import make_dataset
-
-    data = BUILD / (f"table3-n{n}-seed{seed}" + ("-degraded" if degraded else ""))
-    if not (data / "dataset.json").is_file():
-        make_dataset(data, "table3", n, seed, degraded=degraded, progress=True)
-    result = evaluate_dataset(data, progress=True)
-    out: dict[str, Any] = {}
-    for method, s in result["methods"].items():
-        if "mae" in s:
-            out[f"{method}_mae"] = {k: round(v, 4) for k, v in s["mae"].items()}
-            out[f"{method}_mean_time_s"] = round(s["mean_time_s"], 3)
-        out[f"{method}_failures"] = len(s["failures"])
-    out["mapping_max_rel_error_pct"] = (
-        round(100 * result["mapping"]["max_rel_error"], 4)
-        if result["mapping"]["max_rel_error"] is not None else None
-    )
-    return out
-
-
 def _reference(shared: Path) -> dict[str, Any]:
     ref = shared / "reference" / "unity"
     views = sorted((ref / "intrinsics").glob("a*.jpg"))
     if not views:
         return {"reference": f"skipped: no reference images under {ref}"}
-    model = calibrate_images([(p.name, cv2.imread(str(p))) for p in views],
-                             BoardSpec(9, 6, 116.0)).model
+    model = calibrate_images(
+        [(p.name, cv2.imread(str(p))) for p in views], BoardSpec(9, 6, 116.0)
+    ).model
     runs = {
         "joint": ("two_sided_target.png", "two-sided"),
         "paper": ("two_sided_target.png", "two-sided"),
@@ -95,8 +70,9 @@ def _reference(shared: Path) -> dict[str, Any]:
     for method, (name, target) in runs.items():
         image = cv2.imread(str(ref / name))
         try:
-            calib = calibrate_system(image, model, target, method, separation_mm=1292.4,
-                                     board=(9, 6), square_mm=97.0)
+            calib = calibrate_system(
+                image, model, target, method, separation_mm=1292.4, board=(9, 6), square_mm=97.0
+            )
         except Exception as exc:
             out[f"reference_{method}"] = f"failed: {exc}"
             continue
@@ -110,11 +86,6 @@ def _reference(shared: Path) -> dict[str, Any]:
 
 
 def run(shared: Path) -> dict[str, Any]:
-    n = int(os.environ.get("OMNISORT_BENCH_N", "35"))
-    seed = int(os.environ.get("OMNISORT_BENCH_SEED", "0"))
     figures = _speed()
-    figures.update({f"clean_{k}": v for k, v in _table3(n, seed, False).items()})
-    figures.update({f"degraded_{k}": v for k, v in _table3(n, seed, True).items()})
-    figures["table3_configurations"] = n
     figures.update(_reference(shared))
     return figures

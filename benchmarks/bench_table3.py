@@ -1,0 +1,45 @@
+"""The paper's Table 3 comparison on simulated data: all four methods, clean and degraded.
+
+Environment: OMNISORT_BENCH_N (configurations, default 35), OMNISORT_BENCH_SEED (default 0).
+Rendered datasets are kept in build/bench/ and reused.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from omnisort_hw.evaluation import evaluate_dataset
+
+BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
+
+
+def _table3(n: int, seed: int, degraded: bool) -> dict[str, Any]:
+    from sim_backend.dataset import make_dataset
+
+    data = BUILD / (f"table3-n{n}-seed{seed}" + ("-degraded" if degraded else ""))
+    if not (data / "dataset.json").is_file():
+        make_dataset(data, "table3", n, seed, degraded=degraded, progress=True)
+    result = evaluate_dataset(data, progress=True)
+    out: dict[str, Any] = {}
+    for method, s in result["methods"].items():
+        if "mae" in s:
+            out[f"{method}_mae"] = {k: round(v, 4) for k, v in s["mae"].items()}
+            out[f"{method}_mean_time_s"] = round(s["mean_time_s"], 3)
+        out[f"{method}_failures"] = len(s["failures"])
+    out["mapping_max_rel_error_pct"] = (
+        round(100 * result["mapping"]["max_rel_error"], 4)
+        if result["mapping"]["max_rel_error"] is not None
+        else None
+    )
+    return out
+
+
+def run(shared: Path) -> dict[str, Any]:
+    n = int(os.environ.get("OMNISORT_BENCH_N", "35"))
+    seed = int(os.environ.get("OMNISORT_BENCH_SEED", "0"))
+    figures: dict[str, Any] = {"configurations": n, "seed": seed}
+    figures.update({f"clean_{k}": v for k, v in _table3(n, seed, False).items()})
+    figures.update({f"degraded_{k}": v for k, v in _table3(n, seed, True).items()})
+    return figures
