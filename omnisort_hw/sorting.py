@@ -24,6 +24,7 @@ truth; the pipeline itself never does.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import threading
 import time
@@ -62,7 +63,6 @@ from omnisort_hw.errors import (
     ConfigError,
     InputError,
     MotionRefusedError,
-    OmnisortError,
 )
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -378,8 +378,6 @@ class FileCalibration(CalibrationSource):
         self.max_age_days = max_age_days
 
     def _payload(self) -> dict[str, Any]:
-        import json
-
         if not self.path.is_file():
             raise CalibrationFileError(f"{self.path}: system calibration file not found")
         try:
@@ -467,6 +465,7 @@ class Move:
     q_target: np.ndarray
     T_target: np.ndarray | None
     traj: Trajectory
+    tcp_path_B: np.ndarray = field(default_factory=lambda: np.empty((0, 3)), repr=False)
 
 
 @dataclass
@@ -668,7 +667,7 @@ class Planner:
         """One joint move, collision-checked."""
         traj = plan_joint_move(q0, q1, self.limits, model=self.model)
         self._check(traj, obstacles, what, holding)
-        return Move("joint", what, np.asarray(q1, float), None, traj)
+        return Move("joint", what, np.asarray(q1, float), None, traj, self._tcp_path(traj))
 
     def fold(self, q: np.ndarray) -> np.ndarray:
         """The home posture (compact, tool down) turned to q's base angle, keeping wrist 3."""
@@ -712,7 +711,12 @@ class Planner:
         """One straight-line TCP move, collision-checked."""
         traj = plan_linear_move(self.model, q0, T, self.limits, tool=self.tool)
         self._check(traj, obstacles, what, holding, held_on_floor)
-        return Move("linear", what, traj.q[-1].copy(), T, traj)
+        return Move("linear", what, traj.q[-1].copy(), T, traj, self._tcp_path(traj))
+
+    def _tcp_path(self, traj: Trajectory, samples: int = 40) -> np.ndarray:
+        """The TCP's path in B (for the run log), at most `samples` points."""
+        idx = np.unique(np.linspace(0, len(traj) - 1, min(samples, len(traj))).astype(int))
+        return forward(self.model, traj.q[idx], self.tool)[:, :3, 3]
 
     def ik(self, T: np.ndarray, q_near: np.ndarray) -> np.ndarray:
         return nearest_solution(
@@ -859,6 +863,11 @@ def _wrap180(deg: float) -> float:
 # ---- the pipeline ---------------------------------------------------------------------------
 
 
+def _finite(value: float, digits: int) -> float | None:
+    """A rounded number for JSON, None when it is not finite (strict JSON has no NaN)."""
+    return round(float(value), digits) if math.isfinite(value) else None
+
+
 @dataclass
 class CubeOutcome:
     """What happened to one located cube."""
@@ -880,10 +889,10 @@ class CubeOutcome:
         out = {
             "index": self.index,
             "color": self.color,
-            "center_S_mm": [round(v, 2) for v in self.center_S_mm],
-            "center_B_mm": [round(v, 2) for v in self.center_B_mm],
-            "yaw_B_deg": round(self.yaw_B_deg, 2),
-            "sigma_mm": round(self.sigma_mm, 3),
+            "center_S_mm": [_finite(v, 2) for v in self.center_S_mm],
+            "center_B_mm": [_finite(v, 2) for v in self.center_B_mm],
+            "yaw_B_deg": _finite(self.yaw_B_deg, 2),
+            "sigma_mm": _finite(self.sigma_mm, 3),
             "status": self.status,
             "reason": self.reason,
             "bin": self.bin,
@@ -974,6 +983,7 @@ class Sorter:
         self.log = log
         self.cancel = cancel or threading.Event()
         self.progress = progress
+        self._executed: list[np.ndarray] = []
 
     # -- capture and location -------------------------------------------------------------
 
@@ -1212,7 +1222,10 @@ class Sorter:
                 speed_mm_s=self.cfg.linear_speed_mm_s,
                 accel_mm_s2=self.cfg.linear_accel_mm_s2,
             )
-        self.log.pose("sorting/executed/tcp", np.asarray(arm.tcp_pose(), float))
+        tcp = np.asarray(arm.tcp_pose(), float)
+        self.log.pose("sorting/executed/tcp", tcp)
+        self._executed.append(tcp[:3, 3])
+        self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
 
     def _execute(self, plan: PickPlan, out: CubeOutcome, planner: Planner) -> None:
         """Run one planned pick; a grasp that holds nothing is reported and the arm goes home."""
@@ -1270,17 +1283,17 @@ def log_cubes(log: RunLog, prefix: str, cubes: Sequence[Cube], diag: Mapping[str
     if cubes:
         log.points3d(f"{prefix}/cubes_S", np.array([c.center_S for c in cubes]), radius=20.0)
         log.points3d(f"{prefix}/cubes_B", np.array([c.center_B for c in cubes]), radius=20.0)
-    import json
-
     log.text(f"{prefix}/cubes", json.dumps([c.summary() for c in cubes], indent=1))
 
 
 def log_trajectory(log: RunLog, prefix: str, move: Move) -> None:
-    """A planned move's joint samples as a strip in joint space (q1..q3) and its duration."""
+    """A planned move: what and how long (event), its TCP path in B (3D) and its end joints."""
     if not log.enabled:
         return
     log.event(f"{prefix}/moves", f"{move.kind} move: {move.what} ({move.traj.duration:.2f} s)")
-    log.lines3d(f"{prefix}/joints_q123", [move.traj.q[:, :3]], color=(0, 160, 255))
+    if len(move.tcp_path_B):
+        log.lines3d(f"{prefix}/tcp_path_B", [move.tcp_path_B], color=(0, 160, 255))
+    log.text(f"{prefix}/target_joints_deg", json.dumps(np.round(move.q_target, 3).tolist()))
 
 
 # ---- helpers shared with the CLI and the service --------------------------------------------
@@ -1319,8 +1332,6 @@ def write_robot_base(path: str | Path, record: Mapping[str, Any]) -> Path:
     A file written by the calibration store (with a checksum) is re-saved through the store so
     its checksum stays valid; a plain file is rewritten as JSON.
     """
-    import json
-
     from omnisort_hw import fileio
 
     p = Path(path)
@@ -1964,7 +1975,7 @@ def evaluate_sorting(
                 collision_events=report.extra.get("collision_events", []),
                 timings_s=report.extra.get("timings_s", {}),
             )
-        except (OmnisortError, Exception) as exc:
+        except Exception as exc:
             row.update(sorted_ok=0, collisions=None, error=f"{type(exc).__name__}: {exc}")
         finally:
             for d in (arm, laser, cam):

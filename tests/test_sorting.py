@@ -14,6 +14,7 @@ pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
 from omnisort_hw.core.objects import UNKNOWN, Cube
 from omnisort_hw.errors import ConfigError, MotionRefusedError
+from omnisort_hw.runlog import RunLog, entity_paths
 from omnisort_hw.sorting import (
     FileCalibration,
     MemoryCalibration,
@@ -229,7 +230,7 @@ def test_collision_monitor_sees_a_crash(small_cell: Any) -> None:
 # ---- a whole sort on the simulated cell ----------------------------------------------------
 
 
-def test_sort_a_small_scene_end_to_end() -> None:
+def test_sort_a_small_scene_end_to_end(tmp_path: Path) -> None:
     """Two sortable cubes, an unknown colour, one outside the arm's workspace box and one out of
     reach: the two end in their bins with no contact; the others are reported and never
     approached (they have not moved, no TCP target came near them)."""
@@ -269,10 +270,11 @@ def test_sort_a_small_scene_end_to_end() -> None:
         before = {t.index: t.center_S.copy() for t in verifier.true_cubes()}
         verifier.start()
         cfg = sim_sort_config(scene)
-        sorter = Sorter(
-            cam, arm, laser, MemoryCalibration(calib), cfg, sim_registration_config(scene)
-        )
-        report = sorter.run(register=True, verifier=verifier)
+        with RunLog(tmp_path / "sort.rrd") as log:
+            sorter = Sorter(
+                cam, arm, laser, MemoryCalibration(calib), cfg, sim_registration_config(scene), log
+            )
+            report = sorter.run(register=True, verifier=verifier)
         verifier.stop()
     finally:
         for d in (arm, laser, cam):
@@ -295,6 +297,16 @@ def test_sort_a_small_scene_end_to_end() -> None:
 
     # 960 px: the registration's 1-sigma is ~0.6 mm (test_registration checks 2 mm at 1280).
     assert pose_error(T_est, _T_SB(scene))[0] <= 3.0
+    logged = entity_paths(tmp_path / "sort.rrd")
+    for entity in (
+        "/registration/image/corners",
+        "/registration/T_SB",
+        "/sorting/masks/red",
+        "/sorting/cubes_B",
+        "/sorting/planned/tcp_path_B",
+        "/sorting/executed/tcp_B",
+    ):
+        assert entity in logged, sorted(logged)
     untouched = [2, 3, 4]
     for i in untouched:
         assert np.linalg.norm(after[i] - before[i]) < 0.5, (i, before[i], after[i])
