@@ -157,7 +157,7 @@ def cmd_register(args: argparse.Namespace) -> int:
         )
         print(
             f"  1-sigma: x {std['x_mm']:.2f}, y {std['y_mm']:.2f}, z {std['z_mm']:.2f} mm, "
-            f"yaw {std['yaw_deg']:.3f} deg; corner rms {reg.rms_px:.3f} px; "
+            f"yaw {std['yaw_deg']:.3f} deg (corners +- {reg.corner_sigma_px:.3f} px); "
             f"free-fit tilt {reg.free_tilt_deg:.3f} deg"
         )
         print(f"written to {written}" if written else "not written (--dry-run)")

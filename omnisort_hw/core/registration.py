@@ -422,6 +422,7 @@ class Registration:
     tilt_prior_deg: float | None
     free_tilt_deg: float
     board_extent_S: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    corner_sigma_px: float = 0.0
     std: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -441,6 +442,7 @@ class Registration:
                 "offset_T_B_board": pose_record(self.T_B_board),
                 "rms_deg": round(self.rms_deg, 6),
                 "rms_px": round(self.rms_px, 4),
+                "corner_sigma_px": round(self.corner_sigma_px, 4),
                 "free_tilt_deg": round(self.free_tilt_deg, 4),
                 "board_extent_S_mm": [round(v, 2) for v in self.board_extent_S],
                 "std": {k: round(v, 6) for k, v in self.std.items()},
@@ -545,6 +547,7 @@ def register_from_corners(
         tilt_prior_deg=tilt_prior_deg,
         free_tilt_deg=free_tilt,
         board_extent_S=(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])),
+        corner_sigma_px=float(noise * _centre_density(model)),
         std=std,
     )
 
