@@ -442,6 +442,8 @@ def _locate_one(
     shrink: float,
     laser_xy_all: np.ndarray,
 ) -> Cube | None:
+    """Fit one blob (a boolean crop at `offset`) as a cube; None when its outline is too short
+    (mostly hidden by other objects)."""
     half = size / 2.0
     pad = np.pad(blob, 1)
     near_other = cv2.dilate(((fg > 0) & ~blob).astype(np.uint8), np.ones((5, 5), np.uint8))
