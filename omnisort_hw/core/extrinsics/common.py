@@ -12,7 +12,7 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.frames import camera_angles, camera_rotation, laser_angles, laser_normal
-from omnisort_hw.errors import CalibrationFileError, InputError
+from omnisort_hw.errors import CalibrationError, CalibrationFileError, InputError
 
 PARAMETERS = (
     "cam_roll_deg",
@@ -137,6 +137,22 @@ def load_system_json(path: str | Path) -> SystemCalibration:
     if not isinstance(data, dict):
         raise CalibrationFileError(f"{p}: top level is not a JSON object")
     return SystemCalibration.from_json(data, source=str(p))
+
+
+def place_side_walls(
+    R_SC: np.ndarray, m_left: np.ndarray, m_right: np.ndarray, separation_mm: float
+) -> tuple[float, float]:
+    """X of the left wall and Z of the border line from the two borders' great-circle normals
+    (in C): in S a border X = x_w, Z = z_b along Y has normal ~ (-z_b, 0, x_w), so each gives
+    z_b / x_w; the known separation sets the scale. Raises if the walls are not seen apart."""
+    k = []
+    for m in (m_left, m_right):
+        mS = R_SC @ m
+        k.append(-mS[0] / mS[2])
+    if abs(k[0] - k[1]) < 1e-9:
+        raise CalibrationError("border lines are degenerate (walls not seen apart)")
+    x_left = k[1] * separation_mm / (k[0] - k[1])
+    return float(x_left), float(k[0] * x_left)
 
 
 def fit_laser_plane(points_S: np.ndarray) -> tuple[np.ndarray, float, float]:

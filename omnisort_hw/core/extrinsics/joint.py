@@ -31,6 +31,7 @@ from omnisort_hw.core.extrinsics.common import (
     SystemCalibration,
     fit_laser_plane,
     pixel_scale,
+    place_side_walls,
 )
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import (
@@ -117,14 +118,7 @@ def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
     x /= np.linalg.norm(x)
     R = nearest_rotation(np.stack([x, y, np.cross(x, y)]))
     # Border plane normal in S is parallel to (-z_b, 0, x_w): z_b / x_w = -m_x / m_z.
-    k = {}
-    for s in SIDES:
-        mS = R @ m[s]
-        k[s] = -mS[0] / mS[2]
-    if abs(k["left"] - k["right"]) < 1e-9:
-        raise CalibrationError("border lines are degenerate (walls not seen apart)")
-    x_left = k["right"] * separation / (k["left"] - k["right"])
-    z_b = k["left"] * x_left
+    x_left, z_b = place_side_walls(R, m["left"], m["right"], separation)
     walls = {"left": x_left, "right": x_left + separation}
     pts = np.concatenate(
         [rays_to_plane(obs.laser[s] @ R.T, np.array([1.0, 0.0, 0.0]), walls[s]) for s in SIDES]

@@ -15,7 +15,11 @@ import time
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import SystemCalibration, fit_laser_plane
+from omnisort_hw.core.extrinsics.common import (
+    SystemCalibration,
+    fit_laser_plane,
+    place_side_walls,
+)
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import great_circle_normal, nearest_rotation, rays_to_plane
 from omnisort_hw.errors import CalibrationError
@@ -46,12 +50,7 @@ def calibrate_method1(
     if x @ (border["right"].mean(axis=0) - border["left"].mean(axis=0)) < 0:
         x = -x
     R = nearest_rotation(np.stack([x, y, np.cross(x, y)]))
-    k = {}
-    for w in ("left", "right"):
-        mS = R @ m[w]
-        k[w] = -mS[0] / mS[2]  # border plane normal ~ (-z_b, 0, x_w)
-    x_left = k["right"] * separation_mm / (k["left"] - k["right"])
-    z_b = k["left"] * x_left
+    x_left, z_b = place_side_walls(R, m["left"], m["right"], separation_mm)
     mF = R @ m["far"]  # far border plane normal ~ (0, z_b, -y_far)
     y_far = -mF[2] / mF[1] * z_b
     planes = {
