@@ -304,7 +304,10 @@ def _refine(
         np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
     )
     refined, sigma = _fit_board_model(sub, local, board)
-    if np.max(np.linalg.norm(refined - local, axis=1)) > 0.4 * spacing:
+    # The detector's corners may have an outlier (a few px); the fitted grid must still agree
+    # with most of them, or the fit slid to another square.
+    moved = np.linalg.norm(refined - local, axis=1)
+    if not np.all(np.isfinite(refined)) or np.median(moved) > 0.25 * spacing:
         raise FeatureNotFoundError("floor board: corner refinement diverged (blurred board?)")
     return model.ray_to_pixel(view.rays_S(refined) @ R_SC), sigma / FINE_MAGNIFICATION
 
