@@ -138,7 +138,30 @@ class SortConfig:
     the fingers close; `approach_mm` is the straight descent onto the grasp, `lift_mm` the
     straight lift after it; the cube is released with its bottom `release_clearance_mm` above
     the bin's rim. `region_S_mm` = [xmin, xmax, ymin, ymax] is where cubes are looked for;
-    `workspace_B_mm` = [xmin, xmax, ymin, ymax] is where they may be picked.
+    `workspace_B_mm` = [xmin, xmax, ymin, ymax] is where they may be picked. The gripper's
+    collision envelope is two capsules across the finger axis sized from `tcp_offset_mm` and
+    `gripper_stroke_mm` (the simulated parallel gripper's shape). In a cell file:
+
+        [sorting]
+        home_deg = [180, -70, -100, -100, 90, 90]   # compact, tool down, out of the view
+        cube_size_mm = 100
+        [[sorting.bins]]
+        color = "red"
+        center_B_mm = [-100, -420]
+        size_mm = [240, 240, 120]
+        [[sorting.obstacles]]
+        name = "left wall"
+        frame = "S"
+        center_mm = [-557, 650, -700]
+        size_mm = [30, 1085, 1000]
+        [sorting.colors]
+        red = [[0, 7, 110, 255, 50, 255], [168, 179, 110, 255, 50, 255]]
+
+        [registration]
+        board = "9x6"
+        square_mm = 40
+        offset = [200, -180, 2, 180, 0, 90]   # the board in B: mm, deg (Z-Y-X)
+        fit = "auto"                          # or "level" / "free"
     """
 
     robot_model: str = "UR5e"

@@ -406,3 +406,14 @@ def test_service_commands_through_the_cell(tmp_path: Path) -> None:
     finally:
         cell.close()
         sim.close()
+
+
+def test_the_documented_cell_file_example_parses() -> None:
+    import tomllib
+
+    doc = SortConfig.__doc__ or ""
+    block = "\n".join(line[8:] for line in doc.splitlines() if line.startswith("        "))
+    data = tomllib.loads(block)
+    cfg = parse_sort_config(data["sorting"])
+    assert cfg.bin_for("red") is not None and cfg.obstacles[0].frame == "S"
+    assert parse_registration_config(data["registration"]).offset[3] == 180.0
