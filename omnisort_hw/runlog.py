@@ -59,9 +59,7 @@ class RunLog:
         if self._rec is None:
             return
         pts = np.asarray(points, dtype=np.float32).reshape(-1, 2)
-        self._rec.log(
-            entity, self._rr.Points2D(pts, colors=color, radii=radius, labels=labels)
-        )
+        self._rec.log(entity, self._rr.Points2D(pts, colors=color, radii=radius, labels=labels))
 
     def points3d(
         self,
@@ -75,20 +73,28 @@ class RunLog:
         pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         self._rec.log(entity, self._rr.Points3D(pts, colors=color, radii=radius))
 
-    def lines2d(self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None) -> None:
+    def lines2d(
+        self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None
+    ) -> None:
         if self._rec is None:
             return
         self._rec.log(
             entity,
-            self._rr.LineStrips2D([np.asarray(s, np.float32).reshape(-1, 2) for s in strips], colors=color),
+            self._rr.LineStrips2D(
+                [np.asarray(s, np.float32).reshape(-1, 2) for s in strips], colors=color
+            ),
         )
 
-    def lines3d(self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None) -> None:
+    def lines3d(
+        self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None
+    ) -> None:
         if self._rec is None:
             return
         self._rec.log(
             entity,
-            self._rr.LineStrips3D([np.asarray(s, np.float32).reshape(-1, 3) for s in strips], colors=color),
+            self._rr.LineStrips3D(
+                [np.asarray(s, np.float32).reshape(-1, 3) for s in strips], colors=color
+            ),
         )
 
     def pose(self, entity: str, matrix: np.ndarray) -> None:
