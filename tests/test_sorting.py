@@ -417,3 +417,18 @@ def test_the_documented_cell_file_example_parses() -> None:
     cfg = parse_sort_config(data["sorting"])
     assert cfg.bin_for("red") is not None and cfg.obstacles[0].frame == "S"
     assert parse_registration_config(data["registration"]).offset[3] == 180.0
+
+
+def test_example_cell_file_sorting_and_registration_sections_parse() -> None:
+    """deploy/cell.example.toml documents [sorting] and [registration]; they must parse."""
+    import tomllib
+    from pathlib import Path
+
+    from omnisort_hw.sorting import parse_registration_config, parse_sort_config
+
+    example = Path(__file__).resolve().parent.parent / "deploy" / "cell.example.toml"
+    data = tomllib.loads(example.read_text())
+    cfg = parse_sort_config(data["sorting"])
+    reg = parse_registration_config(data["registration"])
+    assert cfg.robot_model == "UR5e" and cfg.bins and cfg.obstacles
+    assert (reg.board.cols, reg.board.rows, reg.board.square_mm) == (9, 6, 40.0)
