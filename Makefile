@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/omnisort demo --shared $(SHARED) --out build/demo
+	$(BIN)/omnisort demo --out build/demo
 
 test: $(STAMP)
 	$(BIN)/ruff check .

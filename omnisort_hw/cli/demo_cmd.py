@@ -1,7 +1,7 @@
 """`omnisort demo`: the cell end to end on the simulated backend, with a rerun log.
 
-1. intrinsics from the third-party checkerboard set when `--shared` has it (else from the
-   simulator's calibration screen);
+1. intrinsics from the simulator's calibration screen (checkerboard views over the whole
+   field of view);
 2. camera + laser calibration (joint) from one rendered image of the two-sided target at a
    random mounting, compared with the simulator's truth;
 3. a laser map of that image;
@@ -56,21 +56,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     with RunLog(rrd) as log:
         _step("1. fisheye intrinsics (OCamCalib model)")
-        ref = args.shared / "reference" / "unity" / "intrinsics"
-        paths = sorted(ref.glob("a*.jpg"))
         import cv2
 
-        if paths:
-            images = [(p.name, cv2.imread(str(p))) for p in paths]
-            board = BoardSpec(9, 6, 116.0)
-            source = f"{len(paths)} third-party images in {ref}"
-        else:
-            from sim_backend.dataset import checkerboard_views
+        from sim_backend.dataset import checkerboard_views
 
-            views = checkerboard_views(out / "views", n=10, seed=args.seed, progress=True)
-            images = [(p.name, cv2.imread(str(p))) for p in views]
-            board = BoardSpec(9, 6, 116.0)
-            source = f"{len(views)} simulated calibration views"
+        views = checkerboard_views(out / "views", n=10, seed=args.seed, progress=True)
+        images = [(p.name, cv2.imread(str(p))) for p in views]
+        board = BoardSpec(9, 6, 116.0)
+        source = f"{len(views)} simulated calibration views"
         t0 = time.perf_counter()
         intr = calibrate_images(images, board, log=log)
         save_camera_json(out / "camera.json", intr.model, **intr.record())
