@@ -13,25 +13,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-R_NOM = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+from omnisort_hw.core import frames
 
 
 def rot_x(deg: float) -> np.ndarray:
     """Rotation about X by `deg` degrees (right-handed)."""
-    c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    return frames.rot_x(np.deg2rad(deg))
 
 
 def rot_y(deg: float) -> np.ndarray:
     """Rotation about Y by `deg` degrees (right-handed)."""
-    c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    return frames.rot_y(np.deg2rad(deg))
 
 
 def rot_z(deg: float) -> np.ndarray:
     """Rotation about Z by `deg` degrees (right-handed)."""
-    c, s = np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return frames.rot_z(np.deg2rad(deg))
 
 
 def rpy_matrix(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
@@ -48,13 +45,13 @@ def matrix_rpy(R: np.ndarray) -> tuple[float, float, float]:
 
 
 def camera_rotation(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
-    """R_SC: maps camera-frame vectors into S."""
-    return rpy_matrix(roll_deg, pitch_deg, yaw_deg) @ R_NOM
+    """R_SC: maps camera-frame vectors into S (the core's convention, degrees here)."""
+    return frames.camera_rotation(*np.deg2rad([roll_deg, pitch_deg, yaw_deg]))
 
 
 def laser_normal(roll_deg: float, pitch_deg: float) -> np.ndarray:
     """Unit normal of the laser plane in S: Ry(pitch) Rx(roll) (0, 0, 1)."""
-    return rot_y(pitch_deg) @ rot_x(roll_deg) @ np.array([0.0, 0.0, 1.0])
+    return frames.laser_normal(*np.deg2rad([roll_deg, pitch_deg]))
 
 
 def homogeneous(R: np.ndarray, t: np.ndarray) -> np.ndarray:
