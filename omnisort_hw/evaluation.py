@@ -2,8 +2,10 @@
 
 For every configuration of a dataset (see sim_backend.dataset), each method calibrates from its
 own image (two-sided: joint and paper; three-sided: method1; checkerboards: method2), with the
-camera intrinsics known, as in the paper. Errors against truth.json give MAE and RMSE per
-parameter and method; time is extraction + solve per calibration.
+camera intrinsics known, as in the paper. One more row, `joint_three_sided`, runs the joint
+refinement on method1's image, so the two solvers also meet on the same pixels. Errors against
+truth.json give MAE and RMSE per parameter and method; time is extraction + solve per
+calibration.
 
 Mapping check: for each configuration, vertical obstacles facing the camera axis at 300 to
 1500 mm are cut with the TRUE laser plane, their laser lines projected through the true
@@ -26,11 +28,14 @@ from omnisort_hw.core.extrinsics.common import PARAMETERS, SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane
 from omnisort_hw.errors import InputError, OmnisortError
 
-METHOD_IMAGES = {
-    "joint": "two_sided",
-    "paper": "two_sided",
-    "method1": "three_sided",
-    "method2": "checkerboards",
+# Row of the table -> (method, image it calibrates from). `joint_three_sided` is the joint
+# refinement on method1's image: the same solver against method1 on the same pixels.
+RUNS = {
+    "joint": ("joint", "two_sided"),
+    "paper": ("paper", "two_sided"),
+    "method1": ("method1", "three_sided"),
+    "method2": ("method2", "checkerboards"),
+    "joint_three_sided": ("joint", "three_sided"),
 }
 TARGET_OF = {
     "two_sided": "two-sided",
@@ -138,10 +143,11 @@ def mapping_errors(calib: SystemCalibration, truth_sys: SystemCalibration) -> np
     return np.array(rel)
 
 
-def _calibrate(method: str, image_path: Path, model: OcamModel, truth: dict[str, Any]) -> Any:
+def _calibrate(
+    method: str, scene: str, image_path: Path, model: OcamModel, truth: dict[str, Any]
+) -> Any:
     from omnisort_hw.extrinsics_pipeline import calibrate_system, read_image
 
-    scene = METHOD_IMAGES[method]
     image = read_image(image_path)
     target = TARGET_OF[scene]
     if target == "checkerboards":
@@ -164,32 +170,32 @@ def evaluate_dataset(data_dir: str | Path, progress: bool = True) -> dict[str, A
     if not index_path.is_file():
         raise InputError(f"{index_path}: no dataset here (render one with omnisort sim dataset)")
     index = json.loads(index_path.read_text())
-    stats = {m: MethodStats() for m in METHOD_IMAGES}
+    stats = {m: MethodStats() for m in RUNS}
     mapping: list[np.ndarray] = []
     configs = index["configs"]
     bar = tqdm(
-        total=len(configs) * len(METHOD_IMAGES),
+        total=len(configs) * len(RUNS),
         desc="calibrating",
         unit="cal",
         disable=not progress,
     )
     for cfg in configs:
         folder = root / cfg["folder"]
-        for method, scene in METHOD_IMAGES.items():
+        for row, (method, scene) in RUNS.items():
             truth = json.loads((folder / f"{scene}.truth.json").read_text())
             model = OcamModel.from_dict(truth["camera"], source=str(folder / scene))
             t0 = time.perf_counter()
             try:
-                calib = _calibrate(method, folder / f"{scene}.png", model, truth)
+                calib = _calibrate(method, scene, folder / f"{scene}.png", model, truth)
             except OmnisortError as exc:
-                stats[method].failures.append(f"{cfg['folder']}: {exc}")
+                stats[row].failures.append(f"{cfg['folder']}: {exc}")
                 bar.update(1)
                 continue
-            stats[method].times.append(time.perf_counter() - t0)
+            stats[row].times.append(time.perf_counter() - t0)
             want = truth_parameters(truth)
             got = calib.parameters()
-            stats[method].errors.append(np.array([got[k] - want[k] for k in PARAMETERS]))
-            if method == "joint":
+            stats[row].errors.append(np.array([got[k] - want[k] for k in PARAMETERS]))
+            if row == "joint":
                 mapping.append(mapping_errors(calib, SystemCalibration.from_json(truth)))
             bar.update(1)
     bar.close()

@@ -21,7 +21,7 @@ from omnisort_hw.runlog import NullLog, RunLog
 TARGETS = ("two-sided", "three-sided", "checkerboards")
 METHODS_FOR = {
     "two-sided": ("joint", "paper"),
-    "three-sided": ("method1",),
+    "three-sided": ("joint", "method1"),
     "checkerboards": ("method2",),
 }
 DEFAULT_SEPARATION_MM = 1084.5

@@ -164,6 +164,46 @@ NAMES = (
 )  # floor_z only when the wall/floor lines were extracted
 
 
+def _order_along(rays: np.ndarray) -> np.ndarray:
+    """Indices that sort rays lying near one great circle along it."""
+    m = great_circle_normal(rays)
+    e1 = rays.mean(axis=0)
+    e1 -= (e1 @ m) * m
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(m, e1)
+    return np.argsort(np.arctan2(rays @ e2, rays @ e1))
+
+
+def correlation_inflation(residuals: np.ndarray, max_lag: int = 10) -> float:
+    """Variance inflation 1 + 2 sum(rho_k) of an average of residuals ordered along a line,
+    from their autocorrelation up to the first lag within the noise of an estimate from n
+    points (2 / sqrt(n)); 1 for independent points, about the number of points sharing each
+    pixel otherwise."""
+    r = np.asarray(residuals, float) - np.mean(residuals)
+    n = r.size
+    denom = float(r @ r)
+    if n < 8 or denom <= 0:
+        return 1.0
+    total = 0.0
+    for k in range(1, min(max_lag, n // 4) + 1):
+        rho = float(r[:-k] @ r[k:]) / denom
+        if rho <= 2.0 / np.sqrt(n):  # indistinguishable from no correlation
+            break
+        total += rho
+    return float(np.clip(1.0 + 2.0 * total, 1.0, 10.0))
+
+
+def line_inflation(blocks: dict[str, np.ndarray], rays: dict[str, np.ndarray]) -> dict[str, float]:
+    """Per kind of line observation, the point-weighted mean of its lines' inflations."""
+    acc: dict[str, list[tuple[float, int]]] = {}
+    for name, ray in rays.items():
+        if len(ray) == 0:
+            continue
+        f = correlation_inflation(blocks[name][_order_along(ray)])
+        acc.setdefault(name.split("_")[0], []).append((f, len(ray)))
+    return {k: sum(f * n for f, n in v) / sum(n for _, n in v) for k, v in acc.items()}
+
+
 def _tangent_basis(rays: np.ndarray) -> np.ndarray:
     """Two unit vectors perpendicular to each ray, (N, 2, 3)."""
     helper = np.where(np.abs(rays[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
@@ -182,6 +222,7 @@ class JointProblem:
         self.has_floor = len(obs.floor["left"]) > 0
         # Per kind of observation, 1 / its noise in pixels (estimate_weights sets them).
         self.weights = {"border": 1.0, "floor": 1.0, "laser": 1.0, "markers": 1.0}
+        self.inflation: dict[str, float] = {}
         self.marker_keys = sorted(obs.markers)
         self.marker_rays = np.array([obs.markers[k] for k in self.marker_keys])
         # Which parameter gives each marker's X (wall), Y (near/far) and Z (top/floor).
@@ -270,9 +311,26 @@ class JointProblem:
         return out
 
     def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
+        """Weight each kind by 1 / (noise * sqrt(inflation)): neighbouring line points share
+        pixels (overlapping fit windows, blur), so N of them carry less than N independent
+        measurements; the inflation is measured from the residuals' correlation along each
+        line, which keeps the kinds' relative weights and the covariance honest."""
         noise = self.noise_px(p)
-        self.weights.update({k: 1.0 / v for k, v in noise.items()})
+        self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
+        self.weights.update(
+            {k: 1.0 / (v * np.sqrt(self.inflation.get(k, 1.0))) for k, v in noise.items()}
+        )
         return noise
+
+    def line_rays(self) -> dict[str, np.ndarray]:
+        """The observed rays behind each line block of `residual_blocks` (for their order)."""
+        out = {}
+        for s in SIDES:
+            out[f"border_{s}"] = self.obs.border[s]
+            out[f"laser_{s}"] = self.obs.laser[s]
+            if self.has_floor:
+                out[f"floor_{s}"] = self.obs.floor[s]
+        return out
 
     def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> int:
         """Drop border, floor and laser points further than k noise sigmas of their kind from
@@ -327,7 +385,8 @@ def _without_floor(obs: _Obs) -> _Obs:
 def calibrate_joint(
     features: TargetFeatures, model: OcamModel, separation_mm: float
 ) -> SystemCalibration:
-    """The default method: closed-form start, then one robust joint refinement.
+    """The default method: closed-form start, then one robust joint refinement (on the
+    three-sided target too, where it refines method1's closed form on all three walls).
 
     The wall/floor lines, when extracted, are used only if they agree with the markers: both
     constrain the walls' cross-section, and a target whose white face meets the floor off its
@@ -335,6 +394,8 @@ def calibrate_joint(
     0.07 degree per millimetre. The fit without them is compared with the fit with them on the
     markers' residuals.
     """
+    if features.kind == "three-sided":
+        return _calibrate_three_sided(features, model, separation_mm)
     t0 = time.perf_counter()
     obs = observations(features, model)
     floor_note = "not extracted"
@@ -356,10 +417,10 @@ def calibrate_joint(
             )
     p = sol.x
     res = sol.fun
-    dof = max(res.size - p.size, 1)
-    sigma2 = float(res @ res) / dof
+    # The residuals are weighted by their measured noise (and correlation): the covariance
+    # of the maximum-likelihood fit is (J^T J)^-1 without rescaling.
     J = sol.jac
-    cov = np.linalg.pinv(J.T @ J) * sigma2
+    cov = np.linalg.pinv(J.T @ J)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     R, n, d, geom = prob.split(p)
     blocks = prob.residual_blocks(p)
@@ -380,6 +441,7 @@ def calibrate_joint(
             "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
             **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
             "noise_px": noise,
+            "correlation_inflation": dict(prob.inflation),
             "floor_lines": floor_note,
             "observations": int(res.size),
         },
@@ -394,6 +456,167 @@ def calibrate_joint(
         PARAMETERS[5]: float(std[5]),
         "border_z_mm": float(std[7]),
         "wall_left_x_mm": float(std[6]),
+    }
+    calib.elapsed_s = time.perf_counter() - t0
+    return calib
+
+
+WALLS3 = ("left", "right", "far")
+
+
+class ThreeSidedProblem:
+    """`joint` on the three-sided target: residuals (pixels) of the three borders and the
+    three laser lines for (camera roll/pitch/yaw, laser roll/pitch/distance, left wall X,
+    border height, far wall Y). The far wall (along X at Y = y_far) supplies what the markers
+    supply on the two-sided target, so markers are not needed (both marker layouts work)."""
+
+    def __init__(
+        self,
+        border: dict[str, np.ndarray],
+        laser: dict[str, np.ndarray],
+        model: OcamModel,
+        separation: float,
+    ) -> None:
+        self.border = dict(border)
+        self.laser = dict(laser)
+        self.scale_border = {w: pixel_scale(model, r) for w, r in border.items()}
+        self.scale_laser = {w: pixel_scale(model, r) for w, r in laser.items()}
+        self.separation = separation
+        self.weights = {"border": 1.0, "laser": 1.0}
+        self.inflation: dict[str, float] = {}
+
+    def normals_S(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Great-circle normals in S of the borders and laser lines, rows in WALLS3 order."""
+        n = laser_normal(p[3], p[4])
+        d, x_left, z_b, y_far = p[5], p[6], p[7], p[8]
+        xs = np.array([x_left, x_left + self.separation])
+        border = np.array([[-z_b, 0.0, xs[0]], [-z_b, 0.0, xs[1]], [0.0, z_b, -y_far]])
+        # Side walls X = x: the laser line runs along u = (0, -n_z, n_y) through (x, 0, z).
+        z_side = -d - n[0] * xs / n[2]
+        side = np.cross(np.stack([xs, np.zeros(2), z_side], axis=1), np.array([0.0, -n[2], n[1]]))
+        # Far wall Y = y_far: along u = (-n_z, 0, n_x) through (0, y_far, z).
+        far = np.cross(
+            np.array([0.0, y_far, -d - n[1] * y_far / n[2]]), np.array([-n[2], 0.0, n[0]])
+        )
+        laser = np.vstack([side, far])
+        border /= np.linalg.norm(border, axis=1, keepdims=True)
+        laser /= np.linalg.norm(laser, axis=1, keepdims=True)
+        return border, laser
+
+    def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
+        R = camera_rotation(p[0], p[1], p[2])
+        border, laser = (m @ R for m in self.normals_S(p))
+        out = {}
+        for i, w in enumerate(WALLS3):
+            out[f"border_{w}"] = (self.border[w] @ border[i]) * self.scale_border[w]
+            out[f"laser_{w}"] = (self.laser[w] @ laser[i]) * self.scale_laser[w]
+        return out
+
+    def residuals(self, p: np.ndarray) -> np.ndarray:
+        return np.concatenate(
+            [b * self.weights[k.split("_")[0]] for k, b in self.residual_blocks(p).items()]
+        )
+
+    def line_rays(self) -> dict[str, np.ndarray]:
+        return {
+            **{f"border_{w}": r for w, r in self.border.items()},
+            **{f"laser_{w}": r for w, r in self.laser.items()},
+        }
+
+    def noise_px(self, p: np.ndarray) -> dict[str, float]:
+        blocks = self.residual_blocks(p)
+        out = {}
+        for kind in ("border", "laser"):
+            r = np.concatenate([blocks[f"{kind}_{w}"] for w in WALLS3])
+            out[kind] = max(1.4826 * float(np.median(np.abs(r))), 0.02)
+        return out
+
+    def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
+        noise = self.noise_px(p)
+        self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
+        self.weights = {
+            k: 1.0 / (v * np.sqrt(self.inflation.get(k, 1.0))) for k, v in noise.items()
+        }
+        return noise
+
+    def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> None:
+        noise = self.noise_px(p)
+        blocks = self.residual_blocks(p)
+        for kind, rays, scale in (
+            ("border", self.border, self.scale_border),
+            ("laser", self.laser, self.scale_laser),
+        ):
+            for w in WALLS3:
+                keep = np.abs(blocks[f"{kind}_{w}"]) <= k * noise[kind]
+                if not keep.all() and keep.sum() >= 5:
+                    rays[w], scale[w] = rays[w][keep], scale[w][keep]
+
+
+def _calibrate_three_sided(
+    features: TargetFeatures, model: OcamModel, separation_mm: float
+) -> SystemCalibration:
+    """`joint` for the three-sided target: method1's closed form, then the robust weighted
+    refinement of all unknowns on the three walls' borders and laser lines."""
+    from omnisort_hw.core.extrinsics.method1 import calibrate_method1
+
+    t0 = time.perf_counter()
+    start = calibrate_method1(features, model, separation_mm)
+    roll, pitch, yaw = camera_angles(start.R_SC)
+    l_roll, l_pitch = laser_angles(start.laser_normal)
+    x0 = np.array(
+        [
+            roll,
+            pitch,
+            yaw,
+            l_roll,
+            l_pitch,
+            start.laser_distance_mm,
+            start.target["wall_left_x_mm"],
+            start.target["border_z_mm"],
+            start.target["far_wall_y_mm"],
+        ]
+    )
+    border = {w: model.pixel_to_ray(features.walls[w].border_px) for w in WALLS3}
+    laser = {w: model.pixel_to_ray(features.walls[w].laser_px) for w in WALLS3}
+    prob = ThreeSidedProblem(border, laser, model, separation_mm)
+    sol = least_squares(prob.residuals, x0, method="lm", x_scale="jac", max_nfev=400)
+    noise: dict[str, float] = {}
+    for _ in range(2):
+        prob.reject_outliers(sol.x)
+        noise = prob.estimate_weights(sol.x)
+        sol = least_squares(prob.residuals, sol.x, method="lm", x_scale="jac", max_nfev=400)
+    p = sol.x
+    std = np.sqrt(np.clip(np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)), 0.0, None))
+    blocks = prob.residual_blocks(p)
+    calib = SystemCalibration(
+        model=model,
+        R_SC=camera_rotation(p[0], p[1], p[2]),
+        laser_normal=laser_normal(p[3], p[4]),
+        laser_distance_mm=float(p[5]),
+        method="joint",
+        target={
+            "kind": features.kind,
+            "separation_mm": separation_mm,
+            "wall_left_x_mm": float(p[6]),
+            "wall_right_x_mm": float(p[6] + separation_mm),
+            "far_wall_y_mm": float(p[8]),
+            "border_z_mm": float(p[7]),
+        },
+        residuals={
+            "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
+            **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
+            "noise_px": noise,
+            "correlation_inflation": dict(prob.inflation),
+            "observations": int(sol.fun.size),
+        },
+    )
+    deg = np.degrees
+    calib.std = {
+        **{PARAMETERS[i]: float(deg(std[i])) for i in range(5)},
+        PARAMETERS[5]: float(std[5]),
+        "border_z_mm": float(std[7]),
+        "wall_left_x_mm": float(std[6]),
+        "far_wall_y_mm": float(std[8]),
     }
     calib.elapsed_s = time.perf_counter() - t0
     return calib
