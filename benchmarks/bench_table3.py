@@ -27,6 +27,8 @@ def _table3(n: int, seed: int, degraded: bool) -> dict[str, Any]:
         if "mae" in s:
             out[f"{method}_mae"] = {k: round(v, 4) for k, v in s["mae"].items()}
             out[f"{method}_mean_time_s"] = round(s["mean_time_s"], 3)
+        if "z_rms" in s:
+            out[f"{method}_std_z_rms"] = {k: round(v, 2) for k, v in s["z_rms"].items()}
         out[f"{method}_failures"] = len(s["failures"])
     out["mapping_max_rel_error_pct"] = (
         round(100 * result["mapping"]["max_rel_error"], 4)

@@ -105,6 +105,7 @@ class MethodStats:
     errors: list[np.ndarray] = field(default_factory=list)
     times: list[float] = field(default_factory=list)
     failures: list[str] = field(default_factory=list)
+    stds: list[np.ndarray] = field(default_factory=list)  # reported std, where a method has one
 
     def summary(self) -> dict[str, Any]:
         out: dict[str, Any] = {"n": len(self.errors), "failures": self.failures}
@@ -116,6 +117,12 @@ class MethodStats:
             }
             out["max"] = {k: float(v) for k, v in zip(PARAMETERS, e.max(axis=0), strict=True)}
             out["mean_time_s"] = float(np.mean(self.times))
+        if self.stds and len(self.stds) == len(self.errors):
+            # Normalised errors: ~1 when the reported standard deviations are honest.
+            z = np.array(self.errors) / np.maximum(np.array(self.stds), 1e-12)
+            out["z_rms"] = {
+                k: float(v) for k, v in zip(PARAMETERS, np.sqrt((z**2).mean(axis=0)), strict=True)
+            }
         return out
 
 
@@ -195,6 +202,8 @@ def evaluate_dataset(data_dir: str | Path, progress: bool = True) -> dict[str, A
             want = truth_parameters(truth)
             got = calib.parameters()
             stats[row].errors.append(np.array([got[k] - want[k] for k in PARAMETERS]))
+            if all(k in calib.std for k in PARAMETERS):
+                stats[row].stds.append(np.array([calib.std[k] for k in PARAMETERS]))
             if row == "joint":
                 mapping.append(mapping_errors(calib, SystemCalibration.from_json(truth)))
             bar.update(1)
