@@ -60,24 +60,25 @@ def _reference(shared: Path) -> dict[str, Any]:
         [(p.name, cv2.imread(str(p))) for p in views], BoardSpec(9, 6, 116.0)
     ).model
     runs = {
-        "joint": ("two_sided_target.png", "two-sided"),
-        "paper": ("two_sided_target.png", "two-sided"),
-        "method1": ("three_sided_target.png", "three-sided"),
-        "method2": ("checkerboard_b.jpg", "checkerboards"),
+        "joint": ("joint", "two_sided_target.png", "two-sided"),
+        "paper": ("paper", "two_sided_target.png", "two-sided"),
+        "method1": ("method1", "three_sided_target.png", "three-sided"),
+        "method2": ("method2", "checkerboard_b.jpg", "checkerboards"),
+        "joint_three_sided": ("joint", "three_sided_target.png", "three-sided"),
     }
     params: dict[str, dict[str, float]] = {}
     out: dict[str, Any] = {}
-    for method, (name, target) in runs.items():
+    for row, (method, name, target) in runs.items():
         image = cv2.imread(str(ref / name))
         try:
             calib = calibrate_system(
                 image, model, target, method, separation_mm=1292.4, board=(9, 6), square_mm=97.0
             )
         except Exception as exc:
-            out[f"reference_{method}"] = f"failed: {exc}"
+            out[f"reference_{row}"] = f"failed: {exc}"
             continue
-        params[method] = calib.parameters()
-        out[f"reference_{method}"] = {k: round(v, 3) for k, v in params[method].items()}
+        params[row] = calib.parameters()
+        out[f"reference_{row}"] = {k: round(v, 3) for k, v in params[row].items()}
     if len(params) > 1:
         keys = [k for k in next(iter(params.values())) if k.endswith("_deg")]
         spread = {k: round(float(np.ptp([p[k] for p in params.values()])), 3) for k in keys}

@@ -201,14 +201,9 @@ def test_evaluate_table3_json(tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
-    keys = {
-        "cam_roll_deg",
-        "cam_pitch_deg",
-        "cam_yaw_deg",
-        "laser_roll_deg",
-        "laser_pitch_deg",
-        "laser_distance_mm",
-    }
+    from omnisort_hw.core.extrinsics.common import PARAMETERS
+
+    keys = set(PARAMETERS)
     assert set(result["methods"]) == {"joint", "paper", "method1", "method2", "joint_three_sided"}
     for name, row in result["methods"].items():
         assert row["failures"] == [] and row["n"] == 2, name

@@ -9,8 +9,12 @@
    roll/pitch/distance, and the nuisance geometry (left wall X, border height, the markers'
    positions along the walls and heights). Residuals are angles between observed rays and the
    model's lines/points, scaled to pixels by the lens' local scale, so every observation is
-   weighted by the image noise it carries. The covariance of the solution gives each
-   parameter's standard deviation.
+   weighted by the image noise it carries, and by how many independent measurements its line
+   points really are (neighbours share pixels: the inflation is measured from the residuals'
+   correlation along the line). The covariance of the solution gives each parameter's standard
+   deviation.
+3. The same refinement runs on the three-sided target (`ThreeSidedProblem`), started from
+   method1's closed form, with the far wall's border and laser line in place of the markers.
 
 Observability: pitch (about Y, the wall direction) is fixed only through the A-D / B-C
 markers and the equal height of the borders; its standard deviation is reported as measured.
@@ -504,6 +508,7 @@ class ThreeSidedProblem:
         return border, laser
 
     def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
+        """Signed distances (px) of every border and laser point from its model line."""
         R = camera_rotation(p[0], p[1], p[2])
         border, laser = (m @ R for m in self.normals_S(p))
         out = {}
@@ -513,17 +518,20 @@ class ThreeSidedProblem:
         return out
 
     def residuals(self, p: np.ndarray) -> np.ndarray:
+        """Residuals over their kind's noise (and correlation), for least_squares."""
         return np.concatenate(
             [b * self.weights[k.split("_")[0]] for k, b in self.residual_blocks(p).items()]
         )
 
     def line_rays(self) -> dict[str, np.ndarray]:
+        """The observed rays behind each block of `residual_blocks`."""
         return {
             **{f"border_{w}": r for w, r in self.border.items()},
             **{f"laser_{w}": r for w, r in self.laser.items()},
         }
 
     def noise_px(self, p: np.ndarray) -> dict[str, float]:
+        """1.4826 MAD of each kind's residuals (px), floored at 0.02 px."""
         blocks = self.residual_blocks(p)
         out = {}
         for kind in ("border", "laser"):
@@ -532,6 +540,7 @@ class ThreeSidedProblem:
         return out
 
     def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
+        """As JointProblem.estimate_weights: 1 / (noise * sqrt(correlation inflation))."""
         noise = self.noise_px(p)
         self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
         self.weights = {
@@ -540,6 +549,7 @@ class ThreeSidedProblem:
         return noise
 
     def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> None:
+        """Drop line points beyond k noise sigmas of their kind (keeping at least 5 a line)."""
         noise = self.noise_px(p)
         blocks = self.residual_blocks(p)
         for kind, rays, scale in (
