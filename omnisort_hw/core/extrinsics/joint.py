@@ -364,13 +364,20 @@ def _solve(obs: _Obs, separation_mm: float) -> tuple[Any, JointProblem, dict[str
     covariance gives the standard deviations."""
     start = closed_form(obs, separation_mm)
     prob = JointProblem(obs, separation_mm)
-    sol = least_squares(prob.residuals, start["x"], method="lm", x_scale="jac", max_nfev=400)
+    sol, noise = _refine(prob, start["x"])
+    return sol, prob, noise
+
+
+def _refine(prob: JointProblem | ThreeSidedProblem, x0: np.ndarray) -> tuple[Any, dict[str, float]]:
+    """LM from x0, then twice: drop points beyond 4 sigmas of their kind, weight each kind by
+    its measured noise and correlation, solve again. Returns the solution and the noise."""
+    sol = least_squares(prob.residuals, x0, method="lm", x_scale="jac", max_nfev=400)
     noise: dict[str, float] = {}
     for _ in range(2):
         prob.reject_outliers(sol.x)
         noise = prob.estimate_weights(sol.x)
         sol = least_squares(prob.residuals, sol.x, method="lm", x_scale="jac", max_nfev=400)
-    return sol, prob, noise
+    return sol, noise
 
 
 def _without_floor(obs: _Obs) -> _Obs:
@@ -589,12 +596,7 @@ def _calibrate_three_sided(
     border = {w: model.pixel_to_ray(features.walls[w].border_px) for w in WALLS3}
     laser = {w: model.pixel_to_ray(features.walls[w].laser_px) for w in WALLS3}
     prob = ThreeSidedProblem(border, laser, model, separation_mm)
-    sol = least_squares(prob.residuals, x0, method="lm", x_scale="jac", max_nfev=400)
-    noise: dict[str, float] = {}
-    for _ in range(2):
-        prob.reject_outliers(sol.x)
-        noise = prob.estimate_weights(sol.x)
-        sol = least_squares(prob.residuals, sol.x, method="lm", x_scale="jac", max_nfev=400)
+    sol, noise = _refine(prob, x0)
     p = sol.x
     std = np.sqrt(np.clip(np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)), 0.0, None))
     blocks = prob.residual_blocks(p)
