@@ -217,7 +217,77 @@ def _tangent_basis(rays: np.ndarray) -> np.ndarray:
     return np.stack([t1, t2], axis=1)
 
 
-class JointProblem:
+# Block name -> (the dict holding its rays, the dict holding their pixel scales, its key).
+LineStore = dict[str, tuple[dict[str, np.ndarray], dict[str, np.ndarray], str]]
+
+
+class _WeightedProblem:
+    """What both targets' problems share: residual blocks named "<kind>_<line>", each kind
+    weighted by its measured noise and correlation, stray line points dropped. Subclasses give
+    `residual_blocks(p)` and `line_store()` (block name -> (rays dict, scales dict, key))."""
+
+    weights: dict[str, float]
+    inflation: dict[str, float]
+
+    def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def line_store(self) -> LineStore:
+        raise NotImplementedError
+
+    def line_rays(self) -> dict[str, np.ndarray]:
+        """The observed rays behind each line block of `residual_blocks` (for their order)."""
+        return {name: rays[key] for name, (rays, _, key) in self.line_store().items()}
+
+    def residuals(self, p: np.ndarray) -> np.ndarray:
+        """Weighted residuals: each kind divided by its noise, so the sum is the likelihood."""
+        return np.concatenate(
+            [
+                block * self.weights[name.split("_")[0]]
+                for name, block in self.residual_blocks(p).items()
+            ]
+        )
+
+    def noise_px(self, p: np.ndarray) -> dict[str, float]:
+        """Robust noise estimate (px) of each kind of observation at parameters p: 1.4826 MAD
+        for the line points, RMS for the few marker coordinates; floored at 0.02 px."""
+        kinds: dict[str, list[np.ndarray]] = {}
+        for name, block in self.residual_blocks(p).items():
+            kinds.setdefault(name.split("_")[0], []).append(block)
+        out = {}
+        for kind, blocks in kinds.items():
+            r = np.concatenate(blocks)
+            sigma = np.sqrt(np.mean(r**2)) if kind == "markers" else 1.4826 * np.median(np.abs(r))
+            out[kind] = max(float(sigma), 0.02)
+        return out
+
+    def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
+        """Weight each kind by 1 / (noise * sqrt(inflation)): neighbouring line points share
+        pixels (overlapping fit windows, blur), so N of them carry less than N independent
+        measurements; the inflation is measured from the residuals' correlation along each
+        line, which keeps the kinds' relative weights and the covariance honest."""
+        noise = self.noise_px(p)
+        self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
+        self.weights.update(
+            {k: 1.0 / (v * np.sqrt(self.inflation.get(k, 1.0))) for k, v in noise.items()}
+        )
+        return noise
+
+    def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> int:
+        """Drop line points further than k noise sigmas of their kind from the fit (stray
+        extracted points), keeping at least 5 a line; markers are kept (each one is needed)."""
+        noise = self.noise_px(p)
+        blocks = self.residual_blocks(p)
+        dropped = 0
+        for name, (rays, scale, key) in self.line_store().items():
+            keep = np.abs(blocks[name]) <= k * noise[name.split("_")[0]]
+            if not keep.all() and keep.sum() >= 5:
+                rays[key], scale[key] = rays[key][keep], scale[key][keep]
+                dropped += int((~keep).sum())
+        return dropped
+
+
+class JointProblem(_WeightedProblem):
     """Residuals (pixels) of all observations for a parameter vector (see NAMES)."""
 
     def __init__(self, obs: _Obs, separation: float) -> None:
@@ -292,69 +362,16 @@ class JointProblem:
         ).ravel()
         return out
 
-    def residuals(self, p: np.ndarray) -> np.ndarray:
-        """Weighted residuals: each kind divided by its noise, so the sum is the likelihood."""
-        return np.concatenate(
-            [
-                block * self.weights[name.split("_")[0]]
-                for name, block in self.residual_blocks(p).items()
-            ]
-        )
-
-    def noise_px(self, p: np.ndarray) -> dict[str, float]:
-        """Robust noise estimate (px) of each kind of observation at parameters p: 1.4826 MAD
-        for the line points, RMS for the few marker coordinates; floored at 0.02 px."""
-        kinds: dict[str, list[np.ndarray]] = {}
-        for name, block in self.residual_blocks(p).items():
-            kinds.setdefault(name.split("_")[0], []).append(block)
+    def line_store(self) -> LineStore:
+        """Border, laser (and wall/floor) rays and scales of each side, by block name."""
+        o = self.obs
         out = {}
-        for kind, blocks in kinds.items():
-            r = np.concatenate(blocks)
-            sigma = np.sqrt(np.mean(r**2)) if kind == "markers" else 1.4826 * np.median(np.abs(r))
-            out[kind] = max(float(sigma), 0.02)
-        return out
-
-    def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
-        """Weight each kind by 1 / (noise * sqrt(inflation)): neighbouring line points share
-        pixels (overlapping fit windows, blur), so N of them carry less than N independent
-        measurements; the inflation is measured from the residuals' correlation along each
-        line, which keeps the kinds' relative weights and the covariance honest."""
-        noise = self.noise_px(p)
-        self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
-        self.weights.update(
-            {k: 1.0 / (v * np.sqrt(self.inflation.get(k, 1.0))) for k, v in noise.items()}
-        )
-        return noise
-
-    def line_rays(self) -> dict[str, np.ndarray]:
-        """The observed rays behind each line block of `residual_blocks` (for their order)."""
-        out = {}
-        for s in SIDES:
-            out[f"border_{s}"] = self.obs.border[s]
-            out[f"laser_{s}"] = self.obs.laser[s]
-            if self.has_floor:
-                out[f"floor_{s}"] = self.obs.floor[s]
-        return out
-
-    def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> int:
-        """Drop border, floor and laser points further than k noise sigmas of their kind from
-        the fit (stray extracted points); markers are kept (each one is needed)."""
-        noise = self.noise_px(p)
-        blocks = self.residual_blocks(p)
-        dropped = 0
-        kinds = [
-            ("border", self.obs.border, self.obs.scale_border),
-            ("laser", self.obs.laser, self.obs.scale_laser),
-        ]
-        if self.has_floor:
-            kinds.append(("floor", self.obs.floor, self.obs.scale_floor))
         for side in SIDES:
-            for kind, rays, scale in kinds:
-                keep = np.abs(blocks[f"{kind}_{side}"]) <= k * noise[kind]
-                if not keep.all() and keep.sum() >= 5:
-                    rays[side], scale[side] = rays[side][keep], scale[side][keep]
-                    dropped += int((~keep).sum())
-        return dropped
+            out[f"border_{side}"] = (o.border, o.scale_border, side)
+            out[f"laser_{side}"] = (o.laser, o.scale_laser, side)
+            if self.has_floor:
+                out[f"floor_{side}"] = (o.floor, o.scale_floor, side)
+        return out
 
 
 def _solve(obs: _Obs, separation_mm: float) -> tuple[Any, JointProblem, dict[str, float]]:
@@ -368,7 +385,7 @@ def _solve(obs: _Obs, separation_mm: float) -> tuple[Any, JointProblem, dict[str
     return sol, prob, noise
 
 
-def _refine(prob: JointProblem | ThreeSidedProblem, x0: np.ndarray) -> tuple[Any, dict[str, float]]:
+def _refine(prob: _WeightedProblem, x0: np.ndarray) -> tuple[Any, dict[str, float]]:
     """LM from x0, then twice: drop points beyond 4 sigmas of their kind, weight each kind by
     its measured noise and correlation, solve again. Returns the solution and the noise."""
     sol = least_squares(prob.residuals, x0, method="lm", x_scale="jac", max_nfev=400)
@@ -475,7 +492,7 @@ def calibrate_joint(
 WALLS3 = ("left", "right", "far")
 
 
-class ThreeSidedProblem:
+class ThreeSidedProblem(_WeightedProblem):
     """`joint` on the three-sided target: residuals (pixels) of the three borders and the
     three laser lines for (camera roll/pitch/yaw, laser roll/pitch/distance, left wall X,
     border height, far wall Y). The far wall (along X at Y = y_far) supplies what the markers
@@ -524,49 +541,13 @@ class ThreeSidedProblem:
             out[f"laser_{w}"] = (self.laser[w] @ laser[i]) * self.scale_laser[w]
         return out
 
-    def residuals(self, p: np.ndarray) -> np.ndarray:
-        """Residuals over their kind's noise (and correlation), for least_squares."""
-        return np.concatenate(
-            [b * self.weights[k.split("_")[0]] for k, b in self.residual_blocks(p).items()]
-        )
-
-    def line_rays(self) -> dict[str, np.ndarray]:
-        """The observed rays behind each block of `residual_blocks`."""
-        return {
-            **{f"border_{w}": r for w, r in self.border.items()},
-            **{f"laser_{w}": r for w, r in self.laser.items()},
-        }
-
-    def noise_px(self, p: np.ndarray) -> dict[str, float]:
-        """1.4826 MAD of each kind's residuals (px), floored at 0.02 px."""
-        blocks = self.residual_blocks(p)
+    def line_store(self) -> LineStore:
+        """Border and laser rays and scales of each wall, by block name."""
         out = {}
-        for kind in ("border", "laser"):
-            r = np.concatenate([blocks[f"{kind}_{w}"] for w in WALLS3])
-            out[kind] = max(1.4826 * float(np.median(np.abs(r))), 0.02)
+        for w in WALLS3:
+            out[f"border_{w}"] = (self.border, self.scale_border, w)
+            out[f"laser_{w}"] = (self.laser, self.scale_laser, w)
         return out
-
-    def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
-        """As JointProblem.estimate_weights: 1 / (noise * sqrt(correlation inflation))."""
-        noise = self.noise_px(p)
-        self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
-        self.weights = {
-            k: 1.0 / (v * np.sqrt(self.inflation.get(k, 1.0))) for k, v in noise.items()
-        }
-        return noise
-
-    def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> None:
-        """Drop line points beyond k noise sigmas of their kind (keeping at least 5 a line)."""
-        noise = self.noise_px(p)
-        blocks = self.residual_blocks(p)
-        for kind, rays, scale in (
-            ("border", self.border, self.scale_border),
-            ("laser", self.laser, self.scale_laser),
-        ):
-            for w in WALLS3:
-                keep = np.abs(blocks[f"{kind}_{w}"]) <= k * noise[kind]
-                if not keep.all() and keep.sum() >= 5:
-                    rays[w], scale[w] = rays[w][keep], scale[w][keep]
 
 
 def _calibrate_three_sided(
