@@ -263,21 +263,24 @@ def format_table(result: dict[str, Any]) -> str:
         "laser_distance_mm",
     ]
     head = ["method"] + [c.replace("_deg", " deg").replace("_mm", " mm") for c in cols]
-    lines = [" | ".join(f"{h:>16}" for h in [*head, "time s", "fail"])]
+    width = max(17, *(len(n) for n in [*result["methods"], *PUBLISHED_MAE]))
+
+    def row(cells: list[str]) -> str:
+        return " | ".join(f"{x:>{width}}" for x in cells)
+
+    lines = [row([*head, "time s", "fail"])]
     for name, s in result["methods"].items():
         if "mae" not in s:
-            lines.append(f"{name:>16} | no successful calibration ({len(s['failures'])} failed)")
-            continue
-        cells = [f"{s['mae'][c]:.3f} ({s['rmse'][c]:.3f})" for c in cols]
-        lines.append(
-            " | ".join(
-                f"{x:>16}"
-                for x in [name, *cells, f"{s['mean_time_s']:.3f}", str(len(s["failures"]))]
+            lines.append(
+                f"{name:>{width}} | no successful calibration ({len(s['failures'])} failed)"
             )
-        )
+            continue
+        # Four decimals: the wall methods' errors are thousandths of a degree.
+        cells = [f"{s['mae'][c]:.4f} ({s['rmse'][c]:.4f})" for c in cols]
+        lines.append(row([name, *cells, f"{s['mean_time_s']:.3f}", str(len(s["failures"]))]))
     for name, pub in PUBLISHED_MAE.items():
         cells = [f"{pub[c]:.2f}" if c in pub else "-" for c in cols]
-        lines.append(" | ".join(f"{x:>16}" for x in [name, *cells, f"{pub['time_s']:.2f}", ""]))
+        lines.append(row([name, *cells, f"{pub['time_s']:.2f}", ""]))
     m = result["mapping"]
     if m["max_rel_error"] is not None:
         lines.append(
