@@ -1,11 +1,15 @@
-"""Small helpers shared by the real drivers: config checks, OS error classification, back-off."""
+"""Small helpers shared by the real drivers: config checks, OS error classification, back-off,
+bounded waits on blocking library calls."""
 
 from __future__ import annotations
 
 import errno
 import logging
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 from drivers.errors import (
     DeviceBusyError,
@@ -16,6 +20,8 @@ from drivers.errors import (
 )
 
 log = logging.getLogger("drivers")
+
+T = TypeVar("T")
 
 
 def require(condition: bool, section: str, key: str, message: str) -> None:
@@ -78,3 +84,36 @@ class Backoff:
     def reset(self) -> None:
         self.count = 0
         self.next_time = 0.0
+
+
+class StillRunningError(Exception):
+    """`call_with_timeout`: the call had not returned in time; `worker` is its thread."""
+
+    def __init__(self, worker: threading.Thread) -> None:
+        super().__init__(f"{worker.name} still running")
+        self.worker = worker
+
+
+def call_with_timeout(fn: Callable[[], T], timeout_s: float, thread_name: str) -> T:
+    """Run a blocking library call in a daemon helper thread and wait at most `timeout_s`.
+
+    Returns its value or re-raises its exception; raises `StillRunningError` (carrying the thread,
+    which is left to finish) when it has not returned, so the caller raises its own typed
+    timeout. This bounds the wait only if the call releases the GIL.
+    """
+    box: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = fn()
+        except BaseException as exc:
+            box["error"] = exc
+
+    worker = threading.Thread(target=run, name=thread_name, daemon=True)
+    worker.start()
+    worker.join(timeout_s)
+    if worker.is_alive():
+        raise StillRunningError(worker)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]  # type: ignore[no-any-return]

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import socket
 import struct
-import threading
 from collections.abc import Callable
 from typing import Any, Literal, Protocol, TypeVar
 
+from drivers._common import StillRunningError, call_with_timeout
 from drivers.errors import (
     BadReplyError,
     DeviceDisconnectedError,
@@ -128,25 +128,13 @@ def _with_timeout(fn: Callable[[], T], timeout_s: float, what: str, host: str) -
     This bounds the wait only if the call releases the GIL; ur-rtde's constructors do not,
     which is why `probe_rtde` runs first.
     """
-    box: dict[str, Any] = {}
-
-    def run() -> None:
-        try:
-            box["value"] = fn()
-        except BaseException as exc:
-            box["error"] = exc
-
-    worker = threading.Thread(target=run, name=f"ur-{what}", daemon=True)
-    worker.start()
-    worker.join(timeout_s)
-    if worker.is_alive():
+    try:
+        return call_with_timeout(fn, timeout_s, f"ur-{what}")
+    except StillRunningError:
         raise DeviceTimeoutError(
             f"UR controller at {host}: {what} did not finish within {timeout_s:.1f} s",
             device=host,
-        )
-    if "error" in box:
-        raise box["error"]
-    return box["value"]  # type: ignore[no-any-return]
+        ) from None
 
 
 class RTDELink:

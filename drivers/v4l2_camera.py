@@ -34,7 +34,7 @@ from typing import Any, ClassVar, Literal, TypeVar
 import cv2
 import numpy as np
 
-from drivers._common import Backoff, require
+from drivers._common import Backoff, StillRunningError, call_with_timeout, require
 from drivers.base import DEFAULT_GRAB_TIMEOUT_S, Camera, Frame
 from drivers.errors import (
     DeviceBusyError,
@@ -187,27 +187,15 @@ class V4L2Camera(Camera):
                     device=self.config.device,
                 )
             self._hung = None
-        box: dict[str, Any] = {}
-
-        def run() -> None:
-            try:
-                box["value"] = fn()
-            except BaseException as exc:
-                box["error"] = exc
-
-        worker = threading.Thread(target=run, name=f"camera-{what}", daemon=True)
-        worker.start()
-        worker.join(timeout_s)
-        if worker.is_alive():
-            self._hung = worker
+        try:
+            return call_with_timeout(fn, timeout_s, f"camera-{what}")
+        except StillRunningError as stuck:
+            self._hung = stuck.worker
             raise DeviceTimeoutError(
                 f"{self.name}: no {what} within {timeout_s:.2f} s (camera stalled? check the "
                 "cable, USB bandwidth, or a too long [camera].exposure_ms)",
                 device=self.config.device,
-            )
-        if "error" in box:
-            raise box["error"]
-        return box["value"]  # type: ignore[no-any-return]
+            ) from None
 
     def _check_source_exists(self) -> None:
         cfg = self.config
