@@ -20,26 +20,11 @@ import os
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.sorting import evaluate_sorting
+from omnisort_hw.sorting import SUMMARY_KEYS, evaluate_sorting
 
 N_TRUTH = int(os.environ.get("OMNISORT_BENCH_SORT_SCENES", "10"))
 N_PERTURBED = max(1, N_TRUTH // 2)
 WIDTH = 960
-KEYS = (
-    "scenes",
-    "cubes",
-    "sorted_ok",
-    "success_rate",
-    "collisions",
-    "mean_position_error_mm",
-    "max_position_error_mm",
-    "mean_position_error_B_mm",
-    "mean_registration_error_mm",
-    "max_registration_error_mm",
-    "mean_registration_error_deg",
-    "motion_s_per_pick",
-    "wall_s_per_pick",
-)
 
 
 def run(shared: Path) -> dict[str, Any]:
@@ -48,7 +33,7 @@ def run(shared: Path) -> dict[str, Any]:
     out: dict[str, Any] = {"width_px": WIDTH, "seed": 7}
     for name, n in (("truth", N_TRUTH), ("perturbed", N_PERTURBED)):
         res = evaluate_sorting(scenes=n, seed=7, width=WIDTH, calibration=name)
-        for key in KEYS:
+        for key in SUMMARY_KEYS:
             out[f"{name}_{key}"] = res[key]
         for stage, secs in res["stage_wall_s_per_scene"].items():
             out[f"{name}_stage_s_{stage}"] = secs

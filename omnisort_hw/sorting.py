@@ -1926,6 +1926,24 @@ def random_scene(
     )
 
 
+# The headline figures of `evaluate_sorting`, in the order people read them (CLI, benchmark).
+SUMMARY_KEYS = (
+    "scenes",
+    "cubes",
+    "sorted_ok",
+    "success_rate",
+    "collisions",
+    "mean_position_error_mm",
+    "max_position_error_mm",
+    "mean_position_error_B_mm",
+    "mean_registration_error_mm",
+    "max_registration_error_mm",
+    "mean_registration_error_deg",
+    "motion_s_per_pick",
+    "wall_s_per_pick",
+)
+
+
 def evaluate_sorting(
     scenes: int = 50,
     seed: int = 0,

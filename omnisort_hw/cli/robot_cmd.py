@@ -318,7 +318,7 @@ def _print_report(result: dict[str, Any], as_json: bool) -> None:
 
 def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
     from omnisort_hw.fileio import atomic_write_json
-    from omnisort_hw.sorting import evaluate_sorting
+    from omnisort_hw.sorting import SUMMARY_KEYS, evaluate_sorting
 
     if args.scenes < 1:
         raise InputError(f"--scenes must be at least 1, got {args.scenes}")
@@ -342,23 +342,7 @@ def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
-    keys = (
-        "scenes",
-        "cubes",
-        "sorted_ok",
-        "success_rate",
-        "collisions",
-        "mean_position_error_mm",
-        "max_position_error_mm",
-        "mean_position_error_B_mm",
-        "mean_registration_error_mm",
-        "max_registration_error_mm",
-        "mean_registration_error_deg",
-        "motion_s_per_pick",
-        "wall_s_per_pick",
-        "wall_s",
-    )
-    for k in keys:
+    for k in (*SUMMARY_KEYS, "wall_s"):
         print(f"{k:<28} {result[k]}")
     for item in result["not_sorted"]:
         print(f"  scene {item['scene']}: {item['error'] or '; '.join(item['reasons'])}")
