@@ -254,14 +254,7 @@ PUBLISHED_MAE = {
 
 def format_table(result: dict[str, Any]) -> str:
     """The comparison as a text table: MAE (RMSE) per parameter and method, and time."""
-    cols = [
-        "cam_roll_deg",
-        "cam_pitch_deg",
-        "cam_yaw_deg",
-        "laser_roll_deg",
-        "laser_pitch_deg",
-        "laser_distance_mm",
-    ]
+    cols = list(PARAMETERS)
     head = ["method"] + [c.replace("_deg", " deg").replace("_mm", " mm") for c in cols]
     width = max(17, *(len(n) for n in [*result["methods"], *PUBLISHED_MAE]))
 
