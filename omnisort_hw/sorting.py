@@ -219,11 +219,9 @@ def _number(data: Mapping[str, Any], key: str, default: float, path: str, lo: fl
     return float(v)
 
 
-_SORT_KEYS = {
-    "from_scene",
-    "robot_model",
+# `[sorting]` keys that are plain non-negative numbers, and every key the section knows.
+_SORT_NUMBERS = (
     "tcp_offset_mm",
-    "home_deg",
     "cube_size_mm",
     "gripper_stroke_mm",
     "grasp_above_center_mm",
@@ -236,6 +234,12 @@ _SORT_KEYS = {
     "linear_accel_mm_s2",
     "collision_margin_mm",
     "max_sigma_mm",
+)
+_SORT_KEYS = {
+    *_SORT_NUMBERS,
+    "from_scene",
+    "robot_model",
+    "home_deg",
     "floor_z_B_mm",
     "region_S_mm",
     "workspace_B_mm",
@@ -259,21 +263,7 @@ def parse_sort_config(
         )
     cfg = base or SortConfig()
     changes: dict[str, Any] = {}
-    for key in (
-        "tcp_offset_mm",
-        "cube_size_mm",
-        "gripper_stroke_mm",
-        "grasp_above_center_mm",
-        "approach_mm",
-        "lift_mm",
-        "release_clearance_mm",
-        "joint_speed_deg_s",
-        "joint_accel_deg_s2",
-        "linear_speed_mm_s",
-        "linear_accel_mm_s2",
-        "collision_margin_mm",
-        "max_sigma_mm",
-    ):
+    for key in _SORT_NUMBERS:
         if key in data:
             changes[key] = _number(data, key, 0.0, path, 0.0)
     if "floor_z_B_mm" in data:
