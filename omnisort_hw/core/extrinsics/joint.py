@@ -397,6 +397,31 @@ def _refine(prob: _WeightedProblem, x0: np.ndarray) -> tuple[Any, dict[str, floa
     return sol, noise
 
 
+def _outcome(
+    prob: _WeightedProblem, sol: Any, noise: dict[str, float]
+) -> tuple[np.ndarray, dict[str, Any], dict[str, float]]:
+    """What both targets report of a refinement: every parameter's standard deviation, the
+    residual summary, and the std record of the parameters they share (degrees, mm). The
+    residuals are weighted by their measured noise and correlation, so the covariance of the
+    maximum-likelihood fit is (J^T J)^-1 without rescaling."""
+    std = np.sqrt(np.clip(np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)), 0.0, None))
+    blocks = prob.residual_blocks(sol.x)
+    residuals = {
+        "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
+        **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
+        "noise_px": noise,
+        "correlation_inflation": dict(prob.inflation),
+        "observations": int(sol.fun.size),
+    }
+    record = {
+        **{PARAMETERS[i]: float(np.degrees(std[i])) for i in range(5)},
+        PARAMETERS[5]: float(std[5]),
+        "border_z_mm": float(std[7]),
+        "wall_left_x_mm": float(std[6]),
+    }
+    return std, residuals, record
+
+
 def _without_floor(obs: _Obs) -> _Obs:
     return _Obs(
         border=dict(obs.border),
@@ -444,14 +469,8 @@ def calibrate_joint(
                 f"{markers_alone:.2f} px (the white face does not meet the floor in its plane)"
             )
     p = sol.x
-    res = sol.fun
-    # The residuals are weighted by their measured noise (and correlation): the covariance
-    # of the maximum-likelihood fit is (J^T J)^-1 without rescaling.
-    J = sol.jac
-    cov = np.linalg.pinv(J.T @ J)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    _, residuals, calib_std = _outcome(prob, sol, noise)
     R, n, d, geom = prob.split(p)
-    blocks = prob.residual_blocks(p)
     calib = SystemCalibration(
         model=model,
         R_SC=R,
@@ -465,26 +484,9 @@ def calibrate_joint(
             "wall_right_x_mm": float(geom["right"]),
             "border_z_mm": float(geom["z_b"]),
         },
-        residuals={
-            "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
-            **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
-            "noise_px": noise,
-            "correlation_inflation": dict(prob.inflation),
-            "floor_lines": floor_note,
-            "observations": int(res.size),
-        },
+        residuals={**residuals, "floor_lines": floor_note},
+        std=calib_std,
     )
-    deg = np.degrees
-    calib.std = {
-        PARAMETERS[0]: float(deg(std[0])),
-        PARAMETERS[1]: float(deg(std[1])),
-        PARAMETERS[2]: float(deg(std[2])),
-        PARAMETERS[3]: float(deg(std[3])),
-        PARAMETERS[4]: float(deg(std[4])),
-        PARAMETERS[5]: float(std[5]),
-        "border_z_mm": float(std[7]),
-        "wall_left_x_mm": float(std[6]),
-    }
     calib.elapsed_s = time.perf_counter() - t0
     return calib
 
@@ -579,8 +581,7 @@ def _calibrate_three_sided(
     prob = ThreeSidedProblem(border, laser, model, separation_mm)
     sol, noise = _refine(prob, x0)
     p = sol.x
-    std = np.sqrt(np.clip(np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)), 0.0, None))
-    blocks = prob.residual_blocks(p)
+    std, residuals, calib_std = _outcome(prob, sol, noise)
     calib = SystemCalibration(
         model=model,
         R_SC=camera_rotation(p[0], p[1], p[2]),
@@ -595,21 +596,8 @@ def _calibrate_three_sided(
             "far_wall_y_mm": float(p[8]),
             "border_z_mm": float(p[7]),
         },
-        residuals={
-            "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
-            **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
-            "noise_px": noise,
-            "correlation_inflation": dict(prob.inflation),
-            "observations": int(sol.fun.size),
-        },
+        residuals=residuals,
+        std={**calib_std, "far_wall_y_mm": float(std[8])},
     )
-    deg = np.degrees
-    calib.std = {
-        **{PARAMETERS[i]: float(deg(std[i])) for i in range(5)},
-        PARAMETERS[5]: float(std[5]),
-        "border_z_mm": float(std[7]),
-        "wall_left_x_mm": float(std[6]),
-        "far_wall_y_mm": float(std[8]),
-    }
     calib.elapsed_s = time.perf_counter() - t0
     return calib
