@@ -29,8 +29,8 @@ def _best(fn: Any, repeat: int = 5) -> float:
 
 
 def _speed() -> dict[str, Any]:
-    from sim_backend.api import render_scene
     from sim_backend.scene import load_scene
+    from sim_backend.scene_images import render_scene
 
     scene = load_scene("two_sided").replace(
         camera={"roll_deg": 4.0, "pitch_deg": -6.0, "yaw_deg": 3.0},

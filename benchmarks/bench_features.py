@@ -128,8 +128,8 @@ def _reference(shared: Path) -> dict[str, Any]:
 
 def _sim() -> dict[str, Any]:
     try:
-        from sim_backend.api import render_scene
         from sim_backend.scene import load_scene
+        from sim_backend.scene_images import render_scene
     except ImportError as exc:
         return {"sim": f"skipped: {exc}"}
     out: dict[str, Any] = {}

@@ -14,13 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.core.frames import rotation_angle_deg
 from omnisort_hw.core.kinematics import (
     UR5E,
     UR_MODELS,
     forward,
     inverse,
     nearest_solutions,
-    rotation_angle_deg,
     wrap_deg,
 )
 from omnisort_hw.core.motion import (

@@ -21,9 +21,9 @@ from types import TracebackType
 from typing import Self
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from drivers.errors import MotionLimitError, SafetyStopError, UnsupportedError
+from omnisort_hw.core.frames import pose_from_xyz_rotvec, xyz_rotvec_from_pose
 
 DEFAULT_GRAB_TIMEOUT_S = 2.0
 DEFAULT_SWITCH_TIMEOUT_S = 1.0
@@ -155,17 +155,13 @@ def as_pose_matrix(pose: object) -> np.ndarray:
 
 def pose_matrix(xyz_mm: object, rotvec_deg: object) -> np.ndarray:
     """4x4 `T_base_tcp` from a position (mm) and a rotation vector (axis * angle, degrees)."""
-    T = np.eye(4)
-    T[:3, :3] = Rotation.from_rotvec(np.asarray(rotvec_deg, dtype=float), degrees=True).as_matrix()
-    T[:3, 3] = np.asarray(xyz_mm, dtype=float)
-    return T
+    return pose_from_xyz_rotvec(np.asarray(xyz_mm, float), np.asarray(rotvec_deg, float))
 
 
 def pose_vector(T: object) -> np.ndarray:
     """`[x, y, z mm, rx, ry, rz deg]` (rotation vector) from a 4x4 `T_base_tcp` in mm."""
-    M = np.asarray(T, dtype=float)
-    rv = Rotation.from_matrix(M[:3, :3]).as_rotvec(degrees=True)
-    return np.concatenate([M[:3, 3], rv])
+    xyz, rv = xyz_rotvec_from_pose(np.asarray(T, float))
+    return np.concatenate([xyz, rv])
 
 
 class Device(ABC):

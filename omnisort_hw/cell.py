@@ -701,7 +701,7 @@ class Cell:
 
     def system_calibration(self) -> Any:
         """The verified system.json as the core's SystemCalibration."""
-        from omnisort_hw.core.extrinsics.common import SystemCalibration
+        from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 
         rec = self.store.read("system")
         return SystemCalibration.from_json(rec.payload, source=str(rec.path))

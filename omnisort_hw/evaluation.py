@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import PARAMETERS, SystemCalibration
+from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS, SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane
 from omnisort_hw.errors import InputError, OmnisortError
 

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import InputError
 from omnisort_hw.runlog import NullLog, RunLog
 

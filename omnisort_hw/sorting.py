@@ -37,7 +37,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from omnisort_hw.core.checkerboard import BoardSpec
-from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.cube_location import UNKNOWN, ColorTable, Cube, LocateSettings, locate_cubes
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.frames import invert_pose
 from omnisort_hw.core.kinematics import URModel, forward, get_model, nearest_solution
 from omnisort_hw.core.motion import (
     Box,
@@ -50,10 +52,8 @@ from omnisort_hw.core.motion import (
     plan_joint_move,
     plan_linear_move,
 )
-from omnisort_hw.core.objects import UNKNOWN, ColorTable, Cube, LocateSettings, locate_cubes
 from omnisort_hw.core.registration import (
     Registration,
-    invert,
     pose_from_offset,
     register_robot,
     tilt_prior_from_std,
@@ -538,7 +538,7 @@ class Planner:
     ) -> None:
         self.cfg = cfg
         self.T_SB = np.asarray(T_SB, float)
-        self.T_BS = invert(self.T_SB)
+        self.T_BS = invert_pose(self.T_SB)
         model = get_model(cfg.robot_model)
         if joint_limits_deg is not None:
             lim = np.asarray(joint_limits_deg, float)
@@ -1707,7 +1707,7 @@ class SimVerifier:
         cubes the pipeline never found are added as "missed"."""
         truth = self.truth or self.true_cubes()
         final = {c.body: c.center_S for c in self.true_cubes()}
-        T_BS_true = invert(self.T_SB())
+        T_BS_true = invert_pose(self.T_SB())
         used: set[int] = set()
         for out in report.outcomes:
             c = np.asarray(out.center_S_mm)
@@ -1765,7 +1765,7 @@ def sim_sort_config(scene: Any, base: SortConfig | None = None) -> SortConfig:
         [0, 0, 1],
     ]
     T_SB[:3, 3] = (robot.base_mm[0], robot.base_mm[1], scene.floor_z + robot.pedestal_mm)
-    T_BS = invert(T_SB)
+    T_BS = invert_pose(T_SB)
     bins = []
     for b in scene.bins:
         c = T_BS[:3, :3] @ np.array([*b.position_mm, 0.0]) + T_BS[:3, 3]

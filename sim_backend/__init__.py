@@ -1,7 +1,7 @@
 """The simulated robot cell on pybullet: scenes, fisheye and laser rendering with ground truth,
 datasets, and simulated devices behind the `drivers.base` interfaces.
 
-Entry points: `sim_backend.api` (render_scene, write_render), `sim_backend.dataset`
+Entry points: `sim_backend.scene_images` (render_scene, write_render), `sim_backend.dataset`
 (make_dataset, checkerboard_views), `sim_backend.devices` (SimCell, SimCamera, SimLaserSwitch,
 SimArm, open_devices).
 """

@@ -24,12 +24,12 @@ import numpy as np
 from tqdm import tqdm
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.frames import camera_rotation
 from omnisort_hw.errors import InputError
 from omnisort_hw.fileio import atomic_write_json
-from sim_backend.api import camera_model_for, render_scene, write_render
-from sim_backend.geometry import camera_rotation
 from sim_backend.patterns import CheckerPattern
 from sim_backend.scene import BoardSpec, Scene, SceneInfo, load_scene, sized
+from sim_backend.scene_images import camera_model_for, render_scene, write_render
 
 TABLE3_SCENES = ("two_sided", "three_sided", "checkerboards")
 EXPERIMENTS = ("table3",)

@@ -47,13 +47,13 @@ from drivers.errors import (
     DeviceTimeoutError,
     MotionLimitError,
 )
+from omnisort_hw.core.frames import homogeneous, invert_pose
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import Trajectory, plan_joint_move, plan_linear_move
 from omnisort_hw.errors import ConfigError, MotionRefusedError
-from sim_backend.api import camera_model_for, render_world
-from sim_backend.geometry import homogeneous, invert_transform
 from sim_backend.robot import tcp_pose, tcp_tool
 from sim_backend.scene import Scene, load_scene, sized
+from sim_backend.scene_images import camera_model_for, render_world
 from sim_backend.world import MM, SimWorld
 
 NOMINAL_EXPOSURE_MS = 10.0
@@ -295,7 +295,7 @@ class SimGripper(Gripper):
         assert spec is not None and world.arm is not None
         g = spec.gripper
         T_S_grip = world.link_pose(world.arm.body, world.arm.gripper_link)
-        T_grip_S = invert_transform(T_S_grip)
+        T_grip_S = invert_pose(T_S_grip)
         for cube, body in world.info.cubes:
             c = T_grip_S[:3, :3] @ world.body_pose(body)[:3, 3] + T_grip_S[:3, 3]
             half = cube.size_mm / 2.0
@@ -323,7 +323,7 @@ class SimGripper(Gripper):
                 body, half = found
                 world.set_fingers(half)
                 T_S_grip = world.link_pose(world.arm.body, world.arm.gripper_link)
-                T_grip_cube = invert_transform(T_S_grip) @ world.body_pose(body)
+                T_grip_cube = invert_pose(T_S_grip) @ world.body_pose(body)
                 quat = Rotation.from_matrix(T_grip_cube[:3, :3]).as_quat()
                 self._constraint = p.createConstraint(
                     world.arm.body,

@@ -1,10 +1,9 @@
-"""Frames and small geometry for the simulated cell (geometry.md conventions, millimetres).
+"""Planar rectangles and box faces of the simulated cell (millimetres, docs/frames.md).
 
-Rotations: `rot_x/rot_y/rot_z` take degrees. The camera rotation is
-`R_SC = Rz(yaw) Ry(pitch) Rx(roll) R_nom` with `R_nom` mapping C to S (x_C = X_S,
-y_C = -Y_S, z_C = -Z_S); the laser plane has normal `Ry(pitch_l) Rx(roll_l) (0, 0, 1)` and
-passes through (0, 0, -d). A `Rect` is an oriented planar rectangle (a box face, a wall face,
-a board) used for analytic shading, truth features and the exact laser polylines.
+A `Rect` is an oriented planar rectangle (a box face, a wall face, a board) used for analytic
+shading, truth features and the exact laser polylines. Rotations, poses and the laser plane
+come from the core's `omnisort_hw.core.frames` (radians inside; the scene's degrees are
+converted where they are read).
 """
 
 from __future__ import annotations
@@ -12,65 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from omnisort_hw.core import frames
-
-
-def rot_x(deg: float) -> np.ndarray:
-    """Rotation about X by `deg` degrees (right-handed)."""
-    return frames.rot_x(np.deg2rad(deg))
-
-
-def rot_y(deg: float) -> np.ndarray:
-    """Rotation about Y by `deg` degrees (right-handed)."""
-    return frames.rot_y(np.deg2rad(deg))
-
-
-def rot_z(deg: float) -> np.ndarray:
-    """Rotation about Z by `deg` degrees (right-handed)."""
-    return frames.rot_z(np.deg2rad(deg))
-
-
-def rpy_matrix(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
-    """Rz(yaw) Ry(pitch) Rx(roll), the Z-Y-X order used everywhere in the project."""
-    return rot_z(yaw_deg) @ rot_y(pitch_deg) @ rot_x(roll_deg)
-
-
-def matrix_rpy(R: np.ndarray) -> tuple[float, float, float]:
-    """Inverse of `rpy_matrix`: (roll, pitch, yaw) in degrees, pitch in [-90, 90]."""
-    pitch = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
-    roll = np.arctan2(R[2, 1], R[2, 2])
-    yaw = np.arctan2(R[1, 0], R[0, 0])
-    return float(np.rad2deg(roll)), float(np.rad2deg(pitch)), float(np.rad2deg(yaw))
-
-
-def camera_rotation(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
-    """R_SC: maps camera-frame vectors into S (the core's convention, degrees here)."""
-    return frames.camera_rotation(*np.deg2rad([roll_deg, pitch_deg, yaw_deg]))
-
-
-def laser_normal(roll_deg: float, pitch_deg: float) -> np.ndarray:
-    """Unit normal of the laser plane in S: Ry(pitch) Rx(roll) (0, 0, 1)."""
-    return frames.laser_normal(*np.deg2rad([roll_deg, pitch_deg]))
-
-
-def homogeneous(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """4x4 rigid transform from a rotation and a translation."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = t
-    return T
-
-
-def invert_transform(T: np.ndarray) -> np.ndarray:
-    """Inverse of a 4x4 rigid transform."""
-    R, t = T[:3, :3], T[:3, 3]
-    return homogeneous(R.T, -R.T @ t)
-
-
-def transform_points(T: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Apply a 4x4 transform to (..., 3) points."""
-    return np.asarray(pts, float) @ T[:3, :3].T + T[:3, 3]
 
 
 @dataclass(frozen=True)

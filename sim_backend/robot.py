@@ -16,8 +16,8 @@ import numpy as np
 import pybullet as p
 from scipy.spatial.transform import Rotation
 
+from omnisort_hw.core.frames import homogeneous, rot_x
 from omnisort_hw.core.kinematics import URModel, forward, get_model
-from sim_backend.geometry import homogeneous, rot_x
 from sim_backend.scene import GripperSpec
 
 MM = 1e-3
@@ -131,7 +131,7 @@ def build_arm(
     """Create the arm as one kinematic multibody whose link frames follow the DH chain."""
     r = LINK_RADIUS_MM[model.name]
     d, a = model.d_mm, model.a_mm
-    alpha = np.rad2deg(model.alpha)
+    alpha = np.asarray(model.alpha, float)
     base = _ShapeList()
     base.cylinder(np.array([0.0, 0.0, -pedestal_mm - 1.0]), np.array([0.0, 0.0, 40.0]), r[0] * 1.2)
     base_col, base_vis = base.build(client, [0.35, 0.36, 0.38, 1.0])

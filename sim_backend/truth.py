@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from sim_backend.geometry import invert_transform, matrix_rpy
+from omnisort_hw.core.frames import invert_pose, rpy_deg
 from sim_backend.laser import LaserPlane, laser_polylines, visible_from
 from sim_backend.world import SimWorld
 
@@ -80,7 +80,7 @@ def _densify_px(proj: Projector, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _pose_dict(T: np.ndarray) -> dict[str, Any]:
-    roll, pitch, yaw = matrix_rpy(T[:3, :3])
+    roll, pitch, yaw = rpy_deg(T[:3, :3])
     return {"matrix": _r(T, 6), "xyz_mm": _r(T[:3, 3]), "rpy_deg": _r([roll, pitch, yaw], 6)}
 
 
@@ -129,7 +129,7 @@ def build_truth(
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     T_S_B = world.T_S_B
-    T_B_S = invert_transform(T_S_B) if T_S_B is not None else None
+    T_B_S = invert_pose(T_S_B) if T_S_B is not None else None
     if T_S_B is not None and scene.robot is not None:
         truth["robot_base"] = {**_pose_dict(T_S_B), "model": scene.robot.model}
     for i, (cube, body) in enumerate(world.info.cubes):
@@ -140,7 +140,7 @@ def build_truth(
             "rgb": list(cube.color.rgb),
             "size_mm": cube.size_mm,
             "center_S_mm": _r(T[:3, 3]),
-            "yaw_deg": round(matrix_rpy(T[:3, :3])[2], 6),
+            "yaw_deg": round(rpy_deg(T[:3, :3])[2], 6),
             "pose_S": _r(T, 6),
             "center_px": _r(proj.project(T[:3, 3])),
         }

@@ -15,14 +15,8 @@ import numpy as np
 import pybullet as p
 from scipy.spatial.transform import Rotation
 
-from sim_backend.geometry import (
-    Rect,
-    box_faces,
-    camera_rotation,
-    homogeneous,
-    laser_normal,
-    rot_z,
-)
+from omnisort_hw.core.frames import camera_rotation, homogeneous, laser_normal, rot_z
+from sim_backend.geometry import Rect, box_faces
 from sim_backend.patterns import CheckerPattern, FloorPattern, Marker, WallPattern
 from sim_backend.robot import ArmBodies, build_arm, tcp_pose, ur_model
 from sim_backend.scene import BinSpec, BoardSpec, CubeSpec, Scene, TargetSpec
@@ -126,9 +120,9 @@ class SimWorld:
         self.info = WorldInfo()
         self.floor_z = scene.floor_z
         self.R_SC = camera_rotation(
-            scene.camera.roll_deg, scene.camera.pitch_deg, scene.camera.yaw_deg
+            *np.radians([scene.camera.roll_deg, scene.camera.pitch_deg, scene.camera.yaw_deg])
         )
-        self.laser_normal = laser_normal(scene.laser.roll_deg, scene.laser.pitch_deg)
+        self.laser_normal = laser_normal(*np.radians([scene.laser.roll_deg, scene.laser.pitch_deg]))
         self.laser_distance = scene.laser.distance_mm
         self.laser_on = scene.laser.on
         self.floor = FloorPattern(
@@ -300,7 +294,7 @@ class SimWorld:
 
     def _build_target(self, t: TargetSpec) -> None:
         cx, cy = t.center_mm
-        Rt = rot_z(t.yaw_deg)
+        Rt = rot_z(np.radians(t.yaw_deg))
         origin = np.array([cx, cy, 0.0])
         fz = self.floor_z
         L, H, th, sep = t.length_mm, t.wall_height_mm, t.wall_thickness_mm, t.separation_mm / 2.0
@@ -442,7 +436,12 @@ class SimWorld:
         half = np.full(3, c.size_mm / 2.0)
         centre = np.array([c.position_mm[0], c.position_mm[1], self.floor_z + c.size_mm / 2.0])
         body = self._box(
-            f"cube_{i}_{c.color.name}", centre, rot_z(c.yaw_deg), half, c.color.rgb, mass=c.mass_kg
+            f"cube_{i}_{c.color.name}",
+            centre,
+            rot_z(np.radians(c.yaw_deg)),
+            half,
+            c.color.rgb,
+            mass=c.mass_kg,
         )
         p.changeDynamics(body, -1, lateralFriction=0.8, physicsClientId=self.client)
         self.info.cubes.append((c, body))
@@ -450,7 +449,7 @@ class SimWorld:
     def _build_bin(self, i: int, b: BinSpec) -> None:
         sx, sy, sz = b.size_mm
         w = b.wall_mm
-        R = rot_z(b.yaw_deg)
+        R = rot_z(np.radians(b.yaw_deg))
         base = np.array([b.position_mm[0], b.position_mm[1], self.floor_z])
         parts = [
             (np.array([0.0, 0.0, w / 2.0]), np.array([sx / 2.0, sy / 2.0, w / 2.0])),
@@ -481,7 +480,7 @@ class SimWorld:
         robot = self.scene.robot
         assert robot is not None
         T = homogeneous(
-            rot_z(robot.base_yaw_deg),
+            rot_z(np.radians(robot.base_yaw_deg)),
             np.array([robot.base_mm[0], robot.base_mm[1], self.floor_z + robot.pedestal_mm]),
         )
         self.T_S_B = T

@@ -47,8 +47,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from omnisort_hw.extrinsics_pipeline import calibrate_system
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.runlog import RunLog
-    from sim_backend.api import render_scene, write_render
     from sim_backend.scene import load_scene
+    from sim_backend.scene_images import render_scene, write_render
 
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)

@@ -48,7 +48,7 @@ def register(sub: Any) -> None:
 
 def load_system(path: Path) -> Any:
     """system.json from the CLI or from the service's store (then its checksum is verified)."""
-    from omnisort_hw.core.extrinsics.common import SystemCalibration, load_system_json
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration, load_system_json
 
     raw = json.loads(path.read_text()) if path.is_file() else None
     if isinstance(raw, dict) and "checksum" in raw:

@@ -166,9 +166,9 @@ def cmd_register(args: argparse.Namespace) -> int:
 
 def cmd_locate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.extrinsics_cmd import load_system
+    from omnisort_hw.core.cube_location import ColorTable, LocateSettings, locate_cubes
     from omnisort_hw.core.laser_stripe import laser_stripe_points
     from omnisort_hw.core.mapping import pixels_to_plane
-    from omnisort_hw.core.objects import ColorTable, LocateSettings, locate_cubes
     from omnisort_hw.extrinsics_pipeline import read_image
     from omnisort_hw.runlog import RunLog
     from omnisort_hw.sorting import board_exclusion, default_region, log_cubes, robot_base_T

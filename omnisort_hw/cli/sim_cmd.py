@@ -59,8 +59,8 @@ def _width(value: int | None) -> int | None:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from sim_backend.api import render_scene, write_render
     from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene, write_render
 
     scene = sized(load_scene(args.scene), _width(args.width))
     laser = None if args.laser is None else args.laser == "on"

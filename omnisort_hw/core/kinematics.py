@@ -28,8 +28,8 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from omnisort_hw.core.frames import as_batch, invert_pose
 from omnisort_hw.errors import MotionRefusedError
 
 UR_ALPHA_RAD = (np.pi / 2, 0.0, 0.0, np.pi / 2, -np.pi / 2, 0.0)
@@ -170,84 +170,7 @@ def get_model(name: str) -> URModel:
 
 
 # ---------------------------------------------------------------------------------------------
-# Pose helpers (mm, degrees)
-
-
-def _as_batch(arr: np.ndarray, tail: tuple[int, ...], what: str) -> tuple[np.ndarray, tuple]:
-    """Flatten the leading axes of `arr` whose trailing shape must be `tail`."""
-    a = np.asarray(arr, dtype=float)
-    if a.shape[a.ndim - len(tail) :] != tail:
-        raise ValueError(
-            f"{what} must have shape (..., {', '.join(map(str, tail))}), got {a.shape}"
-        )
-    batch = a.shape[: a.ndim - len(tail)]
-    return a.reshape((-1, *tail)), batch
-
-
-def _compose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Homogeneous transforms from rotations (N, 3, 3) and translations (N, 3)."""
-    T = np.zeros((R.shape[0], 4, 4))
-    T[:, :3, :3] = R
-    T[:, :3, 3] = t
-    T[:, 3, 3] = 1.0
-    return T
-
-
-def pose_from_xyz_rpy(xyz_mm: np.ndarray, rpy_deg: np.ndarray) -> np.ndarray:
-    """Pose (..., 4, 4) from a position (mm) and roll, pitch, yaw (deg): R = Rz·Ry·Rx (UR's RPY)."""
-    t, batch = _as_batch(xyz_mm, (3,), "xyz_mm")
-    e, batch_e = _as_batch(rpy_deg, (3,), "rpy_deg")
-    t, e = np.broadcast_arrays(t, e)
-    R = Rotation.from_euler("xyz", e, degrees=True).as_matrix()
-    out_batch = np.broadcast_shapes(batch, batch_e)
-    return _compose(R, t).reshape(*out_batch, 4, 4)
-
-
-def xyz_rpy_from_pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Position (..., 3) mm and roll, pitch, yaw (..., 3) deg of poses (..., 4, 4)."""
-    Tf, batch = _as_batch(T, (4, 4), "T")
-    rpy = Rotation.from_matrix(Tf[:, :3, :3]).as_euler("xyz", degrees=True)
-    return Tf[:, :3, 3].reshape(*batch, 3), rpy.reshape(*batch, 3)
-
-
-def pose_from_xyz_rotvec(xyz_mm: np.ndarray, rotvec_deg: np.ndarray) -> np.ndarray:
-    """Pose (..., 4, 4) from a position (mm) and a rotation vector (axis times angle in deg)."""
-    t, batch = _as_batch(xyz_mm, (3,), "xyz_mm")
-    r, batch_r = _as_batch(rotvec_deg, (3,), "rotvec_deg")
-    t, r = np.broadcast_arrays(t, r)
-    R = Rotation.from_rotvec(r, degrees=True).as_matrix()
-    return _compose(R, t).reshape(*np.broadcast_shapes(batch, batch_r), 4, 4)
-
-
-def xyz_rotvec_from_pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Position (..., 3) mm and rotation vector (..., 3) deg of poses (..., 4, 4)."""
-    Tf, batch = _as_batch(T, (4, 4), "T")
-    rv = Rotation.from_matrix(Tf[:, :3, :3]).as_rotvec(degrees=True)
-    return Tf[:, :3, 3].reshape(*batch, 3), rv.reshape(*batch, 3)
-
-
-def translation_pose(xyz_mm: np.ndarray) -> np.ndarray:
-    """Pure translation poses (..., 4, 4) from positions (..., 3) mm."""
-    t, batch = _as_batch(xyz_mm, (3,), "xyz_mm")
-    return _compose(np.broadcast_to(np.eye(3), (t.shape[0], 3, 3)), t).reshape(*batch, 4, 4)
-
-
-def invert_pose(T: np.ndarray) -> np.ndarray:
-    """Inverse of rigid transforms (..., 4, 4), using the transpose of the rotation."""
-    Tf, batch = _as_batch(T, (4, 4), "T")
-    Rt = np.swapaxes(Tf[:, :3, :3], 1, 2)
-    return _compose(Rt, -np.einsum("nij,nj->ni", Rt, Tf[:, :3, 3])).reshape(*batch, 4, 4)
-
-
-def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
-    """Angle (deg) of the rotation between R_a and R_b (..., 3, 3), accurate near zero."""
-    d = np.swapaxes(R_a, -1, -2) @ R_b
-    skew = np.stack(
-        [d[..., 2, 1] - d[..., 1, 2], d[..., 0, 2] - d[..., 2, 0], d[..., 1, 0] - d[..., 0, 1]],
-        axis=-1,
-    )
-    trace = d[..., 0, 0] + d[..., 1, 1] + d[..., 2, 2]
-    return np.degrees(np.arctan2(0.5 * np.linalg.norm(skew, axis=-1), 0.5 * (trace - 1.0)))
+# Joint angles
 
 
 def wrap_deg(q: np.ndarray) -> np.ndarray:
@@ -306,7 +229,7 @@ def _chain(model: URModel, q_rad: np.ndarray, keep_all: bool) -> list[np.ndarray
 
 def forward(model: URModel, q_deg: np.ndarray, tool: np.ndarray | None = None) -> np.ndarray:
     """Flange pose in B (..., 4, 4), mm, for joints q (..., 6) deg; `tool` (4, 4) is appended."""
-    q, batch = _as_batch(q_deg, (6,), "q_deg")
+    q, batch = as_batch(q_deg, (6,), "q_deg")
     T = _chain(model, np.radians(q), keep_all=False)[0]
     if tool is not None:
         T = T @ np.asarray(tool, dtype=float)
@@ -318,7 +241,7 @@ def joint_frames(model: URModel, q_deg: np.ndarray) -> np.ndarray:
 
     Frame i sits at the end of link i; joint i+1 turns about its z axis.
     """
-    q, batch = _as_batch(q_deg, (6,), "q_deg")
+    q, batch = as_batch(q_deg, (6,), "q_deg")
     frames = np.stack(_chain(model, np.radians(q), keep_all=True), axis=1)
     return frames.reshape(*batch, 7, 4, 4)
 
@@ -370,7 +293,7 @@ def inverse(
     wrist |sin theta5| < tol, elbow |sin theta3| < tol, shoulder: horizontal distance of the
     wrist centre from the singular cylinder < tol * reach.
     """
-    Tf, batch = _as_batch(T, (4, 4), "T")
+    Tf, batch = as_batch(T, (4, 4), "T")
     if tool is not None:
         Tf = Tf @ invert_pose(np.asarray(tool, dtype=float))
     n = Tf.shape[0]
@@ -534,7 +457,7 @@ def nearest_solutions(
 
     q_current is (6,) or (..., 6) matching the poses (..., 4, 4).
     """
-    Tf, batch = _as_batch(T, (4, 4), "T")
+    Tf, batch = as_batch(T, (4, 4), "T")
     cur = np.broadcast_to(np.asarray(q_current, dtype=float), (*batch, 6)).reshape(-1, 6)
     lim = model.limits if limits_deg is None else np.asarray(limits_deg, dtype=float)
     w = np.ones(6) if weights is None else np.asarray(weights, dtype=float)

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 
 
 @dataclass

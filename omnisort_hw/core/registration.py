@@ -37,7 +37,7 @@ from scipy.special import erf
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec, detect_corners, to_gray
 from omnisort_hw.core.extrinsics.method2 import board_pose
-from omnisort_hw.core.frames import rot_x, rot_y, rot_z
+from omnisort_hw.core.frames import invert_pose, rot_z, rpy_deg, rpy_matrix
 from omnisort_hw.errors import CalibrationError, FeatureNotFoundError, InputError
 
 # Virtual view: field of the top-down view (half angle from the nadir) and its magnification
@@ -60,25 +60,9 @@ def pose_from_offset(offset: tuple[float, ...] | np.ndarray) -> np.ndarray:
         raise InputError(f"offset must be 6 finite numbers X,Y,Z,RX,RY,RZ, got {offset!r}")
     rx, ry, rz = np.radians(vals[3:])
     T = np.eye(4)
-    T[:3, :3] = rot_z(rz) @ rot_y(ry) @ rot_x(rx)
+    T[:3, :3] = rpy_matrix(rx, ry, rz)
     T[:3, 3] = vals[:3]
     return T
-
-
-def rpy_deg(R: np.ndarray) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) in degrees of R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    pitch = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
-    roll = np.arctan2(R[2, 1], R[2, 2])
-    yaw = np.arctan2(R[1, 0], R[0, 0])
-    return float(np.degrees(roll)), float(np.degrees(pitch)), float(np.degrees(yaw))
-
-
-def invert(T: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid 4x4 transform."""
-    out = np.eye(4)
-    out[:3, :3] = T[:3, :3].T
-    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return out
 
 
 def pose_record(T: np.ndarray) -> dict[str, Any]:
@@ -507,7 +491,7 @@ def register_from_corners(
     n_corner = 3 * len(pts)
     fit = sol.fun[:n_corner]
     rms = float(np.sqrt(np.mean(fit**2) * 3 / 2))
-    T_board_B = invert(T_B_board)
+    T_board_B = invert_pose(T_B_board)
     T_SB = T_S_board @ T_board_B
     # 1-sigma of the base position and yaw: the corner noise through the fit (covariance of
     # the weighted least squares), then through T_board_B by numeric derivatives.
@@ -584,13 +568,11 @@ __all__ = [
     "Registration",
     "TopView",
     "detect_floor_board",
-    "invert",
     "order_corners",
     "pose_error",
     "pose_from_offset",
     "pose_record",
     "register_from_corners",
     "register_robot",
-    "rpy_deg",
     "tilt_prior_from_std",
 ]

@@ -8,8 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from sim_backend.api import render_scene
 from sim_backend.scene import load_scene, sized
+from sim_backend.scene_images import render_scene
 
 TEST_WIDTH = 960
 

@@ -15,10 +15,10 @@ from omnisort_hw.cli import main
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.intrinsics import calibrate_images
-from sim_backend.api import render_scene
 from sim_backend.dataset import checkerboard_views, make_dataset, table3_configs
 from sim_backend.scene import load_scene, sized
-from tests.sim.helpers import stripe_offsets
+from sim_backend.scene_images import render_scene
+from tests.sim.image_measures import stripe_offsets
 
 
 def test_intrinsic_calibration_on_rendered_views_recovers_the_camera(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from drivers.errors import (
     DeviceTimeoutError,
     SafetyStopError,
 )
+from omnisort_hw.core.frames import invert_pose, rot_z
 from omnisort_hw.devices import open_devices as open_cell_devices
 from sim_backend.devices import (
     SimArm,
@@ -23,9 +24,8 @@ from sim_backend.devices import (
     SimWristCamera,
     open_devices,
 )
-from sim_backend.geometry import invert_transform, rot_z
 from tests.drivers.contract import ArmContract, CameraContract, LaserSwitchContract
-from tests.sim.helpers import redness
+from tests.sim.image_measures import redness
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ class TestSimArmContract(ArmContract):
 def _down_pose(xyz_B: np.ndarray, yaw_deg: float = 0.0) -> np.ndarray:
     """A TCP pose with the tool pointing down (-Z of B)."""
     T = np.eye(4)
-    T[:3, :3] = rot_z(yaw_deg) @ np.diag([1.0, -1.0, -1.0])
+    T[:3, :3] = rot_z(np.radians(yaw_deg)) @ np.diag([1.0, -1.0, -1.0])
     T[:3, 3] = xyz_B
     return T
 
@@ -67,7 +67,7 @@ def _down_pose(xyz_B: np.ndarray, yaw_deg: float = 0.0) -> np.ndarray:
 def test_pick_and_place_puts_the_cube_in_its_bin() -> None:
     cell = SimCell.from_scene("sorting", width=160)
     world = cell.world
-    T_B_S = invert_transform(world.T_S_B)
+    T_B_S = invert_pose(world.T_S_B)
     spec, body = world.info.cubes[0]
     assert spec.color.name == "red"
     c_B = (T_B_S @ world.body_pose(body))[:3, 3]
@@ -170,7 +170,7 @@ def test_stop_interrupts_a_move_and_stops_block_motion(cell: SimCell) -> None:
 def test_wrist_camera_sees_the_cube_below_it() -> None:
     cell = SimCell.from_scene("sorting", width=160)
     world = cell.world
-    T_B_S = invert_transform(world.T_S_B)
+    T_B_S = invert_pose(world.T_S_B)
     spec, body = world.info.cubes[2]
     assert spec.color.name == "blue"
     c_B = (T_B_S @ world.body_pose(body))[:3, 3]

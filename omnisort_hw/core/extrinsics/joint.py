@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import (
+from omnisort_hw.core.extrinsics.system_calibration import (
     PARAMETERS,
     SystemCalibration,
     fit_laser_plane,

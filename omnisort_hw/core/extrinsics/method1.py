@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import (
+from omnisort_hw.core.extrinsics.system_calibration import (
     SystemCalibration,
     fit_laser_plane,
     place_side_walls,

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec
-from omnisort_hw.core.extrinsics.common import SystemCalibration, fit_laser_plane
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration, fit_laser_plane
 from omnisort_hw.core.features import BoardsFeatures
 from omnisort_hw.core.frames import nearest_rotation, rays_to_plane
 from omnisort_hw.errors import CalibrationError

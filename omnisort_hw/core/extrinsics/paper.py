@@ -28,8 +28,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import SystemCalibration
 from omnisort_hw.core.extrinsics.joint import observations
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import camera_rotation, great_circle_normal, laser_normal
 

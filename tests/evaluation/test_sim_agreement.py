@@ -20,8 +20,8 @@ pytest.importorskip("pybullet")
 
 @pytest.fixture(scope="module")
 def tilted_truth() -> dict:
-    from sim_backend.api import render_scene
     from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
 
     scene = sized(load_scene("two_sided"), 480).replace(
         camera={"roll_deg": 6.0, "pitch_deg": -7.5, "yaw_deg": 4.0},

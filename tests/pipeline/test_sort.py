@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
-from omnisort_hw.core.objects import UNKNOWN, Cube
+from omnisort_hw.core.cube_location import UNKNOWN, Cube
 from omnisort_hw.errors import ConfigError, MotionRefusedError
 from omnisort_hw.runlog import RunLog, entity_paths
 from omnisort_hw.sorting import (
@@ -264,7 +264,7 @@ def test_sort_a_small_scene_end_to_end(tmp_path: Path) -> None:
 
         arm.move_linear = move_linear  # type: ignore[method-assign]
         cam.grab(with_truth=True)
-        from omnisort_hw.core.extrinsics.common import SystemCalibration
+        from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 
         calib = SystemCalibration.from_json(cam.last_truth, source="truth")
         verifier = SimVerifier(arm)
@@ -421,7 +421,7 @@ def test_example_cell_file_sorting_and_registration_sections_parse() -> None:
 
     from omnisort_hw.sorting import parse_registration_config, parse_sort_config
 
-    example = Path(__file__).resolve().parent.parent / "deploy" / "cell.example.toml"
+    example = Path(__file__).resolve().parents[2] / "deploy" / "cell.example.toml"
     data = tomllib.loads(example.read_text())
     cfg = parse_sort_config(data["sorting"])
     reg = parse_registration_config(data["registration"])

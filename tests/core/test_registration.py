@@ -19,16 +19,15 @@ from scipy.spatial.transform import Rotation
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
 from omnisort_hw.core.checkerboard import BoardSpec
-from omnisort_hw.core.extrinsics.common import SystemCalibration
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.frames import invert_pose, rpy_deg
 from omnisort_hw.core.registration import (
-    invert,
     order_corners,
     pose_error,
     pose_from_offset,
     pose_record,
     register_from_corners,
     register_robot,
-    rpy_deg,
     tilt_prior_from_std,
 )
 from omnisort_hw.errors import FeatureNotFoundError, InputError
@@ -43,8 +42,8 @@ def parked() -> tuple[np.ndarray, dict[str, Any], Any]:
     """The sorting scene with the arm at the sorting home (clear of the board), laser on: the
     single calibration image (walls, markers and stripe for the camera-laser calibration, the
     floor board for the registration; the stripe runs 80 mm above the floor, not on the board)."""
-    from sim_backend.api import render_scene
     from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
 
     scene = load_scene("sorting").replace(robot={"home_deg": SortConfig().home_deg})
     image, truth = render_scene(sized(scene, WIDTH), seed=0, laser_on=True)
@@ -66,7 +65,7 @@ def test_offset_convention_matches_the_simulator() -> None:
     try:
         board = next(b for b in world.info.boards if b.name == "floor")
         assert world.T_S_B is not None
-        pose_B = invert(world.T_S_B) @ board.pose
+        pose_B = invert_pose(world.T_S_B) @ board.pose
     finally:
         world.close()
     rc = sim_registration_config(scene)
@@ -151,7 +150,7 @@ def test_camera_rotation_error_is_inherited_and_cubes_in_B_survive_it(parked: tu
     """A joint-style calibration error (0.1 deg per axis) rotates S about the camera: T_SB in S
     inherits it (real behaviour), while positions in B stay right (the board and the cubes
     are seen through the same rotation, and the tilt prior follows the calibration's std)."""
-    from omnisort_hw.core.objects import LocateSettings, locate_cubes, match_to_truth
+    from omnisort_hw.core.cube_location import LocateSettings, locate_cubes, match_to_truth
 
     image, truth, scene = parked
     true_calib = SystemCalibration.from_json(truth)

@@ -16,8 +16,7 @@ import pytest
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
-from omnisort_hw.core.extrinsics.common import SystemCalibration
-from omnisort_hw.core.objects import (
+from omnisort_hw.core.cube_location import (
     UNKNOWN,
     ColorTable,
     LocateSettings,
@@ -25,6 +24,7 @@ from omnisort_hw.core.objects import (
     match_to_truth,
     silhouette,
 )
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.sorting import SortConfig
 
@@ -42,8 +42,8 @@ CUBES = (
 
 @pytest.fixture(scope="module")
 def scene_images() -> dict[str, Any]:
-    from sim_backend.api import render_scene
     from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
+    from sim_backend.scene_images import render_scene
 
     base = sized(load_scene("sorting"), WIDTH)
     cubes = tuple(CubeSpec(Color(c, NAMED_COLORS[c]), 100.0, xy, yaw) for c, xy, yaw in CUBES)

@@ -29,8 +29,8 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A tilted two-sided scene at 960 px with the laser on and off, and its camera.json."""
-    from sim_backend.api import render_scene, write_render
     from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene, write_render
 
     out = tmp_path_factory.mktemp("ext")
     scene = sized(load_scene("two_sided"), 960).replace(
@@ -168,8 +168,8 @@ def test_blue_cubes_and_bins_are_not_taken_for_markers() -> None:
     floor: the calibration image of a real cell, not a bare target."""
     from omnisort_hw.evaluation import truth_parameters
     from omnisort_hw.extrinsics_pipeline import calibrate_system
-    from sim_backend.api import render_scene
     from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
 
     image, truth = render_scene(sized(load_scene("sorting"), 960), seed=1)
     model = OcamModel.from_dict(truth["camera"])
@@ -201,7 +201,7 @@ def test_evaluate_table3_json(tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
-    from omnisort_hw.core.extrinsics.common import PARAMETERS
+    from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS
 
     keys = set(PARAMETERS)
     assert set(result["methods"]) == {"joint", "paper", "method1", "method2", "joint_three_sided"}

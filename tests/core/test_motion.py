@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
+from omnisort_hw.core.frames import rotation_angle_deg
 from omnisort_hw.core.kinematics import (
     UR5E,
     UR10E,
@@ -15,7 +16,6 @@ from omnisort_hw.core.kinematics import (
     forward,
     inverse,
     joint_frames,
-    rotation_angle_deg,
     wrap_deg,
 )
 from omnisort_hw.core.motion import (

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.common import PARAMETERS, SystemCalibration
 from omnisort_hw.core.extrinsics.joint import (
     calibrate_joint,
     closed_form,
@@ -16,9 +15,10 @@ from omnisort_hw.core.extrinsics.joint import (
 from omnisort_hw.core.extrinsics.method1 import calibrate_method1
 from omnisort_hw.core.extrinsics.method2 import calibrate_method2
 from omnisort_hw.core.extrinsics.paper import calibrate_paper
+from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS, SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane, segments
 from omnisort_hw.errors import CalibrationError
-from tests.synthetic_target import Scene, checkerboards, random_angles, three_sided, two_sided
+from tests.core.synthetic_target import Scene, checkerboards, random_angles, three_sided, two_sided
 
 MODEL = OcamModel.equidistant(1920, 1920, 185.0)
 NOISE = 0.2  # px per coordinate on border, laser and floor points; 1.5x on marker centres

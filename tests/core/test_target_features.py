@@ -410,8 +410,8 @@ def test_great_circle_fit_rejects_outliers() -> None:
 def sim_renders() -> Any:
     """Renders (image, truth) by (scene, degraded), 960 x 960, camera and laser tilted."""
     pytest.importorskip("pybullet")
-    from sim_backend.api import render_scene
     from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
 
     cache: dict[tuple[str, bool], tuple[np.ndarray, dict[str, Any]]] = {}
 

@@ -7,6 +7,15 @@ import warnings
 import numpy as np
 import pytest
 
+from omnisort_hw.core.frames import (
+    invert_pose,
+    pose_from_xyz_rotvec,
+    pose_from_xyz_rpy,
+    rotation_angle_deg,
+    translation_pose,
+    xyz_rotvec_from_pose,
+    xyz_rpy_from_pose,
+)
 from omnisort_hw.core.kinematics import (
     UR3E,
     UR5E,
@@ -20,17 +29,10 @@ from omnisort_hw.core.kinematics import (
     forward,
     get_model,
     inverse,
-    invert_pose,
     joint_frames,
     nearest_solution,
     nearest_solutions,
-    pose_from_xyz_rotvec,
-    pose_from_xyz_rpy,
-    rotation_angle_deg,
-    translation_pose,
     wrap_deg,
-    xyz_rotvec_from_pose,
-    xyz_rpy_from_pose,
 )
 from omnisort_hw.errors import MotionRefusedError
 
