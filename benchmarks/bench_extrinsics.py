@@ -16,7 +16,7 @@ from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane, segments
-from omnisort_hw.extrinsics_pipeline import calibrate_system
+from omnisort_hw.pipeline.extrinsics import calibrate_system
 
 
 def _best(fn: Any, repeat: int = 5) -> float:

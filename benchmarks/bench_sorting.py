@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.sorting import SUMMARY_KEYS, evaluate_sorting
+from omnisort_hw.evaluation.sorting import SUMMARY_KEYS, evaluate_sorting
 
 N_TRUTH = int(os.environ.get("OMNISORT_BENCH_SORT_SCENES", "10"))
 N_PERTURBED = max(1, N_TRUTH // 2)

@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.evaluation import evaluate_dataset
+from omnisort_hw.evaluation.table3 import evaluate_dataset
 
 BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
 

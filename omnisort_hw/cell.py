@@ -7,14 +7,15 @@ always be called concurrently with a motion (the driver contract says it always 
 Status reads use short-lived caches so that many clients polling `status` never queue behind
 a device.
 
-Pipeline commands (calibrate, map, register_robot, locate, sort) call the core; until a core
-component exists they raise `NotAvailableError` naming it, never a made-up result.
+Pipeline commands (calibrate, map, register_robot, locate, sort) call the use-case layer
+(`omnisort_hw.pipeline`) with the cell's devices, calibration store, run log and the cell
+file's typed record (`config.cell.CellConfig`, loaded once at start); a command whose section
+is missing raises `NotAvailableError` naming it.
 """
 
 from __future__ import annotations
 
 import base64
-import json
 import logging
 import threading
 import time
@@ -28,13 +29,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from omnisort_hw import fileio
-from omnisort_hw.errors import MotionRefusedError, OmnisortError
+from omnisort_hw.config.cell import CellConfig
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.devices import Devices, open_devices
+from omnisort_hw.errors import InputError, MotionRefusedError, OmnisortError
+from omnisort_hw.pipeline.arm_motion import ArmMover
+from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
 from omnisort_hw.storage import CalibrationStore
 
 if TYPE_CHECKING:
-    from drivers.base import Arm, Camera, LaserSwitch
-    from omnisort_hw.service.config import Settings
     from omnisort_hw.service.rrd import RunLogRotator
 
 log = logging.getLogger(__name__)
@@ -58,16 +63,8 @@ class DeviceLockTimeoutError(OmnisortError):
     code = "busy"
 
 
-@dataclass
-class CellDevices:
-    """The devices of one cell; a missing device is None (commands needing it say so)."""
-
-    camera: Camera | None = None
-    laser: LaserSwitch | None = None
-    arm: Arm | None = None
-
-    def items(self) -> list[tuple[str, Any]]:
-        return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
+# The devices of one cell (a missing device is None): the device factory's record.
+CellDevices = Devices
 
 
 @dataclass
@@ -105,20 +102,28 @@ class Cell:
         runlog: RunLogRotator | RunLog | None = None,
         capture_dir: Path | None = None,
         capture_keep: int = 50,
-        config: dict[str, Any] | None = None,
+        config: CellConfig | None = None,
     ) -> None:
         self.devices = devices
         self.store = store
         self._runlog = runlog if runlog is not None else RunLog(None)
         self.capture_dir = capture_dir or Path(store.state_dir) / "captures"
         self.capture_keep = capture_keep
-        self.config = dict(config or {})
+        self.config = config or CellConfig()
+        # [sorting] and [registration] resolved once (with the backend's scene for
+        # from_scene): a bad combination stops the service at start, not at the first sort.
+        self.sort_config: SortConfig | None = None
+        self.registration_config = self.config.registration
+        if self.config.sorting is not None:
+            self.sort_config, self.registration_config = resolve_sorting(
+                self.config.sorting, self.config.registration, devices.scene
+            )
         self._camera_lock = threading.Lock()
         self._laser_lock = threading.Lock()
         self._cache_lock = threading.Lock()
         self._caches = _Caches()
         self._connected = False
-        self._motion_count = 0
+        self._mover = ArmMover()
         self._snapshot: dict[str, Any] | None = None
         self._snapshot_at = 0.0
         self._poller_stop = threading.Event()
@@ -127,11 +132,11 @@ class Cell:
     # -- construction and life cycle -------------------------------------------------------
 
     @classmethod
-    def from_settings(cls, settings: Settings) -> Cell:
+    def from_settings(cls, settings: CellConfig) -> Cell:
         """Build the cell of a configuration: devices from the device factory, store, run log."""
         from omnisort_hw.service.rrd import RunLogRotator
 
-        devices = open_devices(settings.raw, settings.path)
+        devices = open_devices(settings.devices)
         lg = settings.logging
         rotator = RunLogRotator(
             lg.log_dir if lg.rerun else None,
@@ -145,7 +150,7 @@ class Cell:
             store,
             rotator,
             capture_keep=settings.service.capture_keep,
-            config=settings.raw,
+            config=settings,
         )
 
     @property
@@ -476,67 +481,11 @@ class Cell:
         Refused before anything reaches the arm when the calibration is not usable or the arm
         reports a safety stop; the driver checks its joint limits and workspace box itself.
         """
-        from drivers.base import pose_matrix
-
         arm = self._need("arm")
         self.check_motion_allowed()
-        arm.safety_status().raise_if_stopped(arm.name)
-        _raise_if_cancelled(cancel)
-        rl = self.runlog
-        start = np.asarray(arm.joint_positions(), float)
-        sampler = _JointSampler(arm)
-        if joints_deg is not None:
-            target = np.asarray(joints_deg, float)
-            rl.event("arm/command", f"move_joints to {np.round(target, 3).tolist()} deg")
-            try:
-                self._log_planned_joint_move(start, target, speed_deg_s)
-            except Exception as exc:
-                log.warning("could not log the planned trajectory: %s", exc)
-            _raise_if_cancelled(cancel)
-            with sampler:
-                arm.move_joints(target, speed_deg_s=speed_deg_s)
-        else:
-            T = np.asarray(matrix, float) if matrix is not None else None
-            if T is None:
-                p = np.asarray(pose, float)
-                T = pose_matrix(p[:3], p[3:])
-            rl.event("arm/command", f"move_linear to xyz {np.round(T[:3, 3], 2).tolist()} mm")
-            rl.pose("arm/planned/tcp", T)
-            _raise_if_cancelled(cancel)
-            with sampler:
-                arm.move_linear(T, speed_mm_s=speed_mm_s)
-        end = np.asarray(arm.joint_positions(), float)
-        tcp = np.asarray(arm.tcp_pose(), float)
-        self._log_joint_series("arm/executed", sampler.times, sampler.samples)
-        rl.pose("arm/executed/tcp", tcp)
-        return {"joints_deg": np.round(end, 4).tolist(), "tcp_pose": np.round(tcp, 4).tolist()}
-
-    def _log_planned_joint_move(
-        self, start: np.ndarray, target: np.ndarray, speed_deg_s: float | None
-    ) -> None:
-        """Log the joint trajectory the core's planner expects for this move (for review)."""
-        from omnisort_hw.core.motion import MotionLimits as PlanLimits
-        from omnisort_hw.core.motion import plan_joint_move
-
-        limits = PlanLimits(joint_speed_deg_s=speed_deg_s) if speed_deg_s else PlanLimits()
-        traj = plan_joint_move(start, target, limits)
-        self._log_joint_series("arm/planned", traj.t, traj.q)
-
-    def _log_joint_series(self, prefix: str, t: Sequence[float], q: np.ndarray) -> None:
-        """Joint angles as scalars `PREFIX/q1..q6` on the `motion_ms` timeline, which counts
-        milliseconds since the move began plus 10^6 times the move's number (one segment per
-        move, planned and executed side by side)."""
-        rl = self.runlog
-        if not rl.enabled or len(t) == 0:
-            return
-        q = np.asarray(q, float).reshape(-1, 6)
-        base = self._motion_count * 1_000_000
-        for ti, qi in zip(t, q, strict=True):
-            rl.set_step("motion_ms", base + round(float(ti) * 1000))
-            for j in range(6):
-                rl.scalar(f"{prefix}/q{j + 1}", float(qi[j]))
-        if prefix.endswith("executed"):
-            self._motion_count += 1
+        return self._mover.move(
+            arm, self.runlog, joints_deg, pose, matrix, speed_deg_s, speed_mm_s, cancel
+        )
 
     def stop_motion(self) -> list[str]:
         """Stop the arm now (never refused); returns the problems met."""
@@ -566,7 +515,7 @@ class Cell:
         st.raise_if_stopped(arm.name)
         return {"arm": {"robot_mode": st.robot_mode, "ok": st.ok}}
 
-    # -- pipeline (core) -------------------------------------------------------------------
+    # -- pipeline (use cases) --------------------------------------------------------------
 
     def calibrate_intrinsics(
         self,
@@ -580,48 +529,27 @@ class Cell:
 
         The images are taken to come from the camera attached now (its serial is stored).
         """
-        import cv2
-
         from omnisort_hw.core.camera_io import camera_record
         from omnisort_hw.core.checkerboard import BoardSpec
-        from omnisort_hw.core.intrinsics import calibrate_images
-        from omnisort_hw.errors import InputError
+        from omnisort_hw.pipeline.intrinsics import calibrate_intrinsics, image_files, read_images
 
         try:
             spec = BoardSpec.parse(board, square_mm)
         except ValueError as exc:
             raise InputError(f"calibrate: board/square_mm: {exc}") from None
-        paths = image_files(folder)
-        images = []
-        for path in paths:
-            _raise_if_cancelled(cancel, "calibration")
-            image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if image is None:
-                raise InputError(f"{path}: not a readable image (unknown format or corrupt)")
-            images.append((str(path), image))
+        images = read_images(image_files(folder), cancel)
         rl = self.runlog
         rl.event("calibration/intrinsics", f"{len(images)} images from {folder}, board {board}")
-        result = calibrate_images(images, spec, degree=degree, log=rl)
+        cal = calibrate_intrinsics(images, spec, degree=degree, log=rl)
         _raise_if_cancelled(cancel, "calibration")
-        record = {
-            **result.record(),
-            "board": {"inner_corners": [spec.cols, spec.rows], "square_mm": spec.square_mm},
-            "images_folder": str(folder),
-            "created": datetime.now(UTC).isoformat(timespec="seconds"),
-        }
+        result, record = cal.result, {**cal.record, "images_folder": str(folder)}
         saved = self.store.save_camera(camera_record(result.model, **record))
-        model = result.model
-        rl.scalar("calibration/intrinsics/rms_px", result.rms_px)
-        rl.text(
-            "calibration/intrinsics/parameters",
-            json.dumps({"model": model.to_dict(), "std": result.std}, indent=1, default=str),
-        )
         return {
             "path": str(saved),
             "rms_px": result.rms_px,
             "images_used": len(result.images_used),
             "images_rejected": record["images_rejected"],
-            "center_uv": list(model.center_uv),
+            "center_uv": list(result.model.center_uv),
             "poly_degree": result.degree,
             "camera_serial": self.store.expected_serial,
         }
@@ -631,7 +559,7 @@ class Cell:
     ) -> tuple[np.ndarray, dict[str, Any], str]:
         """The image to work on: the file `image`, or a fresh capture (laser switched to
         `laser` first) saved under `capture_dir`. Returns (image, image record, source)."""
-        from omnisort_hw.extrinsics_pipeline import image_record, read_image
+        from omnisort_hw.pipeline.extrinsics import image_record, read_image
 
         if image is not None:
             return read_image(image), image_record(image), str(image)
@@ -652,9 +580,13 @@ class Cell:
         """Camera rotation and laser plane from one image of the calibration target (a fresh
         capture with the laser on, or `image`), saved as system.json. The previous robot base
         pose is not carried over: it was registered with the previous camera rotation."""
-        from omnisort_hw.errors import InputError
+        from omnisort_hw.pipeline.extrinsics import (
+            DEFAULT_SEPARATION_MM,
+            calibrate_system,
+            system_payload,
+        )
 
-        target = target or self._config_target().get("kind")
+        target = target or self.config.target.kind
         if target is None:
             raise InputError(
                 "calibrate what=extrinsics needs target=two-sided|three-sided|checkerboards "
@@ -663,28 +595,20 @@ class Cell:
         model = self.store.camera_model()
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "calibration")
-        with core_component("calibrate what=extrinsics"):
-            from omnisort_hw.extrinsics_pipeline import DEFAULT_SEPARATION_MM, calibrate_system
-
-            separation = separation_mm or self._config_target().get(
-                "separation_mm", DEFAULT_SEPARATION_MM
-            )
-            calib = calibrate_system(
-                img,
-                model,
-                target,
-                method,
-                separation_mm=float(separation),
-                board=_board_size(board or "9x6"),
-                square_mm=square_mm or 97.0,
-                source=source,
-                log=self.runlog,
-            )
+        separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
+        calib = calibrate_system(
+            img,
+            model,
+            target,
+            method,
+            separation_mm=float(separation),
+            board=_board_size(board or "9x6"),
+            square_mm=square_mm or 97.0,
+            source=source,
+            log=self.runlog,
+        )
         _raise_if_cancelled(cancel, "calibration")
-        calib.image = record
-        payload = calib.to_json()
-        payload["elapsed_s"] = round(calib.elapsed_s, 4)
-        saved = self.store.save_system(payload)
+        saved = self.store.save_system(system_payload(calib, record))
         return {
             "path": str(saved),
             "method": calib.method,
@@ -695,14 +619,8 @@ class Cell:
             "image": record,
         }
 
-    def _config_target(self) -> dict[str, Any]:
-        section = self.config.get("target", {})
-        return dict(section) if isinstance(section, dict) else {}
-
-    def system_calibration(self) -> Any:
+    def system_calibration(self) -> SystemCalibration:
         """The verified system.json as the core's SystemCalibration."""
-        from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-
         rec = self.store.read("system")
         return SystemCalibration.from_json(rec.payload, source=str(rec.path))
 
@@ -715,49 +633,82 @@ class Cell:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
 
         `with_points` adds the points themselves (S, mm, 0.1 mm) to the result."""
-        from omnisort_hw.extrinsics_pipeline import check_image_size
+        from omnisort_hw.pipeline.laser_map import map_laser
 
         calib = self.system_calibration()
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "mapping")
-        check_image_size(img, calib.model, source)
-        with core_component("map"):
-            from omnisort_hw.core.laser_stripe import laser_stripe_points
-            from omnisort_hw.core.mapping import pixels_to_plane, segments
-
-            pixels = laser_stripe_points(img)
-            points = pixels_to_plane(pixels, calib)
-            segs = segments(points, calib)
-        rl = self.runlog
-        finite = points[np.all(np.isfinite(points), axis=1)]
-        rl.image("map/image", img)
-        rl.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
-        rl.points3d("map/points_S", finite, color=(255, 0, 0))
-        for i, seg in enumerate(segs):
-            rl.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
-        out: dict[str, Any] = {
-            "image": record,
-            "points": len(pixels),
-            "points_on_plane": len(finite),
-            "segments": [seg.summary() for seg in segs],
-        }
+        laser_map = map_laser(img, calib, source, self.runlog)
+        out: dict[str, Any] = {"image": record, **laser_map.summary()}
         if with_points:
-            out["points_S"] = np.round(finite, 1).tolist()
+            out["points_S"] = np.round(laser_map.finite_points_S, 1).tolist()
         return out
 
-    def register_robot(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
-        """Robot base pose from the floor checkerboard, stored in system.json."""
-        from omnisort_hw.sorting import service_register_robot
+    def _image(self, image: str | None, laser: bool) -> np.ndarray:
+        """The file `image`, or a capture with the laser switched to `laser` (off after)."""
+        from omnisort_hw.pipeline.extrinsics import read_image
 
-        return service_register_robot(self, image, cancel)
+        if image is not None:
+            return read_image(image)
+        if self.devices.laser is not None:
+            self.set_laser(laser)
+        try:
+            return np.asarray(self.grab().image)
+        finally:
+            if laser and self.devices.laser is not None:
+                self.set_laser(False)
+
+    def _sorting(self, what: str) -> SortConfig:
+        if self.sort_config is None:
+            raise NotAvailableError(
+                f"{what} needs a [sorting] section in the cell configuration (bins, obstacles, "
+                "cube size, home pose; or from_scene = true)"
+            )
+        return self.sort_config
+
+    def register_robot(
+        self, image: str | None, cancel: threading.Event | None = None
+    ) -> dict[str, Any]:
+        """Robot base pose T_SB from the floor checkerboard in `image` (or a laser-off
+        capture), saved as `robot_base` in the store's system.json."""
+        from omnisort_hw.pipeline.registration import register_from_image, robot_base_record
+
+        rc = self.registration_config
+        if rc is None:
+            raise NotAvailableError(
+                "the robot registration needs a [registration] section in the cell "
+                "configuration (board, square_mm, offset = [X, Y, Z, RX, RY, RZ] of the board in B)"
+            )
+        payload = dict(self.store.load_system())
+        calib = SystemCalibration.from_json(payload, source=str(self.store.path("system")))
+        img = self._image(image, laser=False)
+        _raise_if_cancelled(cancel, "register_robot")
+        self.runlog.image("registration/image", img)
+        reg = register_from_image(img, calib, rc, self.runlog)
+        payload["robot_base"] = robot_base_record(reg, rc, image or "capture")
+        path = self.store.save_system(payload)
+        return {"robot_base": payload["robot_base"], "path": str(path)}
 
     def locate(
-        self, image: str | None, colors: list[str] | None, cancel: threading.Event
+        self, image: str | None, colors: list[str] | None, cancel: threading.Event | None = None
     ) -> dict[str, Any]:
-        """Objects and their poses in the robot base frame."""
-        from omnisort_hw.sorting import service_locate
+        """The cubes in `image` (or laser-off and laser-on captures), in S and B."""
+        from omnisort_hw.pipeline.calibration_source import robot_base_T
+        from omnisort_hw.pipeline.locate import locate_in_images
 
-        return service_locate(self, image, colors, cancel)
+        cfg = self._sorting("the colour-blob location")
+        calib = self.system_calibration()
+        T_SB = robot_base_T(calib, str(self.store.path("system")))
+        colour = self._image(image, laser=False)
+        laser_img = None
+        if image is None and cfg.use_laser and self.devices.laser is not None:
+            laser_img = self._image(None, laser=True)
+        _raise_if_cancelled(cancel, "locate")
+        cubes, _ = locate_in_images(
+            colour, laser_img, calib, cfg, T_SB, calib.robot_base, self.runlog
+        )
+        found = [c.summary() for c in cubes if colors is None or c.color in colors]
+        return {"cubes": found, "count": len(found)}
 
     def sort(
         self,
@@ -766,26 +717,53 @@ class Cell:
         cancel: threading.Event,
         progress: Callable[[dict[str, Any]], None] | None = None,
     ) -> dict[str, Any]:
-        """Locate, pick and place every object by colour until done, `max_objects` or cancel."""
-        from omnisort_hw.sorting import service_sort
+        """Locate, pick and place every object by colour until done, `max_objects` or cancel;
+        gated by the calibration store."""
+        from omnisort_hw.pipeline.calibration_source import StoreCalibration
+        from omnisort_hw.pipeline.sort import Sorter
 
-        return service_sort(self, max_objects, colors, cancel, progress)
+        cfg = self._sorting("the sorting pipeline")
+        if self.devices.camera is None or self.devices.arm is None:
+            raise MotionRefusedError("sort: the cell needs a camera and an arm")
+        laser = _CellLaser(self) if self.devices.laser is not None else None
+        sorter = Sorter(
+            _CellCamera(self),  # type: ignore[arg-type]
+            self.devices.arm,
+            laser,  # type: ignore[arg-type]
+            StoreCalibration(self.store),
+            cfg,
+            self.registration_config,
+            log=self.runlog,
+            cancel=cancel,
+            progress=progress,
+        )
+        return sorter.run(max_objects, colors).to_dict()
 
 
-@contextmanager
-def core_component(what: str) -> Iterator[None]:
-    """Turn "this part of the core is not in the build yet" into NotAvailableError."""
-    try:
-        yield
-    except ModuleNotFoundError as exc:
-        if exc.name and exc.name.startswith("omnisort_hw."):
-            raise NotAvailableError(f"{what}: {exc.name} is not in this build yet") from None
-        raise
+class _CellCamera:
+    """The cell's camera through the cell (its lock and its run log)."""
+
+    def __init__(self, cell: Cell) -> None:
+        self.cell = cell
+
+    def grab(self, timeout_s: float | None = None) -> Any:
+        return self.cell.grab(timeout_s)
+
+
+class _CellLaser:
+    """The cell's laser switch through the cell (its lock and its status cache)."""
+
+    def __init__(self, cell: Cell) -> None:
+        self.cell = cell
+
+    def on(self) -> None:
+        self.cell.set_laser(True)
+
+    def off(self) -> None:
+        self.cell.set_laser(False)
 
 
 def _board_size(text: str) -> tuple[int, int]:
-    from omnisort_hw.errors import InputError
-
     try:
         cols, rows = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -796,71 +774,3 @@ def _board_size(text: str) -> tuple[int, int]:
 def _raise_if_cancelled(cancel: threading.Event | None, what: str = "move") -> None:
     if cancel is not None and cancel.is_set():
         raise MotionRefusedError(f"{what} cancelled")
-
-
-IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
-
-
-def image_files(folder: str | Path) -> list[Path]:
-    """The image files of `folder`, sorted by name; InputError when there are none."""
-    from omnisort_hw.errors import InputError
-
-    path = Path(folder)
-    if not path.is_dir():
-        raise InputError(f"{path}: no such folder")
-    files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
-    if not files:
-        raise InputError(f"{path}: no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
-    return files
-
-
-class _JointSampler:
-    """Samples the arm's joint positions every `period_s` while a motion runs (executed path)."""
-
-    def __init__(self, arm: Arm, period_s: float = 0.05) -> None:
-        self.arm = arm
-        self.period_s = period_s
-        self.times: list[float] = []
-        self.samples: list[np.ndarray] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="joint-sampler", daemon=True)
-        self._t0 = 0.0
-
-    def _run(self) -> None:
-        while True:
-            try:
-                q = np.asarray(self.arm.joint_positions(), float)
-            except Exception:
-                q = None
-            if q is not None and q.shape == (6,):
-                self.times.append(time.monotonic() - self._t0)
-                self.samples.append(q)
-            if self._stop.wait(self.period_s):
-                return
-
-    def __enter__(self) -> _JointSampler:
-        self._t0 = time.monotonic()
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-        try:
-            q = np.asarray(self.arm.joint_positions(), float)
-            self.times.append(time.monotonic() - self._t0)
-            self.samples.append(q)
-        except Exception:
-            return
-
-
-def open_devices(config: dict[str, Any], config_path: Path | None = None) -> CellDevices:
-    """The (unconnected) devices of the `[camera]`, `[laser]` and `[arm]` sections.
-
-    `omnisort_hw.devices` picks the real driver or the simulated cell per section's `backend`
-    and raises ConfigError naming the key when a section is wrong.
-    """
-    from omnisort_hw.devices import open_devices as build
-
-    made = build(config, config_path)
-    return CellDevices(camera=made.camera, laser=made.laser, arm=made.arm)

@@ -23,31 +23,40 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivers.base import Arm, Camera, Device, LaserSwitch
-from omnisort_hw.cell_config import (
+from omnisort_hw.config.devices import (
     CellDeviceConfig,
     DeviceSection,
     config_error,
     parse_device_config,
 )
 
+if TYPE_CHECKING:
+    from omnisort_hw.pipeline.sort import SceneLayout
+
 
 @dataclass
 class Devices:
-    """The cell's devices, unconnected; a device without a section is None."""
+    """The cell's devices, unconnected; a device without a section is None. `scene` is the
+    cell's layout and truth when the backend knows them (the simulated cell; None for real
+    devices): `[sorting] from_scene` and the verification of a sort use it."""
 
     camera: Camera | None = None
     laser: LaserSwitch | None = None
     arm: Arm | None = None
+    scene: SceneLayout | None = None
 
     def items(self) -> list[tuple[str, Device | None]]:
         return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
 
 
-def _open_sim(sections: dict[str, DeviceSection], base_dir: Path | None) -> dict[str, Any]:
-    """Build the `backend = "sim"` devices through `sim_backend.devices.open_devices`."""
+def _open_sim(
+    sections: dict[str, DeviceSection], base_dir: Path | None
+) -> tuple[dict[str, Any], SceneLayout | None]:
+    """Build the `backend = "sim"` devices through `sim_backend.devices.open_devices`, and the
+    simulated cell's scene for the sorting pipeline."""
     first = next(iter(sections))
     key = f"[{first}].backend"
     try:
@@ -65,7 +74,9 @@ def _open_sim(sections: dict[str, DeviceSection], base_dir: Path | None) -> dict
     missing = sorted(set(sections) - set(made))
     if missing:
         raise config_error(f"[{missing[0]}].backend", "the simulated cell did not provide it")
-    return dict(made)
+    from sim_backend.sort_harness import scene_of
+
+    return dict(made), scene_of(made)
 
 
 def _open_real(section: DeviceSection) -> Device:
@@ -91,7 +102,7 @@ def _open_real(section: DeviceSection) -> Device:
 
 def _open_one(section: DeviceSection, base_dir: Path | None) -> Device:
     if section.is_sim:
-        return _open_sim({section.kind: section}, base_dir)[section.kind]
+        return _open_sim({section.kind: section}, base_dir)[0][section.kind]
     return _open_real(section)
 
 
@@ -131,7 +142,7 @@ def open_devices(
         cell = parse_device_config(config, base)
     present = {k: s for k, s in cell.sections() if s is not None}
     sim = {k: s for k, s in present.items() if s.is_sim}
-    made: dict[str, Any] = _open_sim(sim, cell.base_dir) if sim else {}
+    made, scene = _open_sim(sim, cell.base_dir) if sim else ({}, None)
     for kind, section in present.items():
         if not section.is_sim:
             made[kind] = _open_real(section)
@@ -141,7 +152,7 @@ def open_devices(
             raise config_error(
                 f"[{kind}].backend", f"{type(device).__name__} is not a {expected[kind].__name__}"
             )
-    return Devices(camera=made.get("camera"), laser=made.get("laser"), arm=made.get("arm"))
+    return Devices(made.get("camera"), made.get("laser"), made.get("arm"), scene)
 
 
 __all__ = ["Devices", "open_arm", "open_camera", "open_devices", "open_laser"]

@@ -64,14 +64,14 @@ def default_timeout(command: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    from omnisort_hw.config.service import DEFAULT_PORT
     from omnisort_hw.service.client import Client, ClientError
-    from omnisort_hw.service.config import DEFAULT_PORT
 
     host, port, token = "127.0.0.1", DEFAULT_PORT, None
     if args.config:
-        from omnisort_hw.service.config import load_settings
+        from omnisort_hw.config.cell import load_cell_config
 
-        svc = load_settings(args.config).service
+        svc = load_cell_config(args.config).service
         host = "127.0.0.1" if svc.host in ("0.0.0.0", "::") else svc.host
         port, token = svc.port, svc.token
     host = args.host or host

@@ -43,9 +43,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from omnisort_hw.core.intrinsics import calibrate_images
     from omnisort_hw.core.laser_stripe import laser_stripe_points
     from omnisort_hw.core.mapping import pixels_to_plane, segments
-    from omnisort_hw.evaluation import truth_parameters
-    from omnisort_hw.extrinsics_pipeline import calibrate_system
+    from omnisort_hw.evaluation.table3 import truth_parameters
     from omnisort_hw.fileio import atomic_write_json
+    from omnisort_hw.pipeline.extrinsics import calibrate_system
     from omnisort_hw.runlog import RunLog
     from sim_backend.scene import load_scene
     from sim_backend.scene_images import render_scene, write_render

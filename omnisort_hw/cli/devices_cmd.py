@@ -110,10 +110,10 @@ def _exercise(kind: str, device: Any) -> str:
 
 def check_devices(config_path: Path, only: list[str] | None = None) -> list[CheckRow]:
     """Open, exercise and close each configured device; never raises for a device failure."""
-    from omnisort_hw.cell_config import load_device_config
+    from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.devices import open_arm, open_camera, open_laser
 
-    cell = load_device_config(config_path)
+    cell = load_cell_config(config_path).devices
     openers = {"camera": open_camera, "laser": open_laser, "arm": open_arm}
     rows: list[CheckRow] = []
     for kind, section in cell.sections():
@@ -162,11 +162,11 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_laser(args: argparse.Namespace) -> int:
-    from omnisort_hw.cell_config import load_device_config
+    from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.devices import open_laser
     from omnisort_hw.errors import ConfigError
 
-    cell = load_device_config(args.config)
+    cell = load_cell_config(args.config).devices
     if cell.laser is None:
         raise ConfigError(f"{args.config}: no [laser] section")
     with open_laser(cell.laser, cell.base_dir) as laser:

@@ -45,7 +45,7 @@ def _matching(data: Path, n: int, seed: int, degraded: bool) -> bool:
 
 def cmd_table3(args: argparse.Namespace) -> int:
     from omnisort_hw.errors import InputError
-    from omnisort_hw.evaluation import evaluate_dataset, format_table
+    from omnisort_hw.evaluation.table3 import evaluate_dataset, format_table
 
     if args.n < 1:
         raise InputError(f"--n must be at least 1, got {args.n}")

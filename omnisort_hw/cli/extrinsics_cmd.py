@@ -61,8 +61,13 @@ def load_system(path: Path) -> Any:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.camera_io import load_camera_json
-    from omnisort_hw.extrinsics_pipeline import calibrate_system, image_record, read_image
     from omnisort_hw.fileio import atomic_write_json
+    from omnisort_hw.pipeline.extrinsics import (
+        calibrate_system,
+        image_record,
+        read_image,
+        system_payload,
+    )
     from omnisort_hw.runlog import RunLog
 
     if args.separation is not None and args.target == "checkerboards":
@@ -85,10 +90,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             source=str(args.image),
             log=log,
         )
-    calib.image = image_record(args.image)
-    payload = calib.to_json()
-    payload["elapsed_s"] = round(calib.elapsed_s, 4)
-    atomic_write_json(args.out, payload)
+    atomic_write_json(args.out, system_payload(calib, image_record(args.image)))
     if args.json:
         print(
             json.dumps(
@@ -111,26 +113,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from omnisort_hw.core.laser_stripe import laser_stripe_points
-    from omnisort_hw.core.mapping import pixels_to_plane, segments
-    from omnisort_hw.extrinsics_pipeline import check_image_size, read_image
+    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.laser_map import map_laser
     from omnisort_hw.runlog import RunLog
 
     calib = load_system(args.system)
     image = read_image(args.image)
-    check_image_size(image, calib.model, str(args.image))
-    pixels = laser_stripe_points(image)
-    points = pixels_to_plane(pixels, calib)
-    segs = segments(points, calib)
     with RunLog(args.log) as log:
-        log.image("map/image", image)
-        log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
-        log.points3d("map/points_S", points[~(points != points).any(axis=1)], color=(255, 0, 0))
-    result = {"points": len(pixels), "segments": [s.summary() for s in segs]}
+        laser_map = map_laser(image, calib, str(args.image), log)
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(laser_map.summary()))
     else:
-        print(f"{len(pixels)} laser points, {len(segs)} segments")
+        segs = laser_map.segments
+        print(f"{len(laser_map.pixels)} laser points, {len(segs)} segments")
         for i, s in enumerate(segs):
             print(
                 f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"

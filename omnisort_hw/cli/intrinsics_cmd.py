@@ -37,27 +37,12 @@ def register(sub: Any) -> None:
     imp.set_defaults(func=cmd_import)
 
 
-def read_images(paths: list[Path]) -> list[tuple[str, Any]]:
-    """Read every image or fail naming the first unreadable one (nothing is written then)."""
-    import cv2
-
-    images = []
-    for path in paths:
-        if not path.is_file():
-            raise InputError(f"{path}: no such image file")
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise InputError(f"{path}: not a readable image (unknown format or corrupt)")
-        images.append((str(path), image))
-    return images
-
-
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from omnisort_hw.core.camera_io import save_camera_json
     from omnisort_hw.core.checkerboard import BoardSpec
-    from omnisort_hw.core.intrinsics import calibrate_images
+    from omnisort_hw.pipeline.intrinsics import calibrate_intrinsics, read_images
     from omnisort_hw.runlog import RunLog
 
     try:
@@ -71,14 +56,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         ) as bar,
         RunLog(args.log) as log,
     ):
-        result = calibrate_images(
+        cal = calibrate_intrinsics(
             images, board, degree=args.degree, on_detected=lambda _n: bar.update(1), log=log
         )
-    record = {
-        **result.record(),
-        "board": {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm},
-        "created": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
+    result, record = cal.result, cal.record
     save_camera_json(args.out, result.model, **record)
     summary = {"out": str(args.out), **record, "model": result.model.to_dict()}
     if args.json:

@@ -2,7 +2,7 @@
 
     omnisort register-robot IMAGE --system system.json --board 9x6 --square 40 \\
         --offset 200,-180,2,180,0,90
-    omnisort locate IMAGE --system system.json [--laser-image IMAGE] [--json]
+    omnisort locate IMAGE --system system.json [--config cell.toml] [--laser-image IMAGE]
     omnisort sort --config cell.toml [--system system.json] [--register] [--json]
     omnisort evaluate sorting --scenes 50 --seed 0 [--json]
 
@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.errors import ConfigError, InputError
+from omnisort_hw.pipeline.sort import resolve_sorting
 
 
 def register(sub: Any) -> None:
@@ -56,7 +57,15 @@ def register(sub: Any) -> None:
     loc.add_argument("image", type=Path, help="colour image (laser off)")
     loc.add_argument("--system", type=Path, required=True, help="system.json with robot_base")
     loc.add_argument("--laser-image", type=Path, default=None, help="same view, laser on")
-    loc.add_argument("--cube-size", type=float, default=100.0, help="cube edge, mm")
+    loc.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="cell.toml: locate with its [sorting] section, as the service does",
+    )
+    loc.add_argument(
+        "--cube-size", type=float, default=None, help="cube edge, mm (default 100 or --config)"
+    )
     loc.add_argument("--colors", type=Path, default=None, help="colour table (TOML or JSON)")
     loc.add_argument(
         "--region", default=None, help="xmin,xmax,ymin,ymax in S, mm (default: between walls)"
@@ -115,35 +124,28 @@ def _numbers(text: str, n: int, what: str) -> tuple[float, ...]:
 
 def cmd_register(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.extrinsics_cmd import load_system
+    from omnisort_hw.config.sorting import RegistrationConfig
     from omnisort_hw.core.checkerboard import BoardSpec
-    from omnisort_hw.core.registration import pose_from_offset, register_robot
-    from omnisort_hw.extrinsics_pipeline import read_image
+    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.registration import (
+        register_from_image,
+        robot_base_record,
+        write_robot_base,
+    )
     from omnisort_hw.runlog import RunLog
-    from omnisort_hw.sorting import log_registration, tilt_prior, write_robot_base
 
     try:
         board = BoardSpec.parse(args.board, args.square)
     except ValueError as exc:
         raise InputError(f"--board/--square: {exc}") from None
     offset = _numbers(args.offset, 6, "--offset")
+    rc = RegistrationConfig(board, offset, args.fit, args.camera_height)  # type: ignore[arg-type]
     calib = load_system(args.system)
     image = read_image(args.image)
     with RunLog(args.log) as log:
         log.image("registration/image", image)
-        reg = register_robot(
-            image,
-            calib.model,
-            calib.R_SC,
-            board,
-            pose_from_offset(offset),
-            tilt_prior(args.fit, calib),
-            camera_height_mm=args.camera_height,
-        )
-        log_registration(log, reg)
-    record = reg.record(args.model)
-    record["offset"] = list(offset)
-    record["board"] = {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm}
-    record["image"] = str(args.image)
+        reg = register_from_image(image, calib, rc, log)
+    record = robot_base_record(reg, rc, str(args.image), args.model)
     written = None if args.dry_run else write_robot_base(args.system, record)
     if args.json:
         print(json.dumps({**record, "written": str(written) if written else None}))
@@ -164,34 +166,53 @@ def cmd_register(args: argparse.Namespace) -> int:
     return 0
 
 
+def _locate_config(args: argparse.Namespace) -> Any:
+    """The `[sorting]` record of `--config` (what the service locates with), else the defaults;
+    `--cube-size`, `--colors` and `--region` override it."""
+    from dataclasses import replace
+
+    from omnisort_hw.core.cube_location import ColorTable
+    from omnisort_hw.core.pick_planning import SortConfig
+
+    cfg = SortConfig()
+    if args.config is not None:
+        from omnisort_hw.devices import open_devices
+
+        cell, _ = load_cell(args.config, devices=False)
+        if cell.sorting is None:
+            raise ConfigError(f"{args.config}: no [sorting] section")
+        # from_scene: the scene of the cell's backend fills in what the section leaves out.
+        scene = open_devices(cell.devices).scene if cell.sorting.from_scene else None
+        cfg, _ = resolve_sorting(cell.sorting, cell.registration, scene)
+    changes: dict[str, Any] = {}
+    if args.cube_size is not None:
+        if args.cube_size <= 0:
+            raise InputError(f"--cube-size must be positive, got {args.cube_size}")
+        changes["cube_size_mm"] = args.cube_size
+    if args.colors is not None:
+        changes["colors"] = ColorTable.load(args.colors)
+    if args.region is not None:
+        changes["region_S_mm"] = _numbers(args.region, 4, "--region")
+    return replace(cfg, **changes)
+
+
 def cmd_locate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.extrinsics_cmd import load_system
-    from omnisort_hw.core.cube_location import ColorTable, LocateSettings, locate_cubes
-    from omnisort_hw.core.laser_stripe import laser_stripe_points
-    from omnisort_hw.core.mapping import pixels_to_plane
-    from omnisort_hw.extrinsics_pipeline import read_image
+    from omnisort_hw.pipeline.calibration_source import robot_base_T
+    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.locate import locate_in_images
     from omnisort_hw.runlog import RunLog
-    from omnisort_hw.sorting import board_exclusion, default_region, log_cubes, robot_base_T
 
     calib = load_system(args.system)
     T_SB = robot_base_T(calib, str(args.system))
     image = read_image(args.image)
-    colors = ColorTable.load(args.colors) if args.colors else ColorTable.default()
-    region = _numbers(args.region, 4, "--region") if args.region else default_region(calib.target)
-    if args.cube_size <= 0:
-        raise InputError(f"--cube-size must be positive, got {args.cube_size}")
-    settings = LocateSettings(
-        cube_size_mm=args.cube_size,
-        region_S_mm=region,  # type: ignore[arg-type]
-        exclude_S_mm=tuple(board_exclusion(calib.robot_base)),
-    )
-    lp = None
-    if args.laser_image is not None:
-        lp = pixels_to_plane(laser_stripe_points(read_image(args.laser_image)), calib)
-    cubes, diag = locate_cubes(image, calib.model, calib.R_SC, T_SB, colors, settings, lp)
+    cfg = _locate_config(args)
+    laser_image = read_image(args.laser_image) if args.laser_image is not None else None
     with RunLog(args.log) as log:
         log.image("locate/image", image)
-        log_cubes(log, "locate", cubes, diag)
+        cubes, diag = locate_in_images(
+            image, laser_image, calib, cfg, T_SB, calib.robot_base, log, prefix="locate"
+        )
     result = {
         "cubes": [c.summary() for c in cubes],
         "rejected": [r for r in diag["rejected"] if r["reason"] != "outside the search region"],
@@ -210,48 +231,35 @@ def cmd_locate(args: argparse.Namespace) -> int:
     return 0
 
 
-def load_cell(config: Path) -> tuple[dict[str, Any], Any]:
-    """The cell document and its devices (unconnected)."""
-    import tomllib
-
+def load_cell(config: Path, devices: bool = True) -> tuple[Any, Any]:
+    """The cell file's typed record and (unless `devices` is False) its devices, unconnected."""
+    from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.devices import open_devices
 
-    try:
-        doc = tomllib.loads(config.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{config}: cell configuration file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{config}: not valid TOML ({exc})") from None
-    return doc, open_devices(doc, config)
+    cell = load_cell_config(config)
+    return cell, open_devices(cell.devices) if devices else None
 
 
 def cmd_sort(args: argparse.Namespace) -> int:
+    from omnisort_hw.pipeline.calibration_source import FileCalibration, StoreCalibration
+    from omnisort_hw.pipeline.sort import Sorter
     from omnisort_hw.runlog import RunLog
-    from omnisort_hw.sorting import (
-        FileCalibration,
-        SimVerifier,
-        Sorter,
-        StoreCalibration,
-        configs_from_cell,
-    )
 
-    doc, devices = load_cell(args.config)
-    cfg, reg_cfg = configs_from_cell(doc, devices.arm, args.config.resolve().parent)
+    cell, devices = load_cell(args.config)
+    cfg, reg_cfg = resolve_sorting(cell.sorting, cell.registration, devices.scene)
     if devices.camera is None or devices.arm is None:
         raise ConfigError("[camera] and [arm] sections are needed to sort")
-    storage = doc.get("storage", {})
-    max_age = storage.get("max_age_days")
     if args.system is not None:
-        calibration: Any = FileCalibration(args.system, max_age or None)
+        calibration: Any = FileCalibration(args.system, cell.storage.max_age_days or None)
     else:
-        from omnisort_hw.storage import CalibrationStore, StorageConfig
+        from omnisort_hw.storage import CalibrationStore
 
-        store_cfg = StorageConfig.from_mapping(storage, args.config.resolve().parent)
-        store = CalibrationStore.from_config(store_cfg)
+        store = CalibrationStore.from_config(cell.storage)
         calibration = StoreCalibration(store)
     colors = [c.strip() for c in args.colors.split(",")] if args.colors else None
     if args.max is not None and args.max < 1:
         raise InputError(f"--max must be at least 1, got {args.max}")
+    verifier = devices.scene.verifier() if devices.scene is not None else None
     connected = []
     try:
         for dev in (devices.camera, devices.laser, devices.arm):
@@ -260,7 +268,6 @@ def cmd_sort(args: argparse.Namespace) -> int:
                 connected.append(dev)
         if args.system is None and store.expected_serial is None:
             store.expected_serial = devices.camera.serial
-        verifier = SimVerifier(devices.arm) if hasattr(devices.arm, "cell") else None
         if verifier is not None:
             verifier.start()
         with RunLog(args.log) as log:
@@ -274,7 +281,13 @@ def cmd_sort(args: argparse.Namespace) -> int:
                 log,
                 progress=None if args.json else _print_progress,
             )
-            report = sorter.run(args.max, colors, register=args.register, verifier=verifier)
+            report = sorter.run(
+                args.max,
+                colors,
+                register=args.register,
+                on_located=verifier.on_located if verifier is not None else None,
+                on_done=verifier.on_done if verifier is not None else None,
+            )
         if verifier is not None:
             verifier.stop()
     finally:
@@ -317,8 +330,8 @@ def _print_report(result: dict[str, Any], as_json: bool) -> None:
 
 
 def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
+    from omnisort_hw.evaluation.sorting import SUMMARY_KEYS, evaluate_sorting
     from omnisort_hw.fileio import atomic_write_json
-    from omnisort_hw.sorting import SUMMARY_KEYS, evaluate_sorting
 
     if args.scenes < 1:
         raise InputError(f"--scenes must be at least 1, got {args.scenes}")

@@ -25,10 +25,10 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from omnisort_hw.service.config import load_settings
+    from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.service.server import serve
 
-    settings = load_settings(args.config)
+    settings = load_cell_config(args.config)
     logging.basicConfig(
         level=settings.logging.level,
         stream=sys.stderr,

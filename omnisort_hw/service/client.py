@@ -10,7 +10,7 @@ import json
 import socket
 from typing import Any
 
-from omnisort_hw.service.config import DEFAULT_PORT
+from omnisort_hw.config.service import DEFAULT_PORT
 
 MAX_REPLY_BYTES = 256 * 1024 * 1024
 

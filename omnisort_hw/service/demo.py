@@ -24,8 +24,8 @@ SCENE = "sorting"
 def write_config(out: Path, width: int) -> Path:
     """A cell configuration for the simulated scene; [registration] as an installer measures
     it (here read from the scene file), [sorting] bins and obstacles from the scene."""
-    from omnisort_hw.sorting import sim_registration_config
     from sim_backend.scene import load_scene
+    from sim_backend.sort_harness import sim_registration_config
 
     reg = sim_registration_config(load_scene(SCENE))
     sim = f'backend = "sim"\nscene = "{SCENE}"\n'

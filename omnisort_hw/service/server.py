@@ -37,9 +37,10 @@ from typing import Any
 
 from omnisort_hw import __version__
 from omnisort_hw.cell import Cell
+from omnisort_hw.config.cell import CellConfig
+from omnisort_hw.config.service import ServiceConfig, is_loopback
 from omnisort_hw.errors import ConfigError, OmnisortError
 from omnisort_hw.service import protocol as proto
-from omnisort_hw.service.config import ServiceConfig, Settings, is_loopback
 from omnisort_hw.service.handlers import HANDLERS, Context
 from omnisort_hw.service.systemd import Notifier
 
@@ -745,7 +746,7 @@ def start_in_thread(service: Service, timeout_s: float = 10.0) -> RunningService
 
 
 def serve(
-    settings: Settings,
+    settings: CellConfig,
     host: str | None = None,
     port: int | None = None,
     cell: Cell | None = None,

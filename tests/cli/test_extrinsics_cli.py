@@ -123,7 +123,7 @@ def test_bad_input_fails_clearly_and_writes_nothing(
 def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Path) -> None:
     from omnisort_hw.core.checkerboard import BoardSpec
     from omnisort_hw.core.intrinsics import calibrate_images
-    from omnisort_hw.extrinsics_pipeline import calibrate_system
+    from omnisort_hw.pipeline.extrinsics import calibrate_system
 
     views = sorted((reference_dir / "intrinsics").glob("a*.jpg"))
     model = calibrate_images(
@@ -166,8 +166,8 @@ def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Pat
 def test_blue_cubes_and_bins_are_not_taken_for_markers() -> None:
     """The sorting cell has blue cubes and bins near the walls and the laser low over the
     floor: the calibration image of a real cell, not a bare target."""
-    from omnisort_hw.evaluation import truth_parameters
-    from omnisort_hw.extrinsics_pipeline import calibrate_system
+    from omnisort_hw.evaluation.table3 import truth_parameters
+    from omnisort_hw.pipeline.extrinsics import calibrate_system
     from sim_backend.scene import load_scene, sized
     from sim_backend.scene_images import render_scene
 

@@ -15,7 +15,8 @@ from drivers.modbus_laser import ModbusLaser, ModbusLaserConfig
 from drivers.serial_laser import SerialLaser, SerialLaserConfig
 from drivers.ur_arm import URArm, URArmConfig
 from drivers.v4l2_camera import V4L2Camera, V4L2CameraConfig
-from omnisort_hw.cell_config import load_device_config, parse_device_config
+from omnisort_hw.config.cell import load_cell_config
+from omnisort_hw.config.devices import parse_device_config
 from omnisort_hw.devices import open_devices, open_laser
 from omnisort_hw.errors import ConfigError
 
@@ -35,7 +36,7 @@ def error_key(text: str) -> str:
 
 
 def test_example_configuration_has_typed_device_sections() -> None:
-    cell = load_device_config(EXAMPLE)
+    cell = load_cell_config(EXAMPLE).devices
     assert isinstance(cell.camera.settings, V4L2CameraConfig)
     assert isinstance(cell.laser.settings, SerialLaserConfig)
     assert cell.laser.settings.line_ending == "\r\n"
@@ -115,17 +116,17 @@ def test_integers_are_accepted_for_numbers() -> None:
 def test_recorded_camera_paths_are_relative_to_the_config_file(tmp_path: Path) -> None:
     cfg = tmp_path / "cell.toml"
     cfg.write_text('[camera]\nbackend = "v4l2"\napi = "images"\ndevice = "rec/img_%03d.png"\n')
-    cell = load_device_config(cfg)
+    cell = load_cell_config(cfg).devices
     assert cell.camera.settings.device == str(tmp_path / "rec" / "img_%03d.png")
 
 
 def test_missing_and_malformed_files_are_config_errors(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="not found"):
-        load_device_config(tmp_path / "nope.toml")
+        load_cell_config(tmp_path / "nope.toml")
     bad = tmp_path / "bad.toml"
     bad.write_text("[laser\nbackend = ")
     with pytest.raises(ConfigError, match="not valid TOML"):
-        load_device_config(bad)
+        load_cell_config(bad)
 
 
 def test_factory_builds_unconnected_real_devices() -> None:

@@ -25,8 +25,8 @@ from omnisort_hw.core.cube_location import (
     silhouette,
 )
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.errors import ConfigError, InputError
-from omnisort_hw.sorting import SortConfig
 
 WIDTH = 960
 REGION = (-520.0, 520.0, 110.0, 1190.0)

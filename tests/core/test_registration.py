@@ -21,6 +21,7 @@ pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.frames import invert_pose, rpy_deg
+from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.core.registration import (
     order_corners,
     pose_error,
@@ -31,7 +32,7 @@ from omnisort_hw.core.registration import (
     tilt_prior_from_std,
 )
 from omnisort_hw.errors import FeatureNotFoundError, InputError
-from omnisort_hw.sorting import SortConfig, sim_registration_config
+from sim_backend.sort_harness import sim_registration_config
 
 WIDTH = 1280
 SORTING_OFFSET = (200.0, -180.0, 2.0, 180.0, 0.0, 90.0)
@@ -111,7 +112,7 @@ def test_registration_with_the_joint_calibration_of_the_same_image(parked: tuple
     """The whole chain from one image: the joint camera-laser calibration, then the robot.
     The registration may only be worse than on the truth by what the calibration's own
     rotation error carries to the base (about 1.8 m from the camera)."""
-    from omnisort_hw.extrinsics_pipeline import calibrate_system
+    from omnisort_hw.pipeline.extrinsics import calibrate_system
 
     image, truth, scene = parked
     true_calib = SystemCalibration.from_json(truth)

@@ -233,7 +233,7 @@ def test_reference_checkerboards(unity_boards: BoardsFeatures, unity_model: Ocam
 def test_reference_methods_all_return_a_calibration(
     unity: dict[str, np.ndarray], unity_model: OcamModel
 ) -> None:
-    from omnisort_hw.extrinsics_pipeline import calibrate_system
+    from omnisort_hw.pipeline.extrinsics import calibrate_system
 
     runs = [
         ("two_sided_target", "two-sided", "joint"),

@@ -13,7 +13,7 @@ import pytest
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.joint import calibrate_joint
 from omnisort_hw.core.extrinsics.paper import calibrate_paper
-from omnisort_hw.evaluation import features_from_truth, truth_parameters
+from omnisort_hw.evaluation.table3 import features_from_truth, truth_parameters
 
 pytest.importorskip("pybullet")
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw.cell import Cell, CellDevices
+from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.service.client import Client
-from omnisort_hw.service.config import ServiceConfig
 from omnisort_hw.service.server import RunningService, Service, start_in_thread
 from tests.service.fakes import Journal, make_cell
 

@@ -12,7 +12,7 @@ import logging
 import sys
 from pathlib import Path
 
-from omnisort_hw.service.config import ServiceConfig
+from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.service.server import Service
 from omnisort_hw.service.systemd import Notifier
 from tests.service.fakes import make_cell

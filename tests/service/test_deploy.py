@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from omnisort_hw.service.config import Settings
+from omnisort_hw.config.cell import CellConfig
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 UNIT = DEPLOY / "omnisort.service"
@@ -18,7 +18,7 @@ UNIT = DEPLOY / "omnisort.service"
 
 def test_example_config_parses_and_documents_every_key() -> None:
     text = (DEPLOY / "cell.example.toml").read_text()
-    settings = Settings.from_mapping(tomllib.loads(text))
+    settings = CellConfig.from_mapping(tomllib.loads(text))
     assert settings.service.host == "127.0.0.1"
     lines = text.splitlines()
     section = None

@@ -109,10 +109,10 @@ def _polyline_samples(polylines: list[dict], step_mm: float = 2.0) -> np.ndarray
 
 def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
     from omnisort_hw.core.camera_model import OcamModel
-    from omnisort_hw.sorting import sim_registration_config
     from sim_backend.dataset import checkerboard_views
     from sim_backend.scene import load_scene, sized
     from sim_backend.scene_images import camera_model_for, render_scene
+    from sim_backend.sort_harness import sim_registration_config
 
     views = tmp_path / "views"
     checkerboard_views(views, n=10, seed=1, width=WIDTH, progress=False)

@@ -6,9 +6,10 @@ import json
 
 import pytest
 
+from omnisort_hw.config.cell import CellConfig
+from omnisort_hw.config.service import ServiceConfig, is_loopback
 from omnisort_hw.errors import ConfigError
 from omnisort_hw.service import protocol as proto
-from omnisort_hw.service.config import ServiceConfig, Settings, is_loopback
 
 
 def parse(obj: object) -> proto.Request:
@@ -165,7 +166,7 @@ def test_loopback_and_token_config() -> None:
     cfg = ServiceConfig.from_mapping({"host": "0.0.0.0", "token": "s" * 20, "port": 1234})
     assert cfg.token_required and cfg.port == 1234
     with pytest.raises(ConfigError, match="unknown"):
-        Settings.from_mapping({"service": {"hots": "x"}})
+        CellConfig.from_mapping({"service": {"hots": "x"}})
 
 
 def test_token_file(tmp_path) -> None:

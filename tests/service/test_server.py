@@ -196,8 +196,8 @@ def test_token_rules(make_service) -> None:
 
 
 def test_non_loopback_needs_a_token(tmp_path) -> None:
+    from omnisort_hw.config.service import ServiceConfig
     from omnisort_hw.errors import ConfigError
-    from omnisort_hw.service.config import ServiceConfig
     from omnisort_hw.service.server import Service
     from tests.service.fakes import make_cell
 

@@ -17,7 +17,6 @@ out means the cell has no such device (None). Other sections ([service], ...) ar
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 import types
 import typing
 from collections.abc import Mapping
@@ -202,22 +201,6 @@ def parse_device_config(doc: Mapping[str, Any], base_dir: Path | None = None) ->
     return CellDeviceConfig(**found, base_dir=base_dir)
 
 
-def load_device_config(path: str | Path) -> CellDeviceConfig:
-    """Read a cell TOML file and return its device sections."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: cell configuration file not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the cell configuration ({exc.strerror})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
-    return parse_device_config(doc, p.resolve().parent)
-
-
 __all__ = [
     "BACKENDS",
     "DEVICE_SECTIONS",
@@ -225,7 +208,6 @@ __all__ = [
     "DeviceSection",
     "build_config",
     "config_error",
-    "load_device_config",
     "parse_device_config",
     "parse_device_section",
 ]

@@ -153,7 +153,7 @@ def mapping_errors(calib: SystemCalibration, truth_sys: SystemCalibration) -> np
 def _calibrate(
     method: str, scene: str, image_path: Path, model: OcamModel, truth: dict[str, Any]
 ) -> Any:
-    from omnisort_hw.extrinsics_pipeline import calibrate_system, read_image
+    from omnisort_hw.pipeline.extrinsics import calibrate_system, read_image
 
     image = read_image(image_path)
     target = TARGET_OF[scene]

@@ -1,20 +1,14 @@
-"""The `[service]`, `[storage]` and `[logging]` sections of the cell configuration (TOML).
-
-The device sections (`[camera]`, `[laser]`, `[arm]`) belong to `omnisort_hw.cell_config`; this
-module reads only its own sections and keeps the whole parsed document for the cell.
-"""
+"""The `[service]` and `[logging]` sections of the cell file (the whole file: `config.cell`)."""
 
 from __future__ import annotations
 
 import ipaddress
-import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from omnisort_hw.errors import ConfigError
-from omnisort_hw.storage import StorageConfig
 
 DEFAULT_PORT = 29100
 LOOPBACK_NAMES = frozenset({"localhost", "ip6-localhost"})
@@ -181,49 +175,3 @@ class LoggingConfig:
             rrd_max_file_mb=_number(section, name, "rrd_max_file_mb", 512.0, 1.0),
             level=level,
         )
-
-
-@dataclass(frozen=True)
-class Settings:
-    """The whole cell configuration: this module's sections parsed, the rest kept raw."""
-
-    path: Path | None
-    service: ServiceConfig
-    storage: StorageConfig
-    logging: LoggingConfig
-    raw: dict[str, Any] = field(default_factory=dict)
-
-    @classmethod
-    def from_mapping(cls, doc: Mapping[str, Any], path: Path | None = None) -> Settings:
-        """Parse a TOML document already loaded; relative paths are relative to its folder."""
-        base = path.parent if path is not None else None
-        sections = {}
-        for key in ("service", "storage", "logging"):
-            value = doc.get(key, {})
-            if not isinstance(value, Mapping):
-                raise ConfigError(f"[{key}] must be a table")
-            sections[key] = value
-        return cls(
-            path=path,
-            service=ServiceConfig.from_mapping(sections["service"], base),
-            storage=StorageConfig.from_mapping(sections["storage"], base),
-            logging=LoggingConfig.from_mapping(sections["logging"], base),
-            raw=dict(doc),
-        )
-
-
-def load_settings(path: str | Path) -> Settings:
-    """Read the cell configuration file; ConfigError names the file and the problem."""
-    p = Path(path)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: configuration file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: cannot be read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
-    try:
-        return Settings.from_mapping(doc, p.resolve())
-    except ConfigError as exc:
-        raise ConfigError(f"{p}: {exc}") from None

@@ -1,4 +1,6 @@
-"""Image -> features -> system calibration, for the CLI, the service and the evaluation.
+"""Extrinsic calibration: one target image -> features -> camera rotation and laser plane.
+
+One use case for the CLI (`omnisort extrinsics calibrate`), the service and the evaluation.
 
 Picks the extractor for the target and the method (the best one for the target by default),
 checks the image against the camera model, and logs what it saw and produced.
@@ -110,6 +112,14 @@ def calibrate_system(
         calib = solver(features, model, separation_mm)
     _log_calibration(log, calib)
     return calib
+
+
+def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> dict[str, Any]:
+    """The system.json payload of a calibration made from the image `image` (its record)."""
+    calib.image = image
+    payload = calib.to_json()
+    payload["elapsed_s"] = round(calib.elapsed_s, 4)
+    return payload
 
 
 def _log_calibration(log: RunLog, calib: SystemCalibration) -> None:

@@ -1,0 +1,134 @@
+"""The cell file, loaded once at start into one typed record (`CellConfig`).
+
+Every section is parsed and validated here, so a wrong key stops `omnisort serve` (and every
+command that reads the file) at start with the file and the key in the message:
+
+    [service] [logging]          -> omnisort_hw.config.service
+    [storage]                    -> omnisort_hw.storage.StorageConfig
+    [camera] [laser] [arm]       -> omnisort_hw.config.devices
+    [sorting] [registration]     -> omnisort_hw.config.sorting
+    [target]                     -> TargetConfig (the extrinsic calibration's defaults)
+
+Relative paths resolve against the file's own folder, never the working directory (systemd
+starts the service from /).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omnisort_hw.config.devices import CellDeviceConfig, parse_device_config
+from omnisort_hw.config.service import LoggingConfig, ServiceConfig
+from omnisort_hw.config.sorting import (
+    RegistrationConfig,
+    SortSection,
+    parse_registration_config,
+    parse_sort_section,
+)
+from omnisort_hw.errors import ConfigError
+from omnisort_hw.pipeline.extrinsics import TARGETS
+from omnisort_hw.storage import StorageConfig
+
+SECTIONS = (
+    "service",
+    "storage",
+    "logging",
+    "camera",
+    "laser",
+    "arm",
+    "target",
+    "sorting",
+    "registration",
+)
+
+
+@dataclass(frozen=True)
+class TargetConfig:
+    """`[target]`: the calibration target's kind and wall separation (mm), as defaults for
+    `calibrate what=extrinsics`."""
+
+    kind: str | None = None
+    separation_mm: float | None = None
+
+    @classmethod
+    def from_mapping(cls, section: Mapping[str, Any]) -> TargetConfig:
+        unknown = sorted(set(section) - {"kind", "separation_mm"})
+        if unknown:
+            raise ConfigError(f"[target].{unknown[0]}: unknown key (known: kind, separation_mm)")
+        kind = section.get("kind")
+        if kind is not None and kind not in TARGETS:
+            raise ConfigError(f"[target].kind: one of {', '.join(TARGETS)}, got {kind!r}")
+        sep = section.get("separation_mm")
+        if sep is not None and (
+            isinstance(sep, bool) or not isinstance(sep, int | float) or not sep > 0
+        ):
+            raise ConfigError(f"[target].separation_mm: expected a positive number, got {sep!r}")
+        return cls(kind, float(sep) if sep is not None else None)
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """Every section of the cell file, parsed; `path` is the file (None when built in code)."""
+
+    path: Path | None = None
+    service: ServiceConfig = field(default_factory=ServiceConfig)
+    storage: StorageConfig = field(default_factory=lambda: StorageConfig.from_mapping({}))
+    logging: LoggingConfig = field(default_factory=LoggingConfig)
+    devices: CellDeviceConfig = field(default_factory=CellDeviceConfig)
+    target: TargetConfig = field(default_factory=TargetConfig)
+    sorting: SortSection | None = None
+    registration: RegistrationConfig | None = None
+
+    @property
+    def base_dir(self) -> Path | None:
+        """The folder relative paths of the file are resolved against."""
+        return self.path.parent if self.path is not None else None
+
+    @classmethod
+    def from_mapping(cls, doc: Mapping[str, Any], path: Path | None = None) -> CellConfig:
+        """Parse a TOML document already loaded; relative paths are relative to its folder."""
+        base = path.parent if path is not None else None
+        unknown = sorted(set(doc) - set(SECTIONS))
+        if unknown:
+            raise ConfigError(f"[{unknown[0]}]: unknown section (known: {', '.join(SECTIONS)})")
+        tables: dict[str, Mapping[str, Any]] = {}
+        for key in SECTIONS:
+            value = doc.get(key, {})
+            if not isinstance(value, Mapping):
+                raise ConfigError(f"[{key}] must be a table")
+            tables[key] = value
+        return cls(
+            path=path,
+            service=ServiceConfig.from_mapping(tables["service"], base),
+            storage=StorageConfig.from_mapping(tables["storage"], base),
+            logging=LoggingConfig.from_mapping(tables["logging"], base),
+            devices=parse_device_config(doc, base),
+            target=TargetConfig.from_mapping(tables["target"]),
+            sorting=parse_sort_section(doc["sorting"], base) if "sorting" in doc else None,
+            registration=(
+                parse_registration_config(doc["registration"]) if "registration" in doc else None
+            ),
+        )
+
+
+def load_cell_config(path: str | Path) -> CellConfig:
+    """Read and validate the cell file; ConfigError names the file and the key."""
+    p = Path(path)
+    try:
+        doc = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: cell configuration file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: cannot be read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    try:
+        return CellConfig.from_mapping(doc, p.resolve())
+    except ConfigError as exc:
+        err = ConfigError(f"{p}: {exc}")
+        err.key = getattr(exc, "key", None)  # type: ignore[attr-defined]
+        raise err from None

@@ -1,0 +1,127 @@
+"""Where a use case gets the system calibration, and the gate every motion passes.
+
+`check_motion_allowed` refuses motion (MotionRefusedError) unless the calibration is present,
+intact, recent enough and has the robot registered: the service's store, a system.json file
+(plain or written by the store), or one held in memory (evaluation, tests).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.errors import CalibrationFileError, MotionRefusedError
+
+
+class CalibrationSource:
+    """Where the pipeline gets the system calibration, and the gate every motion passes."""
+
+    def check_motion_allowed(self) -> None:
+        raise NotImplementedError
+
+    def system(self) -> SystemCalibration:
+        raise NotImplementedError
+
+
+class StoreCalibration(CalibrationSource):
+    """The service's calibration store (checksums, age, camera serial)."""
+
+    def __init__(self, store: Any) -> None:
+        self.store = store
+
+    def check_motion_allowed(self) -> None:
+        self.store.check_motion_allowed()
+
+    def system(self) -> SystemCalibration:
+        rec = self.store.read("system")
+        return SystemCalibration.from_json(rec.payload, source=str(rec.path))
+
+
+class FileCalibration(CalibrationSource):
+    """A system.json file (plain, or written by the store: then its checksum is verified); it
+    must parse and be no older than `max_age_days` (from its save or creation time)."""
+
+    def __init__(self, path: str | Path, max_age_days: float | None = None) -> None:
+        self.path = Path(path)
+        self.max_age_days = max_age_days
+
+    def _payload(self) -> dict[str, Any]:
+        if not self.path.is_file():
+            raise CalibrationFileError(f"{self.path}: system calibration file not found")
+        try:
+            raw = json.loads(self.path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise CalibrationFileError(f"{self.path}: corrupt, not valid JSON ({exc})") from None
+        if not isinstance(raw, dict):
+            raise CalibrationFileError(f"{self.path}: corrupt, top level is not a JSON object")
+        if "checksum" in raw:
+            from omnisort_hw.storage import read_calibration_file
+
+            rec = read_calibration_file(self.path, "system")
+            payload = dict(rec.payload)
+            payload["_saved"] = rec.saved.isoformat()
+            return payload
+        return raw
+
+    def check_motion_allowed(self) -> None:
+        try:
+            payload = self._payload()
+            SystemCalibration.from_json(payload, source=str(self.path))
+        except CalibrationFileError as exc:
+            raise MotionRefusedError(f"motion refused: calibration not usable: {exc}") from None
+        if self.max_age_days is None:
+            return
+        stamp = payload.get("_saved") or payload.get("created")
+        try:
+            when = datetime.fromisoformat(str(stamp))
+        except ValueError:
+            raise MotionRefusedError(
+                f"motion refused: {self.path}: no valid creation time ('created'), so its age "
+                "cannot be checked"
+            ) from None
+        if when.tzinfo is None:
+            when = when.replace(tzinfo=UTC)
+        age = (datetime.now(UTC) - when).total_seconds() / 86400.0
+        if age > self.max_age_days:
+            raise MotionRefusedError(
+                f"motion refused: {self.path} is {age:.1f} days old, older than "
+                f"{self.max_age_days:g} days; recalibrate"
+            )
+
+    def system(self) -> SystemCalibration:
+        payload = self._payload()
+        payload.pop("_saved", None)
+        return SystemCalibration.from_json(payload, source=str(self.path))
+
+
+class MemoryCalibration(CalibrationSource):
+    """A calibration held in memory (evaluation and tests); always usable."""
+
+    def __init__(self, calib: SystemCalibration) -> None:
+        self.calib = calib
+
+    def check_motion_allowed(self) -> None:
+        return None
+
+    def system(self) -> SystemCalibration:
+        return self.calib
+
+
+def robot_base_T(calib: SystemCalibration, source: str = "system.json") -> np.ndarray:
+    """T_SB from the calibration's `robot_base`, or MotionRefusedError if not registered."""
+    rb = calib.robot_base
+    if not isinstance(rb, Mapping) or "matrix" not in rb:
+        raise MotionRefusedError(
+            f"motion refused: {source} has no robot_base: register the robot first "
+            "(omnisort register-robot, or the register_robot command)"
+        )
+    T = np.asarray(rb["matrix"], float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise MotionRefusedError(f"motion refused: {source}: robot_base.matrix is not a 4x4 pose")
+    return T

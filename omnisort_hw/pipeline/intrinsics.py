@@ -1,0 +1,84 @@
+"""Intrinsic calibration: checkerboard images -> the camera's OCamCalib model and its record.
+
+One use case for the CLI (`omnisort intrinsics calibrate`) and the service
+(`calibrate what=intrinsics`): read the images (every one must be readable, or nothing is
+done), calibrate with the core, and build the camera.json record once.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from omnisort_hw.core.checkerboard import BoardSpec
+from omnisort_hw.core.intrinsics import IntrinsicResult, calibrate_images
+from omnisort_hw.errors import InputError, MotionRefusedError
+from omnisort_hw.runlog import NullLog, RunLog
+
+IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
+
+
+@dataclass
+class IntrinsicCalibration:
+    """The core's result and the record camera.json stores with the model."""
+
+    result: IntrinsicResult
+    record: dict[str, Any]
+
+
+def image_files(folder: str | Path) -> list[Path]:
+    """The image files of `folder`, sorted by name; InputError when there are none."""
+    path = Path(folder)
+    if not path.is_dir():
+        raise InputError(f"{path}: no such folder")
+    files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    if not files:
+        raise InputError(f"{path}: no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+    return files
+
+
+def read_images(
+    paths: Sequence[Path], cancel: threading.Event | None = None
+) -> list[tuple[str, np.ndarray]]:
+    """Read every image or fail naming the first unreadable one (nothing is written then)."""
+    images = []
+    for path in paths:
+        if cancel is not None and cancel.is_set():
+            raise MotionRefusedError("calibration cancelled")
+        if not path.is_file():
+            raise InputError(f"{path}: no such image file")
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if image is None:
+            raise InputError(f"{path}: not a readable image (unknown format or corrupt)")
+        images.append((str(path), image))
+    return images
+
+
+def calibrate_intrinsics(
+    images: list[tuple[str, np.ndarray]],
+    board: BoardSpec,
+    degree: int | None = None,
+    on_detected: Callable[[str], None] | None = None,
+    log: RunLog = NullLog,
+) -> IntrinsicCalibration:
+    """Calibrate from (name, image) pairs; the record holds the board and the creation time."""
+    result = calibrate_images(images, board, degree=degree, on_detected=on_detected, log=log)
+    record = {
+        **result.record(),
+        "board": {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm},
+        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    log.scalar("calibration/intrinsics/rms_px", result.rms_px)
+    log.text(
+        "calibration/intrinsics/parameters",
+        json.dumps({"model": result.model.to_dict(), "std": result.std}, indent=1, default=str),
+    )
+    return IntrinsicCalibration(result, record)

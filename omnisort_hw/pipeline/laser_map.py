@@ -1,0 +1,54 @@
+"""Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> straight segments.
+
+One use case for the CLI (`omnisort map`) and the service (`map`), logged the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.laser_stripe import laser_stripe_points
+from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
+from omnisort_hw.pipeline.extrinsics import check_image_size
+from omnisort_hw.runlog import NullLog, RunLog
+
+
+@dataclass
+class LaserMap:
+    """The stripe's pixels, their points on the laser plane (NaN where a ray misses it) and
+    the segments fitted to the points."""
+
+    pixels: np.ndarray
+    points_S: np.ndarray
+    segments: list[Segment]
+
+    @property
+    def finite_points_S(self) -> np.ndarray:
+        return self.points_S[np.all(np.isfinite(self.points_S), axis=1)]
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "points": len(self.pixels),
+            "points_on_plane": len(self.finite_points_S),
+            "segments": [seg.summary() for seg in self.segments],
+        }
+
+
+def map_laser(
+    image: np.ndarray, calib: SystemCalibration, source: str = "image", log: RunLog = NullLog
+) -> LaserMap:
+    """The laser map of one laser-on image (its size must match the camera model)."""
+    check_image_size(image, calib.model, source)
+    pixels = laser_stripe_points(image)
+    points = pixels_to_plane(pixels, calib)
+    result = LaserMap(pixels, points, segments(points, calib))
+    log.image("map/image", image)
+    log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
+    log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))
+    for i, seg in enumerate(result.segments):
+        log.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
+    return result

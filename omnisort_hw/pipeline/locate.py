@@ -1,0 +1,106 @@
+"""Cube location: the cubes in a colour image (and a laser-on image), in S and in B.
+
+One use case for the CLI (`omnisort locate`), the service (`locate`) and the sorting run: the
+`[sorting]` record gives the cube size, the colours, the search region and the floor height,
+the calibration gives the camera, the laser plane and the robot base; the floor board's area
+is left out (its squares are not cubes).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from omnisort_hw.core.cube_location import Cube, locate_cubes
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.laser_stripe import laser_stripe_points
+from omnisort_hw.core.mapping import pixels_to_plane
+from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.core.registration import Registration
+from omnisort_hw.runlog import NullLog, RunLog
+
+
+@dataclass
+class Located:
+    """The result of one capture + location: cubes and what was needed to find them."""
+
+    cubes: list[Cube]
+    T_SB: np.ndarray
+    calib: SystemCalibration
+    registration: Registration | None
+    diagnostics: dict[str, Any]
+    image: np.ndarray = field(repr=False)
+
+
+def locate_in_images(
+    colour: np.ndarray,
+    laser_image: np.ndarray | None,
+    calib: SystemCalibration,
+    cfg: SortConfig,
+    T_SB: np.ndarray,
+    robot_base: Mapping[str, Any] | None,
+    log: RunLog = NullLog,
+    prefix: str = "sorting",
+) -> tuple[list[Cube], dict[str, Any]]:
+    """The cubes in `colour` (laser off) with the laser-on image's stripe as height check;
+    `robot_base` is the registration record (its board area is excluded)."""
+    lp = None
+    if laser_image is not None:
+        px = laser_stripe_points(laser_image)
+        lp = pixels_to_plane(px, calib)
+        log.points2d(f"{prefix}/laser_image/stripe", px, color=(255, 0, 0), radius=1)
+    settings = cfg.locate_settings(board_exclusion(robot_base))
+    if settings.region_S_mm is None:
+        settings = replace(settings, region_S_mm=default_region(calib.target))
+    cubes, diag = locate_cubes(colour, calib.model, calib.R_SC, T_SB, cfg.colors, settings, lp)
+    log_cubes(log, prefix, cubes, diag)
+    return cubes, diag
+
+
+def board_exclusion(
+    robot_base: Mapping[str, Any] | None,
+) -> list[tuple[float, float, float, float]]:
+    """The floor board's area in S (objects there are the board's squares), if known."""
+    if not isinstance(robot_base, Mapping) or "board_extent_S_mm" not in robot_base:
+        return []
+    ext = robot_base["board_extent_S_mm"]
+    return [tuple(float(v) for v in ext)]  # type: ignore[list-item]
+
+
+def default_region(target: Mapping[str, Any]) -> tuple[float, float, float, float] | None:
+    """Between the target's walls (from the calibration's target record), 20 mm inside them."""
+    left = target.get("wall_left_x_mm")
+    right = target.get("wall_right_x_mm")
+    if left is None or right is None:
+        sep = target.get("separation_mm")
+        centre = target.get("center_mm", [0.0, 0.0])
+        if sep is None:
+            return None
+        left, right = centre[0] - sep / 2.0, centre[0] + sep / 2.0
+    y0, y1 = -1e9, 1e9
+    if "length_mm" in target and "center_mm" in target:
+        y0 = target["center_mm"][1] - target["length_mm"] / 2.0
+        y1 = target["center_mm"][1] + target["length_mm"] / 2.0
+    return (float(left) + 20.0, float(right) - 20.0, float(y0), float(y1))
+
+
+def log_cubes(log: RunLog, prefix: str, cubes: Sequence[Cube], diag: Mapping[str, Any]) -> None:
+    """Colour masks, blob outlines and cube centres of a location."""
+    if not log.enabled:
+        return
+    masks = diag.get("masks", {})
+    for name, m in masks.items():
+        log.image(f"{prefix}/masks/{name}", m, bgr=False)
+    strips = [c.outline_px for c in cubes if c.outline_px is not None]
+    if strips:
+        log.points2d(
+            f"{prefix}/image/outlines", np.concatenate(strips), color=(255, 255, 0), radius=0.5
+        )
+    if cubes:
+        log.points3d(f"{prefix}/cubes_S", np.array([c.center_S for c in cubes]), radius=20.0)
+        log.points3d(f"{prefix}/cubes_B", np.array([c.center_B for c in cubes]), radius=20.0)
+    log.text(f"{prefix}/cubes", json.dumps([c.summary() for c in cubes], indent=1))

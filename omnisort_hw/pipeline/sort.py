@@ -1,0 +1,452 @@
+"""Sorting: capture, locate the cubes, plan and execute one pick-and-place per cube.
+
+The run talks to the cell only through the device interfaces (`drivers.base`: Camera,
+LaserSwitch, Arm with its Gripper), so it runs the same on the simulated and the real cell.
+Planning is the core's (`core.pick_planning`): every move of a pick is planned and
+collision-checked before the first move of that pick is sent; cubes that cannot be sorted are
+reported with the reason and never approached. Motion is refused unless the calibration is
+usable (present, intact, recent, robot registered: `pipeline.calibration_source`).
+
+Whoever knows more than the devices show (the simulated cell knows the truth) joins through
+the callbacks `on_located` and `on_done` of `Sorter.run`; the run itself never reads truth.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+from omnisort_hw.config.sorting import RegistrationConfig, SortSection
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.pick_planning import BLOCKED, Move, PickPlan, Planner, SortConfig
+from omnisort_hw.errors import ConfigError, MotionRefusedError
+from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
+from omnisort_hw.pipeline.locate import Located, locate_in_images
+from omnisort_hw.pipeline.registration import register_from_image
+from omnisort_hw.runlog import NullLog, RunLog
+
+if TYPE_CHECKING:
+    from drivers.base import Arm, Camera, LaserSwitch
+
+JOINT_AT_TOLERANCE_DEG = 0.5
+
+
+class SortVerifier(Protocol):
+    """Checks a run against what the cell really did (the simulated cell's truth)."""
+
+    def start(self) -> None: ...
+
+    def stop(self) -> None: ...
+
+    def on_located(self, loc: Located) -> None: ...
+
+    def on_done(self, report: SortReport, loc: Located) -> None: ...
+
+
+class SceneLayout(Protocol):
+    """What a backend that knows its scene tells the sorting (the simulated cell does)."""
+
+    def sort_config(self, base: SortConfig) -> SortConfig: ...
+
+    def registration_config(self) -> RegistrationConfig: ...
+
+    def verifier(self) -> SortVerifier: ...
+
+
+def resolve_sorting(
+    section: SortSection | None,
+    registration: RegistrationConfig | None,
+    scene: SceneLayout | None,
+) -> tuple[SortConfig, RegistrationConfig | None]:
+    """The `[sorting]` and `[registration]` records to sort with; `from_scene` takes what the
+    file leaves out from the scene of the cell's backend (and its floor board, when there is
+    no `[registration]`)."""
+    if section is None:
+        raise ConfigError(
+            "[sorting]: missing; the sorting pipeline needs it (bins, obstacles, cube size, "
+            "home pose; or from_scene = true on the simulated cell)"
+        )
+    cfg = section.resolve(scene.sort_config(SortConfig()) if scene is not None else None)
+    if registration is None and section.from_scene and scene is not None:
+        registration = scene.registration_config()
+    return cfg, registration
+
+
+def _finite(value: float, digits: int) -> float | None:
+    """A rounded number for JSON, None when it is not finite (strict JSON has no NaN)."""
+    return round(float(value), digits) if math.isfinite(value) else None
+
+
+@dataclass
+class CubeOutcome:
+    """What happened to one located cube."""
+
+    index: int
+    color: str
+    center_S_mm: list[float]
+    center_B_mm: list[float]
+    yaw_B_deg: float
+    sigma_mm: float
+    status: str  # "sorted" (placed), "skipped" (refused before motion), "failed"
+    reason: str = ""
+    bin: str | None = None
+    motion_s: float = 0.0
+    error_mm: float | None = None  # filled by a verifier
+    in_right_bin: bool | None = None  # filled by a verifier
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {
+            "index": self.index,
+            "color": self.color,
+            "center_S_mm": [_finite(v, 2) for v in self.center_S_mm],
+            "center_B_mm": [_finite(v, 2) for v in self.center_B_mm],
+            "yaw_B_deg": _finite(self.yaw_B_deg, 2),
+            "sigma_mm": _finite(self.sigma_mm, 3),
+            "status": self.status,
+            "reason": self.reason,
+            "bin": self.bin,
+            "motion_s": round(self.motion_s, 3),
+        }
+        if self.error_mm is not None:
+            out["error_mm"] = round(self.error_mm, 3)
+        if self.in_right_bin is not None:
+            out["in_right_bin"] = self.in_right_bin
+        return out
+
+
+@dataclass
+class SortReport:
+    """Per-cube outcomes and totals of one sorting run."""
+
+    outcomes: list[CubeOutcome]
+    registration: dict[str, Any] | None = None
+    rejected_blobs: int = 0
+    wall_s: float = 0.0
+    verified: bool = False
+    collisions: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def totals(self) -> dict[str, Any]:
+        picked = [o for o in self.outcomes if o.status == "sorted"]
+        out: dict[str, Any] = {
+            "cubes": len(self.outcomes),
+            "sorted": len(picked),
+            "skipped": sum(o.status == "skipped" for o in self.outcomes),
+            "failed": sum(o.status == "failed" for o in self.outcomes),
+            "motion_s": round(sum(o.motion_s for o in self.outcomes), 3),
+            "motion_s_per_pick": round(sum(o.motion_s for o in picked) / len(picked), 3)
+            if picked
+            else None,
+            "wall_s": round(self.wall_s, 3),
+        }
+        if self.verified:
+            out["sorted_ok"] = sum(bool(o.in_right_bin) for o in self.outcomes)
+            errs = [o.error_mm for o in self.outcomes if o.error_mm is not None]
+            out["mean_position_error_mm"] = round(float(np.mean(errs)), 3) if errs else None
+            out["collisions"] = self.collisions
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "cubes": [o.to_dict() for o in self.outcomes],
+            "totals": self.totals(),
+            "registration": self.registration,
+            "rejected_blobs": self.rejected_blobs,
+            **self.extra,
+        }
+
+
+class Sorter:
+    """Runs the sorting cell through its device interfaces (see module docstring)."""
+
+    def __init__(
+        self,
+        camera: Camera,
+        arm: Arm | None,
+        laser: LaserSwitch | None,
+        calibration: CalibrationSource,
+        cfg: SortConfig,
+        registration: RegistrationConfig | None = None,
+        log: RunLog = NullLog,
+        cancel: threading.Event | None = None,
+        progress: Callable[[dict[str, Any]], None] | None = None,
+    ) -> None:
+        self.camera = camera
+        self.arm = arm
+        self.laser = laser
+        self.calibration = calibration
+        self.cfg = cfg
+        self.registration = registration
+        self.log = log
+        self.cancel = cancel or threading.Event()
+        self.progress = progress
+        self._executed: list[np.ndarray] = []
+
+    # -- capture and location -------------------------------------------------------------
+
+    def capture(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """A laser-off colour image and, with a laser switch and `use_laser`, a laser-on one."""
+        laser_img = None
+        if self.laser is not None:
+            self.laser.off()
+        colour = self.camera.grab().image
+        if self.laser is not None and self.cfg.use_laser:
+            self.laser.on()
+            try:
+                laser_img = self.camera.grab().image
+            finally:
+                self.laser.off()
+        self.log.image("sorting/image", colour)
+        if laser_img is not None:
+            self.log.image("sorting/laser_image", laser_img)
+        return colour, laser_img
+
+    def locate(
+        self,
+        images: tuple[np.ndarray, np.ndarray | None] | None = None,
+        register: bool = False,
+        calib: SystemCalibration | None = None,
+    ) -> Located:
+        """Capture (or use `images`), optionally register the robot, and locate the cubes."""
+        calib = calib or self.calibration.system()
+        t0 = time.perf_counter()
+        colour, laser_img = images if images is not None else self.capture()
+        t1 = time.perf_counter()
+        reg = None
+        if register:
+            if self.registration is None:
+                raise ConfigError("[registration]: needed to register the robot from the image")
+            reg = register_from_image(colour, calib, self.registration, self.log)
+            T_SB = reg.T_SB
+        else:
+            T_SB = robot_base_T(calib)
+        t2 = time.perf_counter()
+        robot_base = reg.record() if reg else calib.robot_base
+        cubes, diag = locate_in_images(
+            colour, laser_img, calib, self.cfg, T_SB, robot_base, self.log
+        )
+        diag["timings_s"] = {
+            "capture": t1 - t0,
+            "register": t2 - t1,
+            "locate": time.perf_counter() - t2,
+        }
+        return Located(cubes, T_SB, calib, reg, diag, colour)
+
+    # -- the run ----------------------------------------------------------------------------
+
+    def _require_arm(self) -> Arm:
+        if self.arm is None:
+            raise MotionRefusedError("sort: no arm in this cell's configuration ([arm] section)")
+        return self.arm
+
+    def _at(self, q: np.ndarray) -> bool:
+        arm = self._require_arm()
+        cur = np.asarray(arm.joint_positions(), float)
+        return bool(np.max(np.abs(cur - q)) <= JOINT_AT_TOLERANCE_DEG)
+
+    def _planner(self, T_SB: np.ndarray) -> Planner:
+        arm = self._require_arm()
+        lim = arm.limits
+        joint_lim = np.stack([np.asarray(lim.joint_min_deg), np.asarray(lim.joint_max_deg)], 1)
+        return Planner(self.cfg, T_SB, joint_lim, lim.check_position)
+
+    def run(
+        self,
+        max_objects: int | None = None,
+        colors: Sequence[str] | None = None,
+        register: bool = False,
+        on_located: Callable[[Located], None] | None = None,
+        on_done: Callable[[SortReport, Located], None] | None = None,
+    ) -> SortReport:
+        """Sort every cube found (or `max_objects`, or only `colors`); returns the report.
+
+        `on_located` is called once the cubes are located (before any pick), `on_done` with
+        the report before it is returned (a harness that knows the truth fills it in there)."""
+        t0 = time.perf_counter()
+        arm = self._require_arm()
+        self.calibration.check_motion_allowed()
+        arm.safety_status().raise_if_stopped(arm.name)
+        calib = self.calibration.system()
+        home = np.asarray(self.cfg.home_deg, float)
+        if not register:
+            T_SB = robot_base_T(calib)
+            if not self._at(home):
+                self._go_home(self._planner(T_SB))
+            loc = self.locate(calib=calib)
+        else:
+            loc = self.locate(calib=calib, register=True)
+            if not self._at(home):
+                self._go_home(self._planner(loc.T_SB))
+                loc = self.locate(calib=calib, register=True)
+        if on_located is not None:
+            on_located(loc)
+        t_plan = time.perf_counter()
+        planner = self._planner(loc.T_SB)
+        outcomes: list[CubeOutcome] = []
+        plans: list[PickPlan] = []
+        for i, cube in enumerate(loc.cubes):
+            others = [c for c in loc.cubes if c is not cube]
+            if colors is not None and cube.color not in colors:
+                plan = PickPlan(cube, self.cfg.bin_for(cube.color))
+                plan.refused = f"colour {cube.color!r} not requested"
+            else:
+                plan = planner.plan_pick(cube, others, home)
+            planner.commit(plan)
+            plans.append(plan)
+            outcomes.append(
+                CubeOutcome(
+                    i,
+                    cube.color,
+                    cube.center_S.tolist(),
+                    cube.center_B.tolist(),
+                    cube.yaw_B_deg,
+                    cube.sigma_mm,
+                    "skipped" if plan.refused else "planned",
+                    plan.refused or "",
+                    plan.bin.color if plan.bin else None,
+                )
+            )
+            self.log.event(
+                "sorting/plan",
+                f"cube {i} ({cube.color}): "
+                + (f"refused: {plan.refused}" if plan.refused else f"{plan.duration_s:.1f} s"),
+                level="WARN" if plan.refused else "INFO",
+            )
+        # Pick what can be picked; then re-plan the cubes that only another cube blocked
+        # (it may be gone now), until nothing changes. A re-plan is still a full plan made
+        # before the first move towards that cube.
+        t_exec = time.perf_counter()
+        t_plan = t_exec - t_plan
+        picked: set[int] = set()
+        done = 0
+        queue = [i for i, p in enumerate(plans) if p.refused is None]
+        while True:
+            for i in queue:
+                plan, out = plans[i], outcomes[i]
+                if max_objects is not None and done >= max_objects:
+                    out.status, out.reason = "skipped", "max_objects reached"
+                    continue
+                if self.cancel.is_set():
+                    out.status, out.reason = "skipped", "cancelled"
+                    continue
+                self._execute(plan, out, planner)
+                done += 1
+                if out.status == "sorted":
+                    picked.add(i)
+                if self.progress is not None:
+                    self.progress({"cube": out.index, "status": out.status, "color": out.color})
+            queue = []
+            if not picked or (max_objects is not None and done >= max_objects):
+                break
+            for i, plan in enumerate(plans):
+                if plan.refused is None or not plan.refused.startswith(BLOCKED):
+                    continue
+                if self.cancel.is_set():
+                    break
+                cube = loc.cubes[i]
+                others = [c for k, c in enumerate(loc.cubes) if k != i and k not in picked]
+                again = planner.plan_pick(cube, others, home)
+                if again.refused is None:
+                    planner.commit(again)
+                    plans[i] = again
+                    outcomes[i].status, outcomes[i].reason = "planned", ""
+                    queue.append(i)
+                    self.log.event("sorting/plan", f"cube {i} ({cube.color}): free now")
+                    break
+            if not queue:
+                break
+        report = SortReport(
+            outcomes,
+            registration=loc.registration.record() if loc.registration else None,
+            rejected_blobs=len(loc.diagnostics.get("rejected", [])),
+        )
+        report.extra["timings_s"] = {
+            **{k: round(v, 3) for k, v in loc.diagnostics.get("timings_s", {}).items()},
+            "plan": round(t_plan, 3),
+            "execute": round(time.perf_counter() - t_exec, 3),
+        }
+        if on_done is not None:
+            on_done(report, loc)
+        report.wall_s = time.perf_counter() - t0
+        return report
+
+    def _go_home(self, planner: Planner) -> None:
+        arm = self._require_arm()
+        q = np.asarray(arm.joint_positions(), float)
+        for move in planner.plan_joint_via(q, planner.home, planner.static, "move home"):
+            self._send(move)
+
+    def _send(self, move: Move) -> None:
+        """Execute one planned move (the arm plans the same path again and checks its limits)."""
+        arm = self._require_arm()
+        if self.cancel.is_set():
+            raise MotionRefusedError("sort cancelled")
+        cur = np.asarray(arm.joint_positions(), float)
+        if np.max(np.abs(cur - move.traj.q[0])) > JOINT_AT_TOLERANCE_DEG:
+            raise MotionRefusedError(
+                f"{move.what}: the arm is not where the plan starts (off by "
+                f"{np.max(np.abs(cur - move.traj.q[0])):.2f} deg); nothing sent"
+            )
+        log_trajectory(self.log, "sorting/planned", move)
+        if move.kind == "joint":
+            arm.move_joints(
+                move.q_target,
+                speed_deg_s=self.cfg.joint_speed_deg_s,
+                accel_deg_s2=self.cfg.joint_accel_deg_s2,
+            )
+        else:
+            assert move.T_target is not None
+            arm.move_linear(
+                move.T_target,
+                speed_mm_s=self.cfg.linear_speed_mm_s,
+                accel_mm_s2=self.cfg.linear_accel_mm_s2,
+            )
+        tcp = np.asarray(arm.tcp_pose(), float)
+        self.log.pose("sorting/executed/tcp", tcp)
+        self._executed.append(tcp[:3, 3])
+        self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
+
+    def _execute(self, plan: PickPlan, out: CubeOutcome, planner: Planner) -> None:
+        """Run one planned pick; a grasp that holds nothing is reported and the arm goes home."""
+        arm = self._require_arm()
+        grip = arm.gripper
+        assert plan.descend is not None and plan.lift is not None
+        self.log.event("sorting/pick", f"cube {out.index} ({out.color}) -> bin {out.bin}")
+        try:
+            grip.open()
+            for move in [*plan.approach, plan.descend]:
+                self._send(move)
+            grip.close()
+            if grip.holding is False:
+                out.status, out.reason = "failed", "the gripper closed on nothing"
+                grip.open()
+                self._send(plan.lift)
+                self._go_home(planner)
+                return
+            for move in [plan.lift, *plan.carry]:
+                self._send(move)
+            grip.open()
+            for move in plan.back:
+                self._send(move)
+            out.status = "sorted"
+            out.motion_s = plan.duration_s
+        except Exception as exc:
+            out.status, out.reason = "failed", f"{type(exc).__name__}: {exc}"
+            raise
+
+
+def log_trajectory(log: RunLog, prefix: str, move: Move) -> None:
+    """A planned move: what and how long (event), its TCP path in B (3D) and its end joints."""
+    if not log.enabled:
+        return
+    log.event(f"{prefix}/moves", f"{move.kind} move: {move.what} ({move.traj.duration:.2f} s)")
+    if len(move.tcp_path_B):
+        log.lines3d(f"{prefix}/tcp_path_B", [move.tcp_path_B], color=(0, 160, 255))
+    log.text(f"{prefix}/target_joints_deg", json.dumps(np.round(move.q_target, 3).tolist()))
