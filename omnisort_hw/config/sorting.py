@@ -181,7 +181,10 @@ def parse_sort_config(
         p = Path(str(data["colors_file"]))
         if base_dir is not None and not p.is_absolute():
             p = base_dir / p
-        changes["colors"] = ColorTable.load(p)
+        try:
+            changes["colors"] = ColorTable.load(p)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}.colors_file: {exc}") from None
     return replace(cfg, **changes)
 
 
