@@ -94,18 +94,45 @@ def _vec(values: object, n: int, what: str) -> np.ndarray:
     return arr
 
 
+# The rates `MotionLimits.check_rate` knows: name -> what it is, for messages.
+RATES = {
+    "joint_speed_deg_s": "joint speed (deg/s)",
+    "joint_accel_deg_s2": "joint acceleration (deg/s^2)",
+    "linear_speed_mm_s": "linear speed (mm/s)",
+    "linear_accel_mm_s2": "linear acceleration (mm/s^2)",
+}
+
+
 @dataclass(frozen=True)
 class MotionLimits:
-    """Joint limits (deg) and a workspace box (mm, base frame) checked before any motion is sent.
+    """Joint limits (deg), a workspace box (mm, base frame) and the highest speeds and
+    accelerations, checked before any motion is sent.
 
-    Both the real and the simulated arm call `check_joints` / `check_pose` before moving, so a
-    target outside the limits raises `MotionLimitError` and nothing reaches the controller.
+    Every arm, real or simulated, calls `check_joints` / `check_pose` and `check_rate` before
+    moving, so a target outside the limits or a speed or acceleration above the configured
+    maximum (`[arm].max_*`) raises `MotionLimitError` and nothing reaches the controller.
     """
 
     joint_min_deg: tuple[float, ...] = (-360.0,) * 6
     joint_max_deg: tuple[float, ...] = (360.0,) * 6
     workspace_min_mm: tuple[float, float, float] = (-1000.0, -1000.0, -100.0)
     workspace_max_mm: tuple[float, float, float] = (1000.0, 1000.0, 1200.0)
+    max_joint_speed_deg_s: float = 180.0
+    max_joint_accel_deg_s2: float = 300.0
+    max_linear_speed_mm_s: float = 1000.0
+    max_linear_accel_mm_s2: float = 3000.0
+
+    def check_rate(self, name: str, value: float | None, default: float) -> float:
+        """`value` (or `default` when None) if it is in (0, max_<name>], else MotionLimitError
+        naming the configuration key. `name` is one of `RATES`."""
+        what = RATES[name]
+        cap = float(getattr(self, f"max_{name}"))
+        v = default if value is None else float(value)
+        if not (np.isfinite(v) and 0 < v <= cap):
+            raise MotionLimitError(
+                f"{what} {v} is outside (0, {cap:g}] set by [arm].max_{name}; nothing sent"
+            )
+        return v
 
     def check_joints(self, q_deg: object) -> np.ndarray:
         """Return `q_deg` as a (6,) float array or raise `MotionLimitError` naming bad joints."""
@@ -374,6 +401,7 @@ __all__ = [
     "DEFAULT_GRIPPER_TIMEOUT_S",
     "DEFAULT_MOVE_TIMEOUT_S",
     "DEFAULT_SWITCH_TIMEOUT_S",
+    "RATES",
     "Arm",
     "ArmState",
     "Camera",

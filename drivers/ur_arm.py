@@ -45,7 +45,6 @@ from drivers.errors import (
     DeviceError,
     DeviceNotReadyError,
     DeviceTimeoutError,
-    MotionLimitError,
 )
 from drivers.ur_rtde_adapter import IOKind, URLink
 
@@ -190,6 +189,10 @@ class URArmConfig:
             joint_max_deg=tuple(self.joint_max_deg),
             workspace_min_mm=tuple(self.workspace_min_mm),  # type: ignore[arg-type]
             workspace_max_mm=tuple(self.workspace_max_mm),  # type: ignore[arg-type]
+            max_joint_speed_deg_s=self.max_joint_speed_deg_s,
+            max_joint_accel_deg_s2=self.max_joint_accel_deg_s2,
+            max_linear_speed_mm_s=self.max_linear_speed_mm_s,
+            max_linear_accel_mm_s2=self.max_linear_accel_mm_s2,
         )
 
 
@@ -361,15 +364,6 @@ class URArm(Arm):
         with self._lock:
             return tcp_matrix_from_ur(self._ready_link().actual_tcp_pose())
 
-    @staticmethod
-    def _rate(value: float | None, default: float, cap: float, what: str, key: str) -> float:
-        v = default if value is None else float(value)
-        if not (np.isfinite(v) and 0 < v <= cap):
-            raise MotionLimitError(
-                f"{what} {v} is outside (0, {cap}] set by [arm].{key}; nothing sent"
-            )
-        return v
-
     def move_joints(
         self,
         q_deg: object,
@@ -379,20 +373,8 @@ class URArm(Arm):
     ) -> None:
         cfg = self.config
         q = self._limits.check_joints(q_deg)
-        v = self._rate(
-            speed_deg_s,
-            cfg.joint_speed_deg_s,
-            cfg.max_joint_speed_deg_s,
-            "joint speed (deg/s)",
-            "max_joint_speed_deg_s",
-        )
-        a = self._rate(
-            accel_deg_s2,
-            cfg.joint_accel_deg_s2,
-            cfg.max_joint_accel_deg_s2,
-            "joint acceleration (deg/s^2)",
-            "max_joint_accel_deg_s2",
-        )
+        v = self._limits.check_rate("joint_speed_deg_s", speed_deg_s, cfg.joint_speed_deg_s)
+        a = self._limits.check_rate("joint_accel_deg_s2", accel_deg_s2, cfg.joint_accel_deg_s2)
         with self._lock:
             self._check_ready()
             self._stop_requested.clear()
@@ -414,20 +396,8 @@ class URArm(Arm):
     ) -> None:
         cfg = self.config
         T = self._limits.check_pose(pose)
-        v = self._rate(
-            speed_mm_s,
-            cfg.linear_speed_mm_s,
-            cfg.max_linear_speed_mm_s,
-            "linear speed (mm/s)",
-            "max_linear_speed_mm_s",
-        )
-        a = self._rate(
-            accel_mm_s2,
-            cfg.linear_accel_mm_s2,
-            cfg.max_linear_accel_mm_s2,
-            "linear acceleration (mm/s^2)",
-            "max_linear_accel_mm_s2",
-        )
+        v = self._limits.check_rate("linear_speed_mm_s", speed_mm_s, cfg.linear_speed_mm_s)
+        a = self._limits.check_rate("linear_accel_mm_s2", accel_mm_s2, cfg.linear_accel_mm_s2)
         target = T[:3, 3]
         with self._lock:
             self._check_ready()

@@ -22,6 +22,7 @@ import time
 import weakref
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ from scipy.spatial.transform import Rotation
 from drivers.base import (
     DEFAULT_GRIPPER_TIMEOUT_S,
     DEFAULT_MOVE_TIMEOUT_S,
+    RATES,
     Arm,
     Camera,
     Frame,
@@ -359,6 +361,10 @@ class SimGripper(Gripper):
             self._closed = False
 
 
+# `[arm]` keys of the simulated arm that set its highest speeds and accelerations.
+MAX_RATES = frozenset(f"max_{name}" for name in RATES)
+
+
 def _default_workspace(scene: Scene) -> MotionLimits:
     robot = scene.robot
     assert robot is not None
@@ -384,6 +390,7 @@ class SimArm(_Connectable, Arm):
         linear_accel_mm_s2: float = 1000.0,
         limits: MotionLimits | None = None,
         realtime: bool = False,
+        max_rates: dict[str, float] | None = None,
     ) -> None:
         super().__init__(cell)
         robot = cell.scene.robot
@@ -399,7 +406,17 @@ class SimArm(_Connectable, Arm):
         self.joint_accel = float(joint_accel_deg_s2)
         self.linear_speed = float(linear_speed_mm_s or robot.linear_speed_mm_s)
         self.linear_accel = float(linear_accel_mm_s2)
-        self._limits = limits or _default_workspace(cell.scene)
+        self._limits = replace(limits or _default_workspace(cell.scene), **(max_rates or {}))
+        for name, value in (
+            ("joint_speed_deg_s", self.joint_speed),
+            ("joint_accel_deg_s2", self.joint_accel),
+            ("linear_speed_mm_s", self.linear_speed),
+            ("linear_accel_mm_s2", self.linear_accel),
+        ):
+            try:
+                self._limits.check_rate(name, None, value)
+            except MotionLimitError as exc:
+                raise _sim_device_error(f"[arm].{name}", str(exc)) from None
         self.realtime = realtime
         self._gripper = SimGripper(self)
         self._stop = threading.Event()
@@ -448,13 +465,6 @@ class SimArm(_Connectable, Arm):
             rate_hz=rate,
         )
 
-    @staticmethod
-    def _rate(value: float | None, default: float, what: str) -> float:
-        v = default if value is None else float(value)
-        if not (np.isfinite(v) and v > 0):
-            raise MotionLimitError(f"{what} {v} must be a positive number; nothing sent")
-        return v
-
     def move_joints(
         self,
         q_deg: object,
@@ -464,8 +474,8 @@ class SimArm(_Connectable, Arm):
     ) -> None:
         self._require()
         q = self._limits.check_joints(q_deg)
-        v = self._rate(speed_deg_s, self.joint_speed, "joint speed (deg/s)")
-        a = self._rate(accel_deg_s2, self.joint_accel, "joint acceleration (deg/s^2)")
+        v = self._limits.check_rate("joint_speed_deg_s", speed_deg_s, self.joint_speed)
+        a = self._limits.check_rate("joint_accel_deg_s2", accel_deg_s2, self.joint_accel)
         self.safety_status().raise_if_stopped(self.name)
         limits = self._plan_limits(v, a, self.linear_speed, self.linear_accel)
         try:
@@ -483,8 +493,8 @@ class SimArm(_Connectable, Arm):
     ) -> None:
         self._require()
         T = self._limits.check_pose(pose)
-        v = self._rate(speed_mm_s, self.linear_speed, "linear speed (mm/s)")
-        a = self._rate(accel_mm_s2, self.linear_accel, "linear acceleration (mm/s^2)")
+        v = self._limits.check_rate("linear_speed_mm_s", speed_mm_s, self.linear_speed)
+        a = self._limits.check_rate("linear_accel_mm_s2", accel_mm_s2, self.linear_accel)
         self.safety_status().raise_if_stopped(self.name)
         limits = self._plan_limits(self.joint_speed, self.joint_accel, v, a)
         try:
@@ -541,6 +551,10 @@ _KEYS: dict[str, dict[str, type]] = {
         "joint_accel_deg_s2": float,
         "linear_speed_mm_s": float,
         "linear_accel_mm_s2": float,
+        "max_joint_speed_deg_s": float,
+        "max_joint_accel_deg_s2": float,
+        "max_linear_speed_mm_s": float,
+        "max_linear_accel_mm_s2": float,
         "realtime": bool,
     },
 }
@@ -620,6 +634,7 @@ def open_devices(
             joint_accel_deg_s2=arm.get("joint_accel_deg_s2", 120.0),
             linear_speed_mm_s=arm.get("linear_speed_mm_s"),
             linear_accel_mm_s2=arm.get("linear_accel_mm_s2", 1000.0),
+            max_rates={k: v for k, v in arm.items() if k in MAX_RATES},
             realtime=arm.get("realtime", False),
         )
     return made

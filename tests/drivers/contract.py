@@ -27,7 +27,16 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from drivers.base import Arm, Camera, Frame, Gripper, LaserSwitch, MotionLimits, SafetyStatus
+from drivers.base import (
+    RATES,
+    Arm,
+    Camera,
+    Frame,
+    Gripper,
+    LaserSwitch,
+    MotionLimits,
+    SafetyStatus,
+)
 from drivers.errors import DeviceError, MotionLimitError
 
 
@@ -259,6 +268,26 @@ class ArmContract:
         with pytest.raises(MotionLimitError):
             arm.move_linear(bad)
         np.testing.assert_allclose(arm.tcp_pose(), before, atol=1e-6)
+
+    @pytest.mark.parametrize("name", sorted(RATES))
+    def test_rate_above_the_configured_maximum_is_refused_without_moving(
+        self, arm: Arm, name: str
+    ) -> None:
+        """The contract states the limits: a speed or acceleration above `[arm].max_*` (or not
+        positive) is refused with the same error, whatever the arm."""
+        cap = getattr(arm.limits, f"max_{name}")
+        assert np.isfinite(cap) and cap > 0
+        kind, arg = name.split("_", 1)  # "joint", "speed_deg_s"
+        before = arm.joint_positions()
+        for value in (cap * 1.5, 0.0, float("nan")):
+            with pytest.raises(MotionLimitError) as info:
+                if kind == "joint":
+                    arm.move_joints(self.joint_target(arm), **{arg: value})
+                else:
+                    arm.move_linear(self.linear_target(arm), **{arg: value})
+            assert info.value.code == "motion_refused"
+            assert f"[arm].max_{name}" in str(info.value), str(info.value)
+        np.testing.assert_allclose(arm.joint_positions(), before, atol=1e-6)
 
     def test_stop_when_idle_is_harmless(self, arm: Arm) -> None:
         arm.stop()

@@ -215,3 +215,18 @@ def test_factory_errors_name_the_key(sections: dict, key: str) -> None:
         open_devices(sections)
     assert info.value.key == key
     assert str(info.value).startswith(key)
+
+
+def test_sim_arm_speed_caps_are_configured_like_the_ur_drivers() -> None:
+    """`[arm].max_*` caps the simulated arm as it caps the UR driver; a default speed above its
+    cap is a configuration error naming the key."""
+    with pytest.raises(DeviceConfigError) as info:
+        open_devices({"arm": {"scene": "sorting", "max_joint_speed_deg_s": 50.0}})
+    assert info.value.key == "[arm].joint_speed_deg_s"
+    made = open_devices(
+        {"arm": {"scene": "sorting", "joint_speed_deg_s": 40.0, "max_joint_speed_deg_s": 50.0}}
+    )
+    try:
+        assert made["arm"].limits.max_joint_speed_deg_s == 50.0
+    finally:
+        made["arm"].cell.close()
