@@ -590,7 +590,8 @@ def open_devices(
     relative to `base_dir`, or a shipped scene name; default "sorting"), `seed`; camera:
     `degraded`, `width`, `height`, `model_file` (camera.json), `exposure_ms`, `gain`,
     `grab_timeout_s`; arm: `joint_speed_deg_s`, `joint_accel_deg_s2`, `linear_speed_mm_s`,
-    `linear_accel_mm_s2`, `realtime`.
+    `linear_accel_mm_s2`, their caps `max_joint_speed_deg_s`, `max_joint_accel_deg_s2`,
+    `max_linear_speed_mm_s`, `max_linear_accel_mm_s2` (as the UR driver's), `realtime`.
     """
     checked = {kind: _check_settings(kind, dict(s)) for kind, s in sections.items()}
     scenes = {(k, s["scene"]) for k, s in checked.items() if "scene" in s}

@@ -27,7 +27,7 @@ _BATCH = 8000
 
 @dataclass(frozen=True)
 class LaserPlane:
-    """The plane through the emitter (0, 0, -d) with unit normal n (geometry.md), in S (mm):
+    """The plane through the emitter (0, 0, -d) with unit normal n (docs/frames.md), in S (mm):
     n . X + d n_z = 0. e1, e2 span the plane."""
 
     normal: np.ndarray

@@ -1,6 +1,6 @@
 """Scene description files (TOML) for the simulated cell: schema, defaults and validation.
 
-Everything is in the system frame S (geometry.md): origin at the camera viewpoint, Z up, the
+Everything is in the system frame S (docs/frames.md): origin at the camera viewpoint, Z up, the
 target walls along Y. Millimetres and degrees. The floor is at Z = -camera.height_mm.
 
 A scene file is parsed against the dataclasses below: an unknown key, a missing required
@@ -158,7 +158,7 @@ class BoomSpec:
 
 @dataclass(frozen=True)
 class TargetSpec:
-    """`[target]`: the two-sided (or three-sided) calibration target of geometry.md.
+    """`[target]`: the two-sided (or three-sided) calibration target of docs/frames.md.
 
     The inner faces of the side walls are at X = center.x -/+ separation/2 (before `yaw_deg`
     about the centre), running along Y over `length_mm` centred on `center_mm[1]`. Markers:

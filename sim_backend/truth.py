@@ -1,6 +1,6 @@
 """Ground truth written beside every rendered image (`NAME.truth.json`).
 
-The keys shared with `system.json` (architecture.md) come first: `camera`, `camera_rotation`,
+The keys shared with `system.json` (docs/architecture.md) come first: `camera`, `camera_rotation`,
 `laser_plane`, `target`, `robot_base`; then what only a simulator knows: cube poses (S and B),
 pixel positions of every checkerboard corner and target marker, and the laser/scene
 intersection polylines in S (exact straight pieces) and in pixels (densely projected).

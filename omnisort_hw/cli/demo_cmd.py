@@ -40,12 +40,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from omnisort_hw.core.camera_io import save_camera_json
     from omnisort_hw.core.checkerboard import BoardSpec
-    from omnisort_hw.core.intrinsics import calibrate_images
-    from omnisort_hw.core.laser_stripe import laser_stripe_points
-    from omnisort_hw.core.mapping import pixels_to_plane, segments
     from omnisort_hw.evaluation.table3 import truth_parameters
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import calibrate_system
+    from omnisort_hw.pipeline.intrinsics import calibrate_intrinsics
+    from omnisort_hw.pipeline.laser_map import map_laser
     from omnisort_hw.runlog import RunLog
     from sim_backend.scene import load_scene
     from sim_backend.scene_images import render_scene, write_render
@@ -65,8 +64,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         board = BoardSpec(9, 6, 116.0)
         source = f"{len(views)} simulated calibration views"
         t0 = time.perf_counter()
-        intr = calibrate_images(images, board, log=log)
-        save_camera_json(out / "camera.json", intr.model, **intr.record())
+        cal = calibrate_intrinsics(images, board, log=log)
+        intr = cal.result
+        save_camera_json(out / "camera.json", intr.model, **cal.record)
         print(
             f"   {source}: RMS {intr.rms_px:.3f} px, {len(intr.images_used)} used, "
             f"{time.perf_counter() - t0:.1f} s -> {out / 'camera.json'}"
@@ -104,15 +104,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f"   solved in {calib.elapsed_s * 1000:.0f} ms -> {out / 'system.json'}")
 
         _step("3. laser map of the same image")
-        pixels = laser_stripe_points(image)
-        segs = segments(pixels_to_plane(pixels, calib), calib)
-        log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
+        laser_map = map_laser(image, calib, str(img_path), log)
+        segs = laser_map.segments
         for i, s in enumerate(segs):
-            log.points3d(f"map/segment_{i}", s.points_S, color=(255, 0, 0))
             print(
                 f"   segment {i}: {len(s.points_S):4d} points, {s.distance_mm:7.1f} mm from the "
                 f"axis at bearing {s.bearing_deg:6.1f} deg"
             )
+        png = write_overview(out / "demo.png", image, laser_map, calib.parameters(), want)
+        print(f"   picture of this step: {png}")
         summary = {
             "intrinsics_rms_px": intr.rms_px,
             "system": calib.parameters(),
@@ -132,3 +132,32 @@ def cmd_demo(args: argparse.Namespace) -> int:
     )
     print(f"\nrun log: {rrd} (omnisort review {rrd}); total {time.perf_counter() - t_start:.1f} s")
     return 0 if ok else 1
+
+
+def write_overview(
+    path: Path, image: Any, laser_map: Any, found: dict[str, float], truth: dict[str, float]
+) -> Path:
+    """The calibration image with the laser stripe found (green) and each segment's distance,
+    and the calibrated parameters against the truth: a picture of one run."""
+    import cv2
+    import numpy as np
+
+    from omnisort_hw.fileio import atomic_write_bytes
+
+    canvas = image.copy()
+    for u, v in np.round(laser_map.pixels).astype(int):
+        cv2.circle(canvas, (int(u), int(v)), max(2, canvas.shape[1] // 600), (0, 220, 0), -1)
+    small = cv2.resize(canvas, (800, round(800 * canvas.shape[0] / canvas.shape[1])))
+    lines = [f"{k}: {found[k]:.3f} (truth {truth[k]:.3f})" for k in found]
+    lines += [f"segment {i}: {s.distance_mm:.0f} mm" for i, s in enumerate(laser_map.segments)]
+    cv2.rectangle(small, (0, 0), (380, 14 + 20 * len(lines)), (0, 0, 0), -1)
+    for i, text in enumerate(lines):
+        org = (10, 22 + 20 * i)
+        cv2.putText(
+            small, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA
+        )
+    ok, buf = cv2.imencode(".png", small)
+    if not ok:
+        raise OSError(f"{path}: could not encode the overview image")
+    atomic_write_bytes(path, buf.tobytes(), keep_history=False)
+    return path

@@ -1,6 +1,6 @@
 """Scaramuzza / OCamCalib omnidirectional camera model, vectorised.
 
-Conventions (see shared/design/geometry.md):
+Conventions (see docs/frames.md):
 - pixels are (u, v) = (column, row), origin at the centre of the top-left pixel;
 - rays are in the camera frame C (OpenCV): x along +u, y along +v, z out of the lens;
 - the forward polynomial f(rho) = a0 + a2 rho^2 + ... keeps OCamCalib's sign (a0 < 0);

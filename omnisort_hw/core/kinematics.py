@@ -1,6 +1,6 @@
 """Forward and analytic inverse kinematics of the UR e-series (UR3e, UR5e, UR10e), vectorised.
 
-Conventions (see shared/design/geometry.md): poses are 4x4 homogeneous transforms of the
+Conventions (see docs/frames.md): poses are 4x4 homogeneous transforms of the
 flange (tool0) in the UR base frame B, translations in millimetres; joint angles are in
 degrees at every public boundary. Arrays carry any number of leading batch axes, OpenCV
 calib3d style: `q` is (..., 6), a pose is (..., 4, 4).

@@ -34,6 +34,11 @@ class IntrinsicCalibration:
     record: dict[str, Any]
 
 
+def board_record(board: BoardSpec) -> dict[str, Any]:
+    """The board as camera.json and system.json's robot_base record it."""
+    return {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm}
+
+
 def image_files(folder: str | Path) -> list[Path]:
     """The image files of `folder`, sorted by name; InputError when there are none."""
     path = Path(folder)
@@ -73,7 +78,7 @@ def calibrate_intrinsics(
     result = calibrate_images(images, board, degree=degree, on_detected=on_detected, log=log)
     record = {
         **result.record(),
-        "board": {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm},
+        "board": board_record(board),
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     log.scalar("calibration/intrinsics/rms_px", result.rms_px)

@@ -19,6 +19,7 @@ from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.registration import Registration, register_robot
 from omnisort_hw.errors import CalibrationFileError
+from omnisort_hw.pipeline.intrinsics import board_record
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -45,10 +46,7 @@ def robot_base_record(
     """The `robot_base` record of system.json: the pose, its 1-sigma, the board and its offset."""
     record = reg.record(model)
     record["offset"] = list(rc.offset)
-    record["board"] = {
-        "inner_corners": [rc.board.cols, rc.board.rows],
-        "square_mm": rc.board.square_mm,
-    }
+    record["board"] = board_record(rc.board)
     record["image"] = image
     return record
 

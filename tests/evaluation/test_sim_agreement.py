@@ -1,4 +1,4 @@
-"""The simulator and the core agree on frames, signs and the laser plane (geometry.md).
+"""The simulator and the core agree on frames, signs and the laser plane (docs/frames.md).
 
 Features made from the simulator's truth (not extracted from the image) must give back the
 simulator's parameters through every two-sided method, to the lens model's round-trip

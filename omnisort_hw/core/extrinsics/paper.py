@@ -11,7 +11,7 @@ parallel to the candidate laser plane):
 5. the laser segments' ends lined up,
 6. the measured separation of the laser segments equal to D (sets the distance d).
 
-The paper names the angle of each step in its own frame. In this project's frame (geometry.md:
+The paper names the angle of each step in its own frame. In this project's frame (docs/frames.md:
 roll about X, pitch about Y along the walls, yaw about Z) the measures control, in order:
 camera roll, camera yaw, camera pitch, laser roll, laser pitch, laser distance; a rotation
 about the wall direction leaves the projected borders parallel, which is why pitch comes from

@@ -157,7 +157,7 @@ def place_side_walls(
 
 def fit_laser_plane(points_S: np.ndarray) -> tuple[np.ndarray, float, float]:
     """Least-squares plane through 3D points in S: (upward unit normal, distance d of the
-    geometry.md convention, i.e. the plane meets the Z axis at -d, RMS distance in mm)."""
+    docs/frames.md convention, i.e. the plane meets the Z axis at -d, RMS distance in mm)."""
     centroid = points_S.mean(axis=0)
     _, _, vt = np.linalg.svd(points_S - centroid, full_matrices=False)
     n = vt[-1] if vt[-1][2] > 0 else -vt[-1]

@@ -1,0 +1,300 @@
+"""The tables of measured figures in README.md and docs/, generated from results.json.
+
+    python -m benchmarks.figures           # check: exit 1 and name the stale blocks
+    python -m benchmarks.figures --write   # rewrite the blocks from results.json
+
+A block sits between `<!-- figures:NAME -->` and `<!-- /figures -->`; everything between
+the markers is generated, so a table can never drift from the record (`tests/test_figures.py`
+checks every block). Published figures (the paper's Table 3) are constants of the literature.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+DOCUMENTS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
+BLOCK = re.compile(r"(<!-- figures:(\w+) -->\n)(.*?)(<!-- /figures -->)", re.S)
+
+ANGLES = ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg")
+PARAMS = (*ANGLES, "laser_distance_mm")
+PARAM_HEADS = "cam roll ° | cam pitch ° | cam yaw ° | laser roll ° | laser pitch ° | laser d mm"
+TABLE3_ROWS = (
+    ("joint", "**joint** (two-sided)"),
+    ("paper", "paper (two-sided)"),
+    ("method1", "method1 (three-sided)"),
+    ("joint_three_sided", "joint (three-sided)"),
+    ("method2", "method2 (checkerboards)"),
+)
+# The paper's Table 3 (MAE, their simulator; no laser distance figure comparable to ours).
+PUBLISHED = (
+    ("published: proposed", (0.13, 0.05, 0.06, 0.09, 0.14), 28.39),
+    ("published: method 1", (0.12, 0.06, 0.06, 0.12, 0.16), 33.99),
+    ("published: method 2", (0.15, 0.11, 0.09, 0.08, 0.29), 25.41),
+)
+
+
+def _table(head: list[str], rows: list[list[Any]]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def _machine(r: dict[str, Any]) -> str:
+    m = r.get("machine", {})
+    return f"{m.get('cores', '?')}-core {m.get('cpu', '?')}, Python {m.get('python', '?')}"
+
+
+def table3(r: dict[str, Any]) -> str:
+    t = r["table3"]
+    rows: list[list[Any]] = []
+    for images in ("clean", "degraded"):
+        for key, label in TABLE3_ROWS:
+            mae = t[f"{images}_{key}_mae"]
+            secs = t[f"{images}_{key}_mean_time_s"]
+            maes = [f"{mae[p]:.4f}" for p in ANGLES]
+            rows.append([label, images, *maes, f"{mae['laser_distance_mm']:.3f}", f"{secs:.2f}"])
+    for label, maes, secs in PUBLISHED:
+        rows.append([label, "their simulator", *maes, "–", secs])
+    head = ["method (target)", "images", *PARAM_HEADS.split(" | "), "time s"]
+    fails = sum(t[f"{i}_{k}_failures"] for i in ("clean", "degraded") for k, _ in TABLE3_ROWS)
+    note = (
+        f"\n{t['configurations']} configurations (seed {t['seed']}); failed calibrations: "
+        f"{fails}. Mapping check, worst relative distance error: "
+        f"{t['clean_mapping_max_rel_error_pct']:.3f} % clean, "
+        f"{t['degraded_mapping_max_rel_error_pct']:.3f} % degraded (published: 0.5 %).\n"
+    )
+    return _table(head, rows) + note
+
+
+def reference(r: dict[str, Any]) -> str:
+    e = r["extrinsics"]
+    names = {
+        "joint": "joint (two_sided_target.png)",
+        "paper": "paper (two_sided_target.png)",
+        "method1": "method1 (three_sided_target.png)",
+        "method2": "method2 (checkerboard_b.jpg)",
+        "joint_three_sided": "joint (three_sided_target.png)",
+    }
+    rows = []
+    for key, label in names.items():
+        p = e.get(f"reference_{key}")
+        if isinstance(p, dict):
+            rows.append([label, *(f"{p[k]:.3f}" for k in ANGLES), f"{p['laser_distance_mm']:.1f}"])
+    spread = e.get("reference_max_disagreement_deg", {})
+    worst = max(spread.items(), key=lambda kv: kv[1]) if spread else ("-", float("nan"))
+    return _table(["method (image)", *PARAM_HEADS.split(" | ")], rows) + (
+        f"\nLargest disagreement between the methods: {worst[1]:.3f}° ({worst[0]}).\n"
+    )
+
+
+def intrinsics(r: dict[str, Any]) -> str:
+    i = r["intrinsics"]
+    rows = [
+        ["third-party set: images used", i["calibration_images_used"], i["opencv_images_found"]],
+        [
+            "RMS reprojection error, 2D",
+            f"**{i['rms_px_2d']:.3f} px**",
+            f"{i['opencv_fisheye_rms_px_2d']:.3f} px",
+        ],
+        [
+            "RMS per coordinate",
+            f"{i['rms_px_per_coord']:.3f} px",
+            f"{i['opencv_fisheye_rms_px_per_coord']:.3f} px",
+        ],
+        [
+            "whole calibration incl. reading and detection",
+            f"{i['calibration_9_images_s']:.2f} s",
+            f"{i['opencv_detect_s'] + i['opencv_calibrate_s']:.2f} s",
+        ],
+        ["pixel → ray, 1 million points", f"{i['pixel_to_ray_1M_ms']:.0f} ms", ""],
+        ["ray → pixel, 1 million points", f"{i['ray_to_pixel_1M_ms']:.0f} ms", ""],
+        ["pixel → ray → pixel, worst error", f"{i['round_trip_max_error_px']:.1e} px", ""],
+    ]
+    return _table(["measured", "omnisort", "OpenCV fisheye, same images"], rows)
+
+
+def extrinsics_speed(r: dict[str, Any]) -> str:
+    e = r["extrinsics"]
+    rows = [
+        [
+            "one 1920x1920 calibration (extraction + joint solve)",
+            f"{e['calibration_1920_joint_s']:.3f} s "
+            f"({e['calibration_speedup_vs_published_28_39s']:.0f}x faster than the published "
+            "28.39 s)",
+        ],
+        [
+            "one 1920x1920 laser map (stripe + mapping), one core",
+            f"{e['map_1920_frame_ms_one_core']:.1f} ms",
+        ],
+    ]
+    return _table(["measured", "time"], rows)
+
+
+def kinematics(r: dict[str, Any]) -> str:
+    k = r["kinematics"]
+    err_mm = max(k[f"{m}_fkik_max_pos_err_mm"] for m in ("ur3e", "ur5e", "ur10e"))
+    err_rad = max(k[f"{m}_fkik_max_rot_err_rad"] for m in ("ur3e", "ur5e", "ur10e"))
+    rows = [
+        ["IK, UR5e, 8 branches", f"{k['ik_ur5e_poses_per_s_8_branches']:,} poses/s"],
+        ["FK, UR5e", f"{k['fk_ur5e_poses_per_s']:,} poses/s"],
+        ["FK(IK) round trip, worst over UR3e/5e/10e", f"{err_mm:.1e} mm, {err_rad:.1e} rad"],
+        [
+            "joint move plan / linear move plan",
+            f"{k['joint_move_plan_ms']} ms / {k['linear_move_plan_ms']} ms",
+        ],
+        ["collision checks", f"{k['collision_check_samples_per_s']:,} samples/s"],
+    ]
+    return _table(["measured", "result"], rows)
+
+
+def sorting(r: dict[str, Any]) -> str:
+    s = r["sorting"]
+    rows = []
+    for cal in ("truth", "perturbed"):
+        rows.append(
+            [
+                f"{cal} calibration, {s[f'{cal}_scenes']} scenes (seed {s['seed']}, "
+                f"{s['width_px']} px)",
+                f"**{s[f'{cal}_sorted_ok']}/{s[f'{cal}_cubes']}**",
+                s[f"{cal}_collisions"],
+                f"{s[f'{cal}_mean_position_error_mm']:.2f} / "
+                f"{s[f'{cal}_max_position_error_mm']:.2f}",
+                f"{s[f'{cal}_mean_position_error_B_mm']:.2f}",
+                f"{s[f'{cal}_mean_registration_error_mm']:.2f} mm, "
+                f"{s[f'{cal}_mean_registration_error_deg']:.3f}°",
+                f"{s[f'{cal}_motion_s_per_pick']:.1f} s",
+                f"{s[f'{cal}_wall_s_per_pick']:.1f} s",
+            ]
+        )
+    head = [
+        "random scenes (3–6 cubes, camera within ±10°)",
+        "in the right bin",
+        "collisions",
+        "cube error in S, mean / max mm",
+        "in B, mean mm",
+        "registration (mean)",
+        "motion per pick",
+        "computation per pick",
+    ]
+    return _table(head, rows)
+
+
+def service(r: dict[str, Any]) -> str:
+    v = r["service"]
+    rows = [
+        [
+            v["long_command"],
+            v["devices"],
+            v["clients"],
+            v["status_requests"],
+            v["missed_replies"],
+            f"{v['latency_median_ms']:.1f} ms",
+            f"{v['latency_p99_ms']:.1f} ms",
+            f"{v['latency_max_ms']:.1f} ms",
+        ]
+    ]
+    head = [
+        "long command",
+        "devices",
+        "clients",
+        "status requests",
+        "missed",
+        "median",
+        "p99",
+        "max",
+    ]
+    return _table(head, rows)
+
+
+def summary(r: dict[str, Any]) -> str:
+    t, e, i, s, k = r["table3"], r["extrinsics"], r["intrinsics"], r["sorting"], r["kinematics"]
+    j, jd = t["clean_joint_mae"], t["degraded_joint_mae"]
+    rows = [
+        [
+            "fisheye intrinsics, third-party images",
+            f"RMS {i['rms_px_2d']:.3f} px (OpenCV fisheye {i['opencv_fisheye_rms_px_2d']:.3f} px)",
+            "[calibration](docs/calibration.md)",
+        ],
+        [
+            "camera + laser from one image (joint), MAE worst angle, clean / degraded",
+            f"{max(j[a] for a in ANGLES):.4f}° / {max(jd[a] for a in ANGLES):.4f}° "
+            f"(published: 0.05–0.14°)",
+            "[calibration](docs/calibration.md)",
+        ],
+        [
+            "one calibration / one laser map, 1920 px",
+            f"{e['calibration_1920_joint_s']:.3f} s / {e['map_1920_frame_ms_one_core']:.1f} ms",
+            "[calibration](docs/calibration.md)",
+        ],
+        [
+            "UR inverse kinematics",
+            f"{k['ik_ur5e_poses_per_s_8_branches']:,} poses/s",
+            "[sorting](docs/sorting.md)",
+        ],
+        [
+            "sorting, random scenes (truth calibration)",
+            f"{s['truth_sorted_ok']}/{s['truth_cubes']} in the right bin, {s['truth_collisions']} "
+            f"collisions, cubes {s['truth_mean_position_error_mm']:.2f} mm",
+            "[sorting](docs/sorting.md)",
+        ],
+    ]
+    return _table(["what", "measured", "more"], rows) + f"\nMachine: {_machine(r)}.\n"
+
+
+GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
+    "summary": summary,
+    "table3": table3,
+    "reference": reference,
+    "intrinsics": intrinsics,
+    "extrinsics_speed": extrinsics_speed,
+    "kinematics": kinematics,
+    "sorting": sorting,
+    "service": service,
+}
+
+
+def render(text: str, results: dict[str, Any]) -> str:
+    """`text` with every figures block regenerated (KeyError names an unknown block)."""
+
+    def one(m: re.Match[str]) -> str:
+        return m.group(1) + GENERATORS[m.group(2)](results) + m.group(4)
+
+    return BLOCK.sub(one, text)
+
+
+def blocks(text: str) -> list[str]:
+    return [m.group(2) for m in BLOCK.finditer(text)]
+
+
+def load_results() -> dict[str, Any]:
+    return json.loads((HERE / "results.json").read_text(encoding="utf-8"))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.figures")
+    parser.add_argument("--write", action="store_true", help="rewrite the blocks in place")
+    args = parser.parse_args()
+    results = load_results()
+    stale = []
+    for path in DOCUMENTS:
+        text = path.read_text(encoding="utf-8")
+        new = render(text, results)
+        if new != text:
+            stale.append(path)
+            if args.write:
+                path.write_text(new, encoding="utf-8")
+    for path in stale:
+        print(f"{path.relative_to(ROOT)}: {'rewritten' if args.write else 'stale'}")
+    return 1 if stale and not args.write else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
