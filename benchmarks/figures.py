@@ -188,30 +188,30 @@ def sorting(r: dict[str, Any]) -> str:
 
 
 def service(r: dict[str, Any]) -> str:
+    """One row per long command the clients polled through (`during_<name>.*` keys), or the
+    single run of an older record (`long_command`, `latency_*` at the top level)."""
     v = r["service"]
-    rows = [
-        [
-            v["long_command"],
-            v["devices"],
-            v["clients"],
-            v["status_requests"],
-            v["missed_replies"],
-            f"{v['latency_median_ms']:.1f} ms",
-            f"{v['latency_p99_ms']:.1f} ms",
-            f"{v['latency_max_ms']:.1f} ms",
-        ]
-    ]
-    head = [
-        "long command",
-        "devices",
-        "clients",
-        "status requests",
-        "missed",
-        "median",
-        "p99",
-        "max",
-    ]
-    return _table(head, rows)
+    runs = sorted({k.split(".", 1)[0] for k in v if k.startswith("during_")})
+    prefixes = [f"{name}." for name in runs] or [""]
+    rows = []
+    for pre in prefixes:
+        command = v[f"{pre}long_command"]
+        if not isinstance(command, str):
+            command = json.dumps(command)
+        rows.append(
+            [
+                command,
+                v["devices"],
+                v["clients"],
+                v[f"{pre}status_requests"],
+                v[f"{pre}missed_replies"],
+                f"{v[f'{pre}latency_median_ms']:.1f} ms",
+                f"{v[f'{pre}latency_p99_ms']:.1f} ms",
+                f"{v[f'{pre}latency_max_ms']:.1f} ms",
+            ]
+        )
+    head = ["long command", "devices", "clients", "status requests", "missed", "median", "p99"]
+    return _table([*head, "max"], rows)
 
 
 def summary(r: dict[str, Any]) -> str:
