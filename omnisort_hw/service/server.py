@@ -28,7 +28,7 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -40,15 +40,24 @@ from omnisort_hw.cell import Cell
 from omnisort_hw.errors import ConfigError, OmnisortError
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.config import ServiceConfig, Settings, is_loopback
+from omnisort_hw.service.connection import (
+    READ_CHUNK,
+    TOO_LONG,
+    Admission,
+    IdleTimeoutError,
+    LineReader,
+    LineTimeoutError,
+    peer_host,
+)
 from omnisort_hw.service.handlers import HANDLERS, Context
 from omnisort_hw.service.systemd import Notifier
 
 log = logging.getLogger("omnisort.service")
 
-TOO_LONG = object()
 SWITCH_INTERVAL_S = 0.001
-WRITE_TIMEOUT_S = 30.0
-READ_CHUNK = 65536
+SAFETY_INFLIGHT_PER_CLIENT = 4
+MAX_SAFETY_LINE_BYTES = 4096
+OVERFLOW_PER_CLIENT = 4
 
 
 class State(StrEnum):
@@ -240,7 +249,17 @@ class Service:
         self._clients: set[asyncio.StreamWriter] = set()
         self._started = time.monotonic()
         self.address: tuple[str, int] | None = None
-        self.counters = {"requests": 0, "errors": 0, "connections": 0}
+        self.counters = {
+            "requests": 0,
+            "errors": 0,
+            "connections": 0,
+            "slow_clients_dropped": 0,
+        }
+        self._admission = Admission(
+            config.max_clients,
+            config.max_clients_per_peer,
+            OVERFLOW_PER_CLIENT * config.max_clients,
+        )
         self.exit_problems: list[str] = []
 
     # -- state -----------------------------------------------------------------------------
@@ -362,53 +381,27 @@ class Service:
 
     # -- connections -----------------------------------------------------------------------
 
-    async def _lines(self, reader: asyncio.StreamReader) -> AsyncIterator[bytes | object]:
-        """Lines without their newline; TOO_LONG once for each over-long line (then skipped)."""
-        limit = self.config.max_line_bytes
-        buf = bytearray()
-        skipping = False
-        while True:
-            chunk = await reader.read(READ_CHUNK)
-            if not chunk:
-                if buf and not skipping:
-                    yield bytes(buf)
-                return
-            start = 0
-            while True:
-                nl = chunk.find(b"\n", start)
-                if nl < 0:
-                    if not skipping:
-                        buf += chunk[start:]
-                        if len(buf) > limit:
-                            buf.clear()
-                            skipping = True
-                            yield TOO_LONG
-                    break
-                if skipping:
-                    skipping = False
-                else:
-                    buf += chunk[start:nl]
-                    if len(buf) > limit:
-                        yield TOO_LONG
-                    else:
-                        yield bytes(buf[:-1] if buf.endswith(b"\r") else buf)
-                    buf.clear()
-                start = nl + 1
-
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        peer = writer.get_extra_info("peername")
+        host = peer_host(writer.get_extra_info("peername"))
         self.counters["connections"] += 1
-        write_lock = asyncio.Lock()
-        if len(self._clients) >= self.config.max_clients:
-            msg = f"too many clients ({self.config.max_clients}); try again later"
-            await self._send(writer, write_lock, proto.error_reply(None, proto.BUSY, msg))
-            writer.close()
+        refusal = self._admission.admit(host)
+        if refusal is not None:
+            await self._overflow(reader, writer, host, refusal)
             return
+        write_lock = asyncio.Lock()
         self._clients.add(writer)
         slots = asyncio.Semaphore(self.config.max_inflight_per_client)
+        safety_slots = asyncio.Semaphore(SAFETY_INFLIGHT_PER_CLIENT)
         tasks: set[asyncio.Task[None]] = set()
+        lines = LineReader(
+            reader,
+            self.config.max_line_bytes,
+            self.config.line_timeout_s,
+            self.config.idle_timeout_s or None,
+            busy=lambda: bool(tasks),
+        )
         try:
-            async for line in self._lines(reader):
+            while (line := await lines.next()) is not None and not writer.is_closing():
                 self.counters["requests"] += 1
                 if line is TOO_LONG:
                     msg = f"request line longer than {self.config.max_line_bytes} bytes; discarded"
@@ -422,18 +415,62 @@ class Service:
                 except proto.ProtocolError as exc:
                     await self._send(writer, write_lock, proto.reply_for(exc))
                     continue
-                await slots.acquire()
-                task = asyncio.create_task(self._serve(req, writer, write_lock, slots))
+                # Stop and estop never wait behind the client's other requests.
+                slot = safety_slots if req.command.kind == "safety" else slots
+                await slot.acquire()
+                task = asyncio.create_task(self._serve(req, writer, write_lock, slot))
                 tasks.add(task)
                 task.add_done_callback(tasks.discard)
+        except (LineTimeoutError, IdleTimeoutError) as exc:
+            log.info("closing connection from %s: %s", host, exc)
+            await self._send(
+                writer, write_lock, proto.error_reply(None, proto.BAD_REQUEST, f"{exc}; closing")
+            )
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         except Exception:
-            log.exception("connection %s failed", peer)
+            log.exception("connection from %s failed", host)
         finally:
             if tasks:
-                await asyncio.wait(tasks, timeout=WRITE_TIMEOUT_S)
+                await asyncio.wait(tasks, timeout=self.config.write_timeout_s)
             self._clients.discard(writer)
+            self._admission.release(host)
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 2.0)
+
+    async def _overflow(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, host: str, refusal: str
+    ) -> None:
+        """A connection over a limit: one `stop`/`estop` line is still served (the reserved
+        path); anything else, or nothing within the grace period, gets `busy` and is closed."""
+        lock = asyncio.Lock()
+        busy = proto.error_reply(
+            None, proto.BUSY, f"{refusal}; try again later (stop and estop are still served)"
+        )
+        if not self._admission.enter_overflow():
+            log.warning("refusing a connection from %s at once: %s", host, refusal)
+            await self._send(writer, lock, busy)
+            writer.close()
+            return
+        try:
+            lines = LineReader(reader, MAX_SAFETY_LINE_BYTES, self.config.overflow_grace_s, None)
+            try:
+                line = await asyncio.wait_for(lines.next(), self.config.overflow_grace_s)
+            except (TimeoutError, LineTimeoutError, ConnectionError):
+                line = None
+            req = None
+            if isinstance(line, bytes):
+                with contextlib.suppress(proto.ProtocolError):
+                    req = proto.parse_request(line, self._authorize)
+            if req is not None and req.command.kind == "safety":
+                self.counters["requests"] += 1
+                log.warning("%s from %s served on the reserved path (%s)", req.cmd, host, refusal)
+                await self._send(writer, lock, await self._reply(req))
+            else:
+                await self._send(writer, lock, busy)
+        finally:
+            self._admission.leave_overflow()
             writer.close()
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(writer.wait_closed(), 2.0)
@@ -449,28 +486,41 @@ class Service:
                 return
             writer.write(data)
             try:
-                await asyncio.wait_for(writer.drain(), WRITE_TIMEOUT_S)
-            except (TimeoutError, ConnectionError):
+                await asyncio.wait_for(writer.drain(), self.config.write_timeout_s)
+            except TimeoutError:
+                self.counters["slow_clients_dropped"] += 1
+                log.warning(
+                    "client %s did not read its replies for %g s; disconnected",
+                    peer_host(writer.get_extra_info("peername")),
+                    self.config.write_timeout_s,
+                )
+                writer.transport.abort()
+            except ConnectionError:
                 writer.close()
+
+    async def _reply(self, req: proto.Request) -> dict[str, Any]:
+        try:
+            return await self.dispatch(req)
+        except proto.ProtocolError as exc:
+            return proto.reply_for(exc, req.id)
+        except Exception as exc:
+            log.exception("request %r failed", req.cmd)
+            code, msg, details = error_from_exception(exc)
+            return proto.error_reply(req.id, code, msg, **details)
 
     async def _serve(
         self,
         req: proto.Request,
         writer: asyncio.StreamWriter,
         lock: asyncio.Lock,
-        slots: asyncio.Semaphore,
+        slot: asyncio.Semaphore,
     ) -> None:
+        """Run one request and write its reply; the client's slot is freed only once the reply
+        is written (or the client dropped), so a client that does not read stops being read."""
         try:
-            reply = await self.dispatch(req)
-        except proto.ProtocolError as exc:
-            reply = proto.reply_for(exc, req.id)
-        except Exception as exc:
-            log.exception("request %r failed", req.cmd)
-            code, msg, details = error_from_exception(exc)
-            reply = proto.error_reply(req.id, code, msg, **details)
+            await self._send(writer, lock, await self._reply(req))
         finally:
-            slots.release()
-        await self._send(writer, lock, reply)
+            slot.release()
 
     def _authorize(self, spec: proto.Command, token: str | None, rid: int | str | None) -> None:
         """Commands that move, write or change state need the token when one is required."""
