@@ -17,6 +17,7 @@ from contextlib import contextmanager
 
 import pytest
 
+from omnisort_hw.service.loadgen import idle_connections, round_trip
 from tests.service.conftest import Harness
 
 pytestmark = pytest.mark.timeout(120)
@@ -27,43 +28,22 @@ ISSUE_BOUND_S = 0.050
 LOAD_FACTOR = 10.0
 
 
-def _round_trip(host: str, port: int, cmd: str, source: str = "127.0.0.1") -> tuple[dict, float]:
-    """Connect (from `source`), send one request, read its reply; (reply, seconds)."""
-    t0 = time.perf_counter()
-    with socket.create_connection((host, port), timeout=10, source_address=(source, 0)) as s:
-        s.sendall(json.dumps({"id": 1, "cmd": cmd}).encode() + b"\n")
-        buf = b""
-        while b"\n" not in buf:
-            chunk = s.recv(65536)
-            assert chunk, f"{cmd}: connection closed without a reply"
-            buf += chunk
-    return json.loads(buf.split(b"\n", 1)[0]), time.perf_counter() - t0
-
-
 def _baseline_s(h: Harness, n: int = 7) -> float:
     return statistics.median(
-        _round_trip(h.running.host, h.running.port, "status")[1] for _ in range(n)
+        round_trip(h.running.host, h.running.port, "status")[1] for _ in range(n)
     )
 
 
 @contextmanager
 def _held(h: Harness, n: int, sources: list[str]) -> Iterator[list[socket.socket]]:
     """`n` idle connections spread over `sources`, all accepted by the service."""
-    socks: list[socket.socket] = []
     before = h.running.service.counters["connections"]
-    try:
-        for i in range(n):
-            addr = (h.running.host, h.running.port)
-            src = (sources[i % len(sources)], 0)
-            socks.append(socket.create_connection(addr, timeout=10, source_address=src))
+    with idle_connections(h.running.host, h.running.port, n, sources) as socks:
         deadline = time.monotonic() + 10
         while h.running.service.counters["connections"] < before + n:
             assert time.monotonic() < deadline, "the service did not accept every connection"
             time.sleep(0.01)
         yield socks
-    finally:
-        for s in socks:
-            s.close()
 
 
 def _wait_moving(h: Harness) -> None:
@@ -83,7 +63,7 @@ def test_estop_served_with_200_idle_connections_held(make_service) -> None:
         assert h.running.service.service_status()["service"]["clients"] == 64
         rid = mover.send("move", {"joints_deg": [10, 0, 0, 0, 0, 0]})
         _wait_moving(h)
-        reply, took = _round_trip(h.running.host, h.running.port, "estop")
+        reply, took = round_trip(h.running.host, h.running.port, "estop")
         moved = mover.read_reply(timeout_s=10)
     assert reply["ok"], reply
     assert reply["result"]["state"] == "fault" and reply["result"]["stopped_job"] == "move"
@@ -98,15 +78,15 @@ def test_stop_and_estop_served_with_every_client_slot_held(make_service) -> None
     sources = [f"127.0.0.{2 + i}" for i in range(cfg.max_clients // cfg.max_clients_per_peer)]
     bound = max(ISSUE_BOUND_S, LOAD_FACTOR * _baseline_s(h))
     with _held(h, cfg.max_clients, sources) as socks:
-        refused, _ = _round_trip(h.running.host, h.running.port, "status")
+        refused, _ = round_trip(h.running.host, h.running.port, "status")
         assert (
             refused["error"]["code"] == "busy" and "too many clients" in refused["error"]["message"]
         )
         socks[0].sendall(b'{"id": 2, "cmd": "move", "args": {"joints_deg": [10, 0, 0, 0, 0, 0]}}\n')
         _wait_moving(h)
-        stopped, t_stop = _round_trip(h.running.host, h.running.port, "stop")
+        stopped, t_stop = round_trip(h.running.host, h.running.port, "stop")
         assert stopped["ok"] and stopped["result"]["stopped_job"] == "move", stopped
-        estopped, t_estop = _round_trip(h.running.host, h.running.port, "estop")
+        estopped, t_estop = round_trip(h.running.host, h.running.port, "estop")
         assert estopped["ok"] and estopped["result"]["state"] == "fault", estopped
     assert "arm move_joints interrupted" in h.journal.events
     assert max(t_stop, t_estop) < bound, (t_stop, t_estop, bound)
@@ -115,10 +95,10 @@ def test_stop_and_estop_served_with_every_client_slot_held(make_service) -> None
 def test_one_address_cannot_take_every_slot(make_service) -> None:
     h = make_service(max_clients_per_peer=2, overflow_grace_s=0.5)
     with _held(h, 2, ["127.0.0.7"]):
-        refused, _ = _round_trip(h.running.host, h.running.port, "status", "127.0.0.7")
+        refused, _ = round_trip(h.running.host, h.running.port, "status", "127.0.0.7")
         assert refused["error"]["code"] == "busy"
         assert "127.0.0.7" in refused["error"]["message"]
-        other, _ = _round_trip(h.running.host, h.running.port, "status", "127.0.0.8")
+        other, _ = round_trip(h.running.host, h.running.port, "status", "127.0.0.8")
         assert other["ok"], other
 
 
