@@ -48,6 +48,7 @@ ERROR_CODES: tuple[str, ...] = (
     "calibration_failed",
     "feature_not_found",
     "bad_calibration_file",
+    "storage_error",
 )
 
 MAX_ID_CHARS = 128

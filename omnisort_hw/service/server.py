@@ -35,7 +35,7 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Any
 
-from omnisort_hw import __version__
+from omnisort_hw import __version__, fileio
 from omnisort_hw.cell import Cell
 from omnisort_hw.errors import ConfigError, OmnisortError
 from omnisort_hw.service import protocol as proto
@@ -794,6 +794,13 @@ def start_in_thread(service: Service, timeout_s: float = 10.0) -> RunningService
     return RunningService(service, thread, box["loop"], host, port, exit_code)
 
 
+def check_directories(settings: Settings) -> None:
+    """The state and log directories must be writable before any device is opened."""
+    fileio.check_writable(settings.storage.state_dir, "[storage] state_dir")
+    if settings.logging.rerun:
+        fileio.check_writable(settings.logging.log_dir, "[logging] log_dir")
+
+
 def serve(
     settings: Settings,
     host: str | None = None,
@@ -812,6 +819,7 @@ def serve(
     # A shorter GIL switch interval keeps the event loop answering while a job computes.
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     notifier = Notifier()
+    check_directories(settings)
     notifier.status("opening devices")
     cell = cell or Cell.from_settings(settings)
     try:
