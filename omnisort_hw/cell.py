@@ -20,7 +20,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -159,9 +159,17 @@ class Cell:
         return self.runlog.path
 
     def roll_runlog(self) -> bool:
-        """Start a new `.rrd` file if the current one is over its size limit (between jobs)."""
+        """Start a new `.rrd` file when the current one is over its size limit or its file or
+        folder went away; never raises (a failure turns the run log off, see `log_health`)."""
         rl = self._runlog
-        return False if isinstance(rl, RunLog) else rl.roll_if_needed()
+        return False if isinstance(rl, RunLog) else rl.check()
+
+    def log_health(self) -> dict[str, Any]:
+        """The run log's health for `status`: ok, the file, or the problem and since when."""
+        rl = self._runlog
+        if isinstance(rl, RunLog):
+            return {"ok": True, "rrd": str(rl.path) if rl.path else None}
+        return asdict(rl.health())
 
     def connect(self) -> None:
         """Connect every device (a DeviceError propagates) and check the camera serial."""
@@ -356,6 +364,7 @@ class Cell:
             },
             "calibration": self.calibration_status(),
             "rrd": str(self.runlog_path) if self.runlog_path else None,
+            "logging": self.log_health(),
         }
 
     def status(self) -> dict[str, Any]:

@@ -58,6 +58,7 @@ SWITCH_INTERVAL_S = 0.001
 SAFETY_INFLIGHT_PER_CLIENT = 4
 MAX_SAFETY_LINE_BYTES = 4096
 OVERFLOW_PER_CLIENT = 4
+LOG_CHECK_S = 5.0
 
 
 class State(StrEnum):
@@ -261,6 +262,7 @@ class Service:
             OVERFLOW_PER_CLIENT * config.max_clients,
         )
         self.exit_problems: list[str] = []
+        self.log_check_s = LOG_CHECK_S
 
     # -- state -----------------------------------------------------------------------------
 
@@ -323,7 +325,10 @@ class Service:
         host, port = self.address or ("?", 0)
         self.notifier.ready(f"idle; listening on {host}:{port}")
         self.cell.runlog.event("service/state", f"ready on {host}:{port}")
-        tasks = [asyncio.create_task(self._housekeeping())]
+        tasks = [
+            asyncio.create_task(self._watchdog_pings()),
+            asyncio.create_task(self._log_checks()),
+        ]
         try:
             await self._stop_requested.wait()
         finally:
@@ -336,18 +341,30 @@ class Service:
             await self._shutdown()
         return 0
 
-    async def _housekeeping(self) -> None:
-        """Watchdog pings from the main loop and run-log rolling between jobs."""
+    async def _watchdog_pings(self) -> None:
+        """WATCHDOG=1 from the event loop and nothing else: a ping means the loop is alive."""
         interval = self.notifier.watchdog_interval_s
-        period = min(interval, 5.0) if interval else 5.0
-        next_roll = time.monotonic() + 30.0
+        if not interval:
+            return
         while True:
             self.notifier.watchdog()
-            if time.monotonic() >= next_roll:
-                next_roll = time.monotonic() + 30.0
-                if self._job is None:
-                    await asyncio.to_thread(self.cell.roll_runlog)
-            await asyncio.sleep(period)
+            await asyncio.sleep(interval)
+
+    async def _log_checks(self) -> None:
+        """Roll the run log by size (during jobs too) and notice a deleted or replaced log
+        directory; a failure is reported by the rotator and never ends this loop."""
+        last_problem: str | None = None
+        while True:
+            await asyncio.sleep(self.log_check_s)
+            try:
+                await asyncio.to_thread(self.cell.roll_runlog)
+                problem = self.cell.log_health().get("problem")
+            except Exception as exc:
+                problem = f"run log check failed: {exc}"
+                log.error("%s", problem)
+            if problem != last_problem:
+                self.notifier.status(f"run log: {problem}" if problem else "run log ok")
+                last_problem = problem
 
     async def _shutdown(self) -> None:
         reason = self._stop_reason or "shutdown"
