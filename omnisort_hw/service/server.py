@@ -22,22 +22,18 @@ import faulthandler
 import hmac
 import logging
 import os
-import queue
 import signal
 import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from concurrent.futures import Future
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from enum import StrEnum
+from dataclasses import dataclass
 from typing import Any
 
 from omnisort_hw import __version__, fileio
 from omnisort_hw.cell import Cell
 from omnisort_hw.errors import ConfigError, OmnisortError
+from omnisort_hw.instance_lock import InstanceLock
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.config import ServiceConfig, Settings, is_loopback
 from omnisort_hw.service.connection import (
@@ -50,6 +46,8 @@ from omnisort_hw.service.connection import (
     peer_host,
 )
 from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.pool import DaemonPool
+from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
 
 log = logging.getLogger("omnisort.service")
@@ -59,142 +57,6 @@ SAFETY_INFLIGHT_PER_CLIENT = 4
 MAX_SAFETY_LINE_BYTES = 4096
 OVERFLOW_PER_CLIENT = 4
 LOG_CHECK_S = 5.0
-
-
-class State(StrEnum):
-    """The service's explicit state. `moving` is a single `move` command."""
-
-    IDLE = "idle"
-    CALIBRATING = "calibrating"
-    MAPPING = "mapping"
-    SORTING = "sorting"
-    MOVING = "moving"
-    STOPPED = "stopped"
-    FAULT = "fault"
-
-
-RESTING = frozenset({State.IDLE, State.STOPPED})
-
-
-@dataclass(frozen=True)
-class Transition:
-    """One state change, as logged and reported by `status`."""
-
-    at: str
-    old: str
-    new: str
-    reason: str
-
-
-class StateMachine:
-    """The current state with its reason; every change is logged and passed to `on_change`."""
-
-    def __init__(self, on_change: Callable[[Transition], None] | None = None) -> None:
-        self._lock = threading.Lock()
-        self._state = State.IDLE
-        self._reason = "started"
-        self._since = time.time()
-        self._history: deque[Transition] = deque(maxlen=50)
-        self._on_change = on_change
-
-    @property
-    def state(self) -> State:
-        return self._state
-
-    @property
-    def reason(self) -> str:
-        return self._reason
-
-    def set(self, new: State, reason: str) -> Transition:
-        with self._lock:
-            old = self._state
-            self._state, self._reason, self._since = new, reason, time.time()
-            tr = Transition(_iso(self._since), old.value, new.value, reason)
-            self._history.append(tr)
-        log.info("state %s -> %s (%s)", tr.old, tr.new, reason)
-        if self._on_change is not None:
-            try:
-                self._on_change(tr)
-            except Exception:
-                log.exception("state change hook failed")
-        return tr
-
-    def snapshot(self) -> dict[str, Any]:
-        with self._lock:
-            return {
-                "state": self._state.value,
-                "reason": self._reason,
-                "since": _iso(self._since),
-                "transitions": [t.__dict__ for t in list(self._history)[-10:]],
-            }
-
-
-def _iso(wall: float) -> str:
-    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
-
-
-class DaemonPool:
-    """A fixed pool of daemon worker threads (a hung device call never blocks the exit)."""
-
-    def __init__(self, name: str, workers: int) -> None:
-        self._q: queue.SimpleQueue[tuple[Callable[[], Any], Future[Any]] | None] = (
-            queue.SimpleQueue()
-        )
-        self._threads = [
-            threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
-            for i in range(workers)
-        ]
-        for t in self._threads:
-            t.start()
-
-    def _work(self) -> None:
-        while True:
-            item = self._q.get()
-            if item is None:
-                return
-            fn, fut = item
-            if not fut.set_running_or_notify_cancel():
-                continue
-            try:
-                fut.set_result(fn())
-            except BaseException as exc:
-                fut.set_exception(exc)
-
-    def submit(self, fn: Callable[[], Any]) -> Future[Any]:
-        fut: Future[Any] = Future()
-        self._q.put((fn, fut))
-        return fut
-
-    def shutdown(self) -> None:
-        for _ in self._threads:
-            self._q.put(None)
-
-
-@dataclass
-class Job:
-    """The one long command running now."""
-
-    cmd: str
-    request_id: int | str | None
-    state: State
-    cancel: threading.Event = field(default_factory=threading.Event)
-    started: float = field(default_factory=time.monotonic)
-    stopped_by: str | None = None
-    progress: list[dict[str, Any]] = field(default_factory=list)
-
-    def report(self, event: dict[str, Any]) -> None:
-        """Progress from the running job (e.g. each cube sorted); `status` shows it."""
-        self.progress.append(dict(event))
-        del self.progress[:-50]
-
-    def describe(self) -> dict[str, Any]:
-        return {
-            "cmd": self.cmd,
-            "request_id": self.request_id,
-            "running_s": round(time.monotonic() - self.started, 3),
-            "cancelled": self.cancel.is_set(),
-            "progress": list(self.progress),
-        }
 
 
 def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
@@ -812,7 +674,7 @@ def start_in_thread(service: Service, timeout_s: float = 10.0) -> RunningService
 
 
 def check_directories(settings: Settings) -> None:
-    """The state and log directories must be writable before any device is opened."""
+    """The state and log directories must be writable before anything else happens."""
     fileio.check_writable(settings.storage.state_dir, "[storage] state_dir")
     if settings.logging.rerun:
         fileio.check_writable(settings.logging.log_dir, "[logging] log_dir")
@@ -837,18 +699,19 @@ def serve(
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     notifier = Notifier()
     check_directories(settings)
-    notifier.status("opening devices")
-    cell = cell or Cell.from_settings(settings)
-    try:
-        cell.connect()
-        service = Service(cell, cfg, notifier)
-    except BaseException:
-        cell.close()
-        raise
-    try:
-        code = asyncio.run(service.run())
-    finally:
-        notifier.close()
+    with InstanceLock(settings.storage.state_dir):
+        notifier.status("opening devices")
+        cell = cell or Cell.from_settings(settings)
+        try:
+            cell.connect()
+            service = Service(cell, cfg, notifier)
+        except BaseException:
+            cell.close()
+            raise
+        try:
+            code = asyncio.run(service.run())
+        finally:
+            notifier.close()
     if service.exit_problems:
         log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
     return code
