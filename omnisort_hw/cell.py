@@ -123,6 +123,9 @@ class Cell:
         self._snapshot_at = 0.0
         self._poller_stop = threading.Event()
         self._poller: threading.Thread | None = None
+        # Called (under the device's lock) before anything is switched on; raises to refuse.
+        # The service sets it to its state rules (nothing actuates in `fault`).
+        self.actuation_guard: Callable[[], None] | None = None
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -411,6 +414,8 @@ class Cell:
         """Switch the laser (confirmed by the driver's read-back) and return the state."""
         laser = self._need("laser")
         with self._locked(self._laser_lock, "laser"):
+            if on and self.actuation_guard is not None:
+                self.actuation_guard()
             laser.set(bool(on))
             state = bool(laser.state())
         self._cache_laser(state)

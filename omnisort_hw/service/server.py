@@ -32,7 +32,7 @@ from typing import Any
 
 from omnisort_hw import __version__, fileio
 from omnisort_hw.cell import Cell
-from omnisort_hw.errors import ConfigError, OmnisortError
+from omnisort_hw.errors import ConfigError, MotionRefusedError, OmnisortError
 from omnisort_hw.instance_lock import InstanceLock
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.config import ServiceConfig, Settings, is_loopback
@@ -101,6 +101,7 @@ class Service:
         self.config = config
         self.notifier = notifier or Notifier({})
         self.states = StateMachine(self._on_transition)
+        cell.actuation_guard = self._check_may_actuate
         self._job: Job | None = None
         self._job_lock = threading.Lock()
         self._quick = DaemonPool("quick", 6)
@@ -435,10 +436,14 @@ class Service:
             # Answered in the event loop from the cell's snapshot: no device, no pool.
             ctx = Context(self.cell, threading.Event(), self.service_status)
             return proto.ok_reply(req.id, HANDLERS["status"](ctx, req.args))
-        if req.cmd == "laser" and self._job is not None:
-            raise proto.ProtocolError(
-                proto.BUSY, f"laser is in use by the running {self._job.cmd}; send stop first"
-            )
+        switches_laser = req.args.get("laser" if req.cmd == "capture" else "on")
+        if req.cmd in ("laser", "capture") and switches_laser is not None:
+            if self._job is not None:
+                raise proto.ProtocolError(
+                    proto.BUSY, f"laser is in use by the running {self._job.cmd}; send stop first"
+                )
+            if switches_laser:
+                self._check_may_actuate()
         handler = HANDLERS[req.cmd]
         ctx = Context(self.cell, threading.Event(), self.service_status)
         return await self._in_pool(
@@ -491,15 +496,24 @@ class Service:
             "problems": problems,
         }
 
+    def _check_may_actuate(self) -> None:
+        """The state rule of every command that switches something on: none in `fault`."""
+        if self.states.state == State.FAULT:
+            raise MotionRefusedError(
+                f"refused: the cell is in fault ({self.states.reason}); clear the cause and "
+                "send reset"
+            )
+
     def _estop(self) -> dict[str, Any]:
         job = self._job
         if job is not None:
             job.stopped_by = "estop"
             job.cancel.set()
+        # Fault first: whatever is about to switch on from now is refused by the guard.
+        self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
         problems = self.cell.emergency_stop()
         if job is not None:
             self._keep_stopping(job)
-        self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
         return {
             "stopped_job": job.cmd if job is not None else None,
             "state": self.states.state.value,
