@@ -29,6 +29,8 @@ import numpy as np
 
 from omnisort_hw import fileio
 from omnisort_hw.errors import MotionRefusedError, OmnisortError
+from omnisort_hw.gripper_load import assess
+from omnisort_hw.job_journal import JobJournal
 from omnisort_hw.runlog import RunLog
 from omnisort_hw.storage import CalibrationStore
 
@@ -126,6 +128,7 @@ class Cell:
         # Called (under the device's lock) before anything is switched on; raises to refuse.
         # The service sets it to its state rules (nothing actuates in `fault`).
         self.actuation_guard: Callable[[], None] | None = None
+        self.journal = JobJournal(store.state_dir)
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -368,6 +371,7 @@ class Cell:
             "calibration": self.calibration_status(),
             "rrd": str(self.runlog_path) if self.runlog_path else None,
             "logging": self.log_health(),
+            "gripper": assess(self.devices.arm, self.journal.in_flight()).to_dict(),
         }
 
     def status(self) -> dict[str, Any]:
@@ -570,6 +574,14 @@ class Cell:
         problems = self.make_safe()
         self.runlog.event("arm/command", "emergency stop (software)", level="ERROR")
         return problems
+
+    def confirm_gripper_empty(self) -> None:
+        """An operator removed the gripper's load by hand: open the gripper (it holds nothing
+        now) and forget the cube in flight."""
+        arm = self.devices.arm
+        if arm is not None and arm.is_connected and arm.gripper.is_closed:
+            arm.gripper.open()
+        self.journal.clear_in_flight("an operator confirmed the gripper is empty")
 
     def check_safe_to_resume(self) -> dict[str, Any]:
         """Raise the driver's SafetyStopError if the arm is still in a stop; else its safety."""

@@ -986,6 +986,7 @@ class Sorter:
         log: RunLog = NullLog,
         cancel: threading.Event | None = None,
         progress: Callable[[dict[str, Any]], None] | None = None,
+        on_pick: Callable[[str, CubeOutcome], None] | None = None,
     ) -> None:
         self.camera = camera
         self.arm = arm
@@ -996,6 +997,7 @@ class Sorter:
         self.log = log
         self.cancel = cancel or threading.Event()
         self.progress = progress
+        self.on_pick = on_pick  # pick phases: grasping, holding, released, empty
         self._executed: list[np.ndarray] = []
 
     # -- capture and location -------------------------------------------------------------
@@ -1246,20 +1248,31 @@ class Sorter:
         grip = arm.gripper
         assert plan.descend is not None and plan.lift is not None
         self.log.event("sorting/pick", f"cube {out.index} ({out.color}) -> bin {out.bin}")
+        phase = self.on_pick or (lambda _phase, _out: None)
         try:
             grip.open()
             for move in [*plan.approach, plan.descend]:
                 self._send(move)
+            phase("grasping", out)
             grip.close()
             if grip.holding is False:
                 out.status, out.reason = "failed", "the gripper closed on nothing"
                 grip.open()
+                phase("empty", out)
                 self._send(plan.lift)
                 self._go_home(planner)
                 return
+            phase("holding", out)
             for move in [plan.lift, *plan.carry]:
                 self._send(move)
+            if grip.holding is False:
+                out.status, out.reason = "failed", "the cube was lost on the way to its bin"
+                grip.open()
+                phase("empty", out)
+                self._go_home(planner)
+                return
             grip.open()
+            phase("released", out)
             for move in plan.back:
                 self._send(move)
             out.status = "sorted"
@@ -1556,8 +1569,16 @@ def service_sort(
         log=cell.runlog,
         cancel=cancel,
         progress=progress,
+        on_pick=lambda phase, out: cell.journal.pick_phase(phase, out.index, out.color, out.bin),
     )
-    return sorter.run(max_objects, colors).to_dict()
+    from omnisort_hw.gripper_load import resolve_before_sort
+
+    sorter.calibration.check_motion_allowed()
+    held = resolve_before_sort(sorter, cell.journal, robot_base_T(sorter.calibration.system()))
+    report = sorter.run(max_objects, colors)
+    if held is not None:
+        report.outcomes.insert(0, held)
+    return report.to_dict()
 
 
 # ---- simulation harness (verification and the random-scene experiment) ----------------------

@@ -102,6 +102,7 @@ class Service:
         self.notifier = notifier or Notifier({})
         self.states = StateMachine(self._on_transition)
         cell.actuation_guard = self._check_may_actuate
+        self._recover_interrupted_job()
         self._job: Job | None = None
         self._job_lock = threading.Lock()
         self._quick = DaemonPool("quick", 6)
@@ -133,11 +134,31 @@ class Service:
         self.cell.runlog.event("service/state", f"{tr.old} -> {tr.new}: {tr.reason}")
         self.notifier.status(f"{tr.new}: {tr.reason}")
 
+    def _recover_interrupted_job(self) -> None:
+        """A job the previous process did not finish: report it and refuse motion until reset
+        (nothing resumes by itself)."""
+        rec = self.cell.journal.recover()
+        if rec is None:
+            return
+        cube = rec.get("in_flight")
+        flight = (
+            f"; cube {cube['cube']} ({cube['color']}, for bin {cube['bin']}) was {cube['phase']}"
+            if cube
+            else ""
+        )
+        msg = (
+            f"{rec['job']} (request {rec['request_id']}) was interrupted: {rec['outcome']} after "
+            f"{len(rec['progress'])} progress event(s){flight}; check the cell, then send reset"
+        )
+        log.error("%s", msg)
+        self.states.set(State.FAULT, msg)
+
     def service_status(self) -> dict[str, Any]:
         """The service's part of the `status` reply."""
         out = self.states.snapshot()
         job = self._job
         out["job"] = job.describe() if job is not None else None
+        out["last_run"] = self.cell.journal.record
         out["service"] = {
             "version": __version__,
             "pid": os.getpid(),
@@ -428,7 +449,10 @@ class Service:
             fn = self._stop if req.cmd == "stop" else self._estop
             return await self._in_pool(self._safety, req, fn, self.config.quick_timeout_s)
         if req.cmd == "reset":
-            return await self._in_pool(self._quick, req, self._reset, self.config.quick_timeout_s)
+            empty = bool(req.args.get("gripper_empty"))
+            return await self._in_pool(
+                self._quick, req, lambda: self._reset(empty), self.config.quick_timeout_s
+            )
         if req.cmd == "shutdown":
             self.request_shutdown(f"shutdown requested (request {req.id})")
             return proto.ok_reply(req.id, {"shutting_down": True})
@@ -533,13 +557,15 @@ class Service:
 
         threading.Thread(target=loop, name="keep-stopping", daemon=True).start()
 
-    def _reset(self) -> dict[str, Any]:
+    def _reset(self, gripper_empty: bool = False) -> dict[str, Any]:
         with self._job_lock:
             if self._job is not None:
                 raise proto.ProtocolError(
                     proto.BUSY, f"{self._job.cmd} is running; send stop first"
                 )
             safety = self.cell.check_safe_to_resume()
+            if gripper_empty:
+                self.cell.confirm_gripper_empty()
             old = self.states.state
             self.states.set(State.IDLE, f"reset from {old.value}")
         return {"state": State.IDLE.value, "previous": old.value, **safety}
@@ -568,7 +594,12 @@ class Service:
         self.cell.runlog.event("service/requests", f"{req.cmd} {req.args}")
         loop = asyncio.get_running_loop()
         done: asyncio.Future[dict[str, Any]] = loop.create_future()
-        ctx = Context(self.cell, job.cancel, self.service_status, job.report)
+
+        def report(event: dict[str, Any]) -> None:
+            job.report(event)
+            self.cell.journal.progress(event)
+
+        ctx = Context(self.cell, job.cancel, self.service_status, report)
         thread = threading.Thread(
             target=self._job_thread,
             args=(job, req, ctx, resting, loop, done),
@@ -599,6 +630,8 @@ class Service:
         done: asyncio.Future[dict[str, Any]],
     ) -> None:
         reply: dict[str, Any]
+        journal = self.cell.journal
+        journal.start(req.cmd, req.id, req.args)
         try:
             result = self._then_refresh(lambda: HANDLERS[req.cmd](ctx, req.args))
             if job.cancel.is_set():
@@ -622,6 +655,12 @@ class Service:
             with self._job_lock:
                 if self._job is job:
                     self._job = None
+        if reply["ok"]:
+            journal.finish("done", f"{req.cmd} done")
+        else:
+            err = reply["error"]
+            stopped = err["code"] == proto.STOPPED
+            journal.finish("stopped" if stopped else "failed", f"{err['code']}: {err['message']}")
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(_set_if_pending, done, reply)
 

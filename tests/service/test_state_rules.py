@@ -3,6 +3,7 @@ starts; switching off stays allowed; `stopped` is not a latch, for the laser as 
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from tests.service.conftest import Harness
@@ -47,3 +48,23 @@ def test_stopped_is_not_a_latch_for_laser_or_motion(service: Harness) -> None:
         assert c.call("stop")["result"]["state"] == "stopped"
         assert c.call("laser", {"on": True})["ok"]
         assert c.call("move", {"joints_deg": [5, 0, 0, 0, 0, 0]})["ok"]
+
+
+def test_a_gripper_that_may_hold_something_refuses_sort_until_confirmed(service: Harness) -> None:
+    from omnisort_hw.gripper_load import GripperLoadedError, resolve_before_sort
+    from omnisort_hw.sorting import SortConfig, Sorter
+
+    grip = service.devices.arm.gripper
+    grip.close()  # closed, no sensor, no pick on record: it may hold anything
+    sorter = Sorter(None, service.devices.arm, None, None, SortConfig())  # type: ignore[arg-type]
+    with pytest.raises(GripperLoadedError, match="gripper_empty=true") as info:
+        resolve_before_sort(sorter, service.cell.journal, np.eye(4))
+    assert info.value.code == "gripper_loaded"
+    service.cell.refresh_status()
+    with service.client() as c:
+        assert c.call("status")["result"]["gripper"]["load"] == "maybe"
+        assert c.call("reset", {"gripper_empty": True})["ok"]
+        service.cell.refresh_status()
+        assert c.call("status")["result"]["gripper"]["load"] == "empty"
+    assert grip.is_closed is False
+    assert resolve_before_sort(sorter, service.cell.journal, np.eye(4)) is None
