@@ -477,7 +477,17 @@ class Service:
     async def _in_pool(
         self, pool: DaemonPool, req: proto.Request, fn: Callable[[], dict[str, Any]], timeout: float
     ) -> dict[str, Any]:
-        fut = asyncio.wrap_future(pool.submit(lambda: self._then_refresh(fn)))
+        if pool is self._safety:
+            # The reply to stop/estop never waits for the status refresh's device reads.
+            def then_queue_refresh() -> dict[str, Any]:
+                try:
+                    return fn()
+                finally:
+                    self._quick.submit(lambda: self._then_refresh(lambda: {}))
+
+            fut = asyncio.wrap_future(pool.submit(then_queue_refresh))
+        else:
+            fut = asyncio.wrap_future(pool.submit(lambda: self._then_refresh(fn)))
         try:
             result = await asyncio.wait_for(fut, timeout)
         except TimeoutError:
