@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw.service.client import Client
-from omnisort_hw.service.demo import write_config
+from omnisort_hw.service.demo import calibrate_from_truth, write_config
 from omnisort_hw.service.launch import start_service
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
@@ -28,10 +28,10 @@ def _journal(state: Path) -> dict:
 
 
 def test_sigkill_mid_sort_then_restart(tmp_path: Path) -> None:
-    from tests.service.sim_cell import WIDTH, calibrated_sim_cell
+    from tests.service.sim_cell import WIDTH
 
-    calibrated_sim_cell(tmp_path).close()
     config = write_config(tmp_path, WIDTH)
+    calibrate_from_truth(config)
     state = tmp_path / "state"
     first = start_service(config, tmp_path / "run1")
     try:
