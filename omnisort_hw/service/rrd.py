@@ -21,6 +21,9 @@ from omnisort_hw.runlog import RunLog
 
 log = logging.getLogger(__name__)
 RRD_GLOB = "*.rrd"
+# A file is rolled once it passes this fraction of its limit, so that what is written until the
+# next check (every second) still fits under the limit.
+ROLL_AT = 0.9
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,7 @@ class RunLogRotator:
             size = path.stat().st_size
         except FileNotFoundError:
             return "the file was deleted"
-        if self.max_file_bytes is not None and size > self.max_file_bytes:
+        if self.max_file_bytes is not None and size > ROLL_AT * self.max_file_bytes:
             return f"reached {size} bytes (limit {self.max_file_bytes})"
         return None
 
@@ -216,7 +219,11 @@ class RunLogRotator:
         if self.log_dir is None:
             return None
         current = [self._log.path] if self._log.path is not None else []
-        result = rotate_rrd_files(self.log_dir, self.keep, self.max_total_bytes, protect=current)
+        budget = self.max_total_bytes
+        if budget is not None and self.max_file_bytes is not None:
+            # Room for the current file to grow to its own limit.
+            budget = max(0, budget - self.max_file_bytes)
+        result = rotate_rrd_files(self.log_dir, self.keep, budget, protect=current)
         for p in result.deleted:
             log.info("deleted old run log %s", p)
         return result

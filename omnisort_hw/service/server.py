@@ -56,7 +56,7 @@ SWITCH_INTERVAL_S = 0.001
 SAFETY_INFLIGHT_PER_CLIENT = 4
 MAX_SAFETY_LINE_BYTES = 4096
 OVERFLOW_PER_CLIENT = 4
-LOG_CHECK_S = 5.0
+LOG_CHECK_S = 1.0
 
 
 def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
