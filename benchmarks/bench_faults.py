@@ -35,7 +35,8 @@ def sim_service(tmp: Path, service: str = "", logging: str = "") -> Any:
     text = config.read_text().replace('log_dir = "logs"\n', f'log_dir = "logs"\n{logging}')
     config.write_text(text + f"[service]\n{service}")
     calibrate_from_truth(config)
-    return start_service(config, tmp / "run")
+    # The environment of deploy/omnisort.service.
+    return start_service(config, tmp / "run", extra_env={"MALLOC_ARENA_MAX": "2"})
 
 
 def _estops(ctl: Any, host: str, port: int, source: str = "127.0.0.1") -> dict[str, Any]:
