@@ -21,7 +21,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,9 +32,12 @@ from omnisort_hw import fileio
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.device_status import Cached, Caches, arm_summary, camera_summary, error_text
 from omnisort_hw.devices import Devices, open_devices
 from omnisort_hw.errors import InputError, MotionRefusedError, OmnisortError
+from omnisort_hw.job_journal import JobJournal
 from omnisort_hw.pipeline.arm_motion import ArmMover
+from omnisort_hw.pipeline.gripper_load import assess
 from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
 from omnisort_hw.storage import CalibrationStore
@@ -67,29 +70,8 @@ class DeviceLockTimeoutError(OmnisortError):
 CellDevices = Devices
 
 
-@dataclass
-class _Cached:
-    value: Any = None
-    at: float = -1e18
-
-    def fresh(self, max_age_s: float) -> bool:
-        return time.monotonic() - self.at <= max_age_s
-
-
-@dataclass
-class _Caches:
-    arm: _Cached = field(default_factory=_Cached)
-    laser: _Cached = field(default_factory=_Cached)
-    calibration: _Cached = field(default_factory=_Cached)
-    calibration_key: Any = None
-
-
 def _iso(wall: float) -> str:
     return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
-
-
-def _error_text(exc: BaseException) -> dict[str, str]:
-    return {"error": str(exc), "code": str(getattr(exc, "code", type(exc).__name__))}
 
 
 class Cell:
@@ -121,13 +103,17 @@ class Cell:
         self._camera_lock = threading.Lock()
         self._laser_lock = threading.Lock()
         self._cache_lock = threading.Lock()
-        self._caches = _Caches()
+        self._caches = Caches()
         self._connected = False
         self._mover = ArmMover()
         self._snapshot: dict[str, Any] | None = None
         self._snapshot_at = 0.0
         self._poller_stop = threading.Event()
         self._poller: threading.Thread | None = None
+        # Called (under the device's lock) before anything is switched on; raises to refuse.
+        # The service sets it to its state rules (nothing actuates in `fault`).
+        self.actuation_guard: Callable[[], None] | None = None
+        self.journal = JobJournal(store.state_dir)
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -164,9 +150,17 @@ class Cell:
         return self.runlog.path
 
     def roll_runlog(self) -> bool:
-        """Start a new `.rrd` file if the current one is over its size limit (between jobs)."""
+        """Start a new `.rrd` file when the current one is over its size limit or its file or
+        folder went away; never raises (a failure turns the run log off, see `log_health`)."""
         rl = self._runlog
-        return False if isinstance(rl, RunLog) else rl.roll_if_needed()
+        return False if isinstance(rl, RunLog) else rl.check()
+
+    def log_health(self) -> dict[str, Any]:
+        """The run log's health for `status`: ok, the file, or the problem and since when."""
+        rl = self._runlog
+        if isinstance(rl, RunLog):
+            return {"ok": True, "rrd": str(rl.path) if rl.path else None}
+        return asdict(rl.health())
 
     def connect(self) -> None:
         """Connect every device (a DeviceError propagates) and check the camera serial."""
@@ -259,7 +253,7 @@ class Cell:
 
     def _cache_laser(self, on: bool) -> None:
         with self._cache_lock:
-            self._caches.laser = _Cached(bool(on), time.monotonic())
+            self._caches.laser = Cached(bool(on), time.monotonic())
 
     # -- status ----------------------------------------------------------------------------
 
@@ -278,7 +272,7 @@ class Cell:
                 return dict(c.calibration.value)
         value = self.store.status()
         with self._cache_lock:
-            self._caches.calibration = _Cached(value, time.monotonic())
+            self._caches.calibration = Cached(value, time.monotonic())
             self._caches.calibration_key = key
         return dict(value)
 
@@ -289,25 +283,9 @@ class Cell:
         with self._cache_lock:
             if self._caches.arm.fresh(STATUS_CACHE_S):
                 return dict(self._caches.arm.value)
-        out: dict[str, Any] = {"configured": True, "name": arm.name, "connected": arm.is_connected}
-        if arm.is_connected:
-            try:
-                st = arm.state()
-                out.update(
-                    joints_deg=np.round(np.asarray(st.joints_deg, float), 4).tolist(),
-                    tcp_pose=np.round(np.asarray(st.tcp_pose, float), 4).tolist(),
-                    safety={
-                        "ok": st.safety.ok,
-                        "protective_stop": st.safety.protective_stop,
-                        "emergency_stop": st.safety.emergency_stop,
-                        "robot_mode": st.safety.robot_mode,
-                        "safety_mode": getattr(st.safety, "safety_mode", None),
-                    },
-                )
-            except Exception as exc:
-                out.update(_error_text(exc))
+        out = arm_summary(arm)
         with self._cache_lock:
-            self._caches.arm = _Cached(out, time.monotonic())
+            self._caches.arm = Cached(out, time.monotonic())
         return out
 
     def _laser_status(self) -> dict[str, Any]:
@@ -330,7 +308,7 @@ class Cell:
                 self._cache_laser(on)
                 out["on"] = on
             except Exception as exc:
-                out.update(_error_text(exc))
+                out.update(error_text(exc))
             finally:
                 self._laser_lock.release()
         else:
@@ -339,17 +317,7 @@ class Cell:
         return out
 
     def _camera_status(self) -> dict[str, Any]:
-        cam = self.devices.camera
-        if cam is None:
-            return {"configured": False}
-        out: dict[str, Any] = {"configured": True, "name": cam.name, "connected": cam.is_connected}
-        if cam.is_connected:
-            try:
-                out["serial"] = cam.serial
-                out["resolution"] = list(cam.resolution)
-            except Exception as exc:
-                out.update(_error_text(exc))
-        return out
+        return camera_summary(self.devices.camera)
 
     def read_status(self) -> dict[str, Any]:
         """Devices and calibration read now (device calls; the poller thread calls this)."""
@@ -361,6 +329,8 @@ class Cell:
             },
             "calibration": self.calibration_status(),
             "rrd": str(self.runlog_path) if self.runlog_path else None,
+            "logging": self.log_health(),
+            "gripper": assess(self.devices.arm, self.journal.in_flight()).to_dict(),
         }
 
     def status(self) -> dict[str, Any]:
@@ -407,6 +377,8 @@ class Cell:
         """Switch the laser (confirmed by the driver's read-back) and return the state."""
         laser = self._need("laser")
         with self._locked(self._laser_lock, "laser"):
+            if on and self.actuation_guard is not None:
+                self.actuation_guard()
             laser.set(bool(on))
             state = bool(laser.state())
         self._cache_laser(state)
@@ -505,6 +477,14 @@ class Cell:
         problems = self.make_safe()
         self.runlog.event("arm/command", "emergency stop (software)", level="ERROR")
         return problems
+
+    def confirm_gripper_empty(self) -> None:
+        """An operator removed the gripper's load by hand: open the gripper (it holds nothing
+        now) and forget the cube in flight."""
+        arm = self.devices.arm
+        if arm is not None and arm.is_connected and arm.gripper.is_closed:
+            arm.gripper.open()
+        self.journal.clear_in_flight("an operator confirmed the gripper is empty")
 
     def check_safe_to_resume(self) -> dict[str, Any]:
         """Raise the driver's SafetyStopError if the arm is still in a stop; else its safety."""
@@ -719,7 +699,8 @@ class Cell:
     ) -> dict[str, Any]:
         """Locate, pick and place every object by colour until done, `max_objects` or cancel;
         gated by the calibration store."""
-        from omnisort_hw.pipeline.calibration_source import StoreCalibration
+        from omnisort_hw.pipeline.calibration_source import StoreCalibration, robot_base_T
+        from omnisort_hw.pipeline.gripper_load import resolve_before_sort
         from omnisort_hw.pipeline.sort import Sorter
 
         cfg = self._sorting("the sorting pipeline")
@@ -736,8 +717,15 @@ class Cell:
             log=self.runlog,
             cancel=cancel,
             progress=progress,
+            on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
         )
-        return sorter.run(max_objects, colors).to_dict()
+        sorter.calibration.check_motion_allowed()
+        T_SB = robot_base_T(sorter.calibration.system())
+        held = resolve_before_sort(sorter, self.journal, T_SB)
+        report = sorter.run(max_objects, colors)
+        if held is not None:
+            report.outcomes.insert(0, held)
+        return report.to_dict()
 
 
 class _CellCamera:

@@ -40,6 +40,13 @@ class CalibrationFileError(OmnisortError):
     code = "bad_calibration_file"
 
 
+class StorageError(OmnisortError):
+    """A file of the state or log directory could not be written (the message names the path
+    and the operating system's error); nothing already stored was changed."""
+
+    code = "storage_error"
+
+
 class MotionRefusedError(OmnisortError):
     """A motion was refused before anything was sent to the arm."""
 

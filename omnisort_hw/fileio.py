@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -10,7 +11,29 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.errors import StorageError
+
 HISTORY_DIRNAME = "history"
+
+
+def os_error_text(exc: OSError) -> str:
+    """`[Errno 28] ENOSPC: No space left on device (PATH)` from an OSError."""
+    name = errno.errorcode.get(exc.errno or 0, "")
+    text = exc.strerror or str(exc)
+    where = f" ({exc.filename})" if exc.filename else ""
+    return f"[Errno {exc.errno}] {name}: {text}{where}" if exc.errno else f"{text}{where}"
+
+
+def check_writable(directory: str | os.PathLike[str], what: str) -> Path:
+    """Create `directory` if needed and prove a file can be written, synced and removed in it;
+    StorageError names the directory and the OS error otherwise."""
+    folder = Path(directory)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        write_temp(folder, "writable-check", b"ok\n").unlink()
+    except OSError as exc:
+        raise StorageError(f"{what} {folder} is not writable: {os_error_text(exc)}") from None
+    return folder
 
 
 def _fsync_dir(directory: Path) -> None:
@@ -47,8 +70,9 @@ def prune_history(path: str | os.PathLike[str], keep: int) -> list[Path]:
     return doomed
 
 
-def _keep_previous(target: Path) -> None:
-    """Preserve the current `target` in the history folder before it is replaced.
+def _keep_previous(target: Path) -> Path | None:
+    """Preserve the current `target` in the history folder before it is replaced; returns the
+    new history entry (None when one with the same name exists already).
 
     A hard link is atomic and costs nothing (the rename below leaves the old inode to the link);
     where links are not supported the file is copied to a temp name, fsynced and renamed.
@@ -60,14 +84,34 @@ def _keep_previous(target: Path) -> None:
     try:
         os.link(target, dest)
     except FileExistsError:
-        return
+        return None
     except OSError:
         tmp = history / f".{dest.name}.tmp"
-        shutil.copy2(target, tmp)
-        with open(tmp, "rb") as handle:
-            os.fsync(handle.fileno())
-        os.replace(tmp, dest)
+        try:
+            shutil.copy2(target, tmp)
+            with open(tmp, "rb") as handle:
+                os.fsync(handle.fileno())
+            os.replace(tmp, dest)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
     _fsync_dir(history)
+    return dest
+
+
+def write_temp(directory: Path, name: str, data: bytes) -> Path:
+    """`data` in a new temp file `.NAME.*.tmp` of `directory`, fsynced (the one place where a
+    write's bytes reach the disk: a full disk or a read-only folder fails here)."""
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+    return Path(tmp_name)
 
 
 def atomic_write_bytes(
@@ -78,26 +122,28 @@ def atomic_write_bytes(
 ) -> Path:
     """Write `data` to `path` so that readers see either the old or the new file, never half.
 
-    With `keep_history`, an existing file is first kept as `history/NAME.TIMESTAMP` beside it;
-    `history_keep` then bounds how many previous versions stay (None: all).
+    With `keep_history`, an existing file is kept as `history/NAME.TIMESTAMP` beside it;
+    `history_keep` then bounds how many previous versions stay (None: all). A write that fails
+    leaves the file and its history exactly as they were: the new bytes are on disk before the
+    history is touched, a history entry added for a rename that then fails is taken back, and
+    old versions are pruned only after the new file is in place.
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    if keep_history and target.exists():
-        _keep_previous(target)
-        if history_keep is not None:
-            prune_history(target, history_keep)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    tmp = write_temp(target.parent, target.name, data)
+    added: Path | None = None
     try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp_name, target)
+        if keep_history and target.exists():
+            added = _keep_previous(target)
+        os.replace(tmp, target)
     except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
+        if added is not None:
+            added.unlink(missing_ok=True)
         raise
     _fsync_dir(target.parent)
+    if keep_history and history_keep is not None:
+        prune_history(target, history_keep)
     return target
 
 

@@ -7,6 +7,7 @@ stages receive a RunLog from the caller.
 
 from __future__ import annotations
 
+import threading
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
@@ -19,16 +20,34 @@ class RunLog:
     """Logs images, points, lines, scalars and text of one run to one `.rrd` file."""
 
     def __init__(self, path: str | Path | None, application_id: str = "omnisort") -> None:
-        self.path = Path(path) if path is not None else None
+        self.path: Path | None = None
+        self._application_id = application_id
         self._rec: Any = None
         self._rr: Any = None
-        if self.path is not None:
+        self._swap = threading.Lock()
+        self.reopen(path)
+
+    def reopen(self, path: str | Path | None) -> None:
+        """Close the current file and go on in `path` (None: stop writing), in place, so every
+        holder of this RunLog follows. Raises OSError when `path`'s folder cannot be made; this
+        log is then off (no file)."""
+        with self._swap:
+            old, self._rec, self.path = self._rec, None, None
+            if old is not None:
+                try:
+                    old.flush()
+                finally:
+                    old.disconnect()
+            if path is None:
+                return
             import rerun as rr
 
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+            new_path = Path(path)
+            new_path.parent.mkdir(parents=True, exist_ok=True)
             self._rr = rr
-            self._rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
-            self._rec.save(str(self.path))
+            rec = rr.RecordingStream(self._application_id, recording_id=uuid.uuid4())
+            rec.save(str(new_path))
+            self._rec, self.path = rec, new_path
 
     @property
     def enabled(self) -> bool:
@@ -36,17 +55,19 @@ class RunLog:
 
     def set_step(self, timeline: str, step: int) -> None:
         """Set the sequence index that following entries belong to (image number, pick number)."""
-        if self._rec is not None:
-            self._rec.set_time(timeline, sequence=int(step))
+        rec = self._rec
+        if rec is not None:
+            rec.set_time(timeline, sequence=int(step))
 
     def image(self, entity: str, image: np.ndarray, bgr: bool = True) -> None:
         """Log an image; OpenCV's BGR order is converted to RGB."""
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
         img = np.asarray(image)
         if img.ndim == 3 and img.shape[2] == 3 and bgr:
             img = img[:, :, ::-1]
-        self._rec.log(entity, self._rr.Image(np.ascontiguousarray(img)))
+        rec.log(entity, self._rr.Image(np.ascontiguousarray(img)))
 
     def points2d(
         self,
@@ -56,10 +77,11 @@ class RunLog:
         radius: float = 2.0,
         labels: Sequence[str] | None = None,
     ) -> None:
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
         pts = np.asarray(points, dtype=np.float32).reshape(-1, 2)
-        self._rec.log(entity, self._rr.Points2D(pts, colors=color, radii=radius, labels=labels))
+        rec.log(entity, self._rr.Points2D(pts, colors=color, radii=radius, labels=labels))
 
     def points3d(
         self,
@@ -68,17 +90,19 @@ class RunLog:
         color: Sequence[int] | np.ndarray | None = None,
         radius: float = 2.0,
     ) -> None:
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
         pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-        self._rec.log(entity, self._rr.Points3D(pts, colors=color, radii=radius))
+        rec.log(entity, self._rr.Points3D(pts, colors=color, radii=radius))
 
     def lines2d(
         self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None
     ) -> None:
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
-        self._rec.log(
+        rec.log(
             entity,
             self._rr.LineStrips2D(
                 [np.asarray(s, np.float32).reshape(-1, 2) for s in strips], colors=color
@@ -88,9 +112,10 @@ class RunLog:
     def lines3d(
         self, entity: str, strips: Sequence[np.ndarray], color: Sequence[int] | None = None
     ) -> None:
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
-        self._rec.log(
+        rec.log(
             entity,
             self._rr.LineStrips3D(
                 [np.asarray(s, np.float32).reshape(-1, 3) for s in strips], colors=color
@@ -99,33 +124,36 @@ class RunLog:
 
     def pose(self, entity: str, matrix: np.ndarray) -> None:
         """Log a 4x4 homogeneous transform (translation in mm) as the entity's frame."""
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
         m = np.asarray(matrix, dtype=float)
-        self._rec.log(entity, self._rr.Transform3D(translation=m[:3, 3], mat3x3=m[:3, :3]))
+        rec.log(entity, self._rr.Transform3D(translation=m[:3, 3], mat3x3=m[:3, :3]))
 
     def scalar(self, entity: str, value: float) -> None:
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
-        self._rec.log(entity, self._rr.Scalars(float(value)))
+        rec.log(entity, self._rr.Scalars(float(value)))
 
     def text(self, entity: str, text: str) -> None:
         """Log a document (parameters, a summary) as markdown/plain text."""
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
-        self._rec.log(entity, self._rr.TextDocument(text))
+        rec.log(entity, self._rr.TextDocument(text))
 
     def event(self, entity: str, message: str, level: str = "INFO") -> None:
-        if self._rec is None:
+        rec = self._rec
+        if rec is None:
             return
-        self._rec.log(entity, self._rr.TextLog(message, level=level))
+        rec.log(entity, self._rr.TextLog(message, level=level))
 
     def close(self) -> None:
-        """Flush and close the file; later calls are no-ops."""
-        if self._rec is not None:
-            self._rec.flush()
-            self._rec.disconnect()
-            self._rec = None
+        """Flush and close the file (`path` still names it); later calls are no-ops."""
+        last = self.path
+        self.reopen(None)
+        self.path = last
 
     def __enter__(self) -> RunLog:
         return self

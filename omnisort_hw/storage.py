@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 from omnisort_hw import fileio
 from omnisort_hw.core.camera_io import MODEL_KEYS
-from omnisort_hw.errors import CalibrationFileError, MotionRefusedError
+from omnisort_hw.errors import CalibrationFileError, MotionRefusedError, StorageError
 
 if TYPE_CHECKING:
     from omnisort_hw.core.camera_model import OcamModel
@@ -229,9 +229,15 @@ class CalibrationStore:
             "saved": saved,
         }
         body[CHECKSUM_KEY] = checksum_of(body)
-        return fileio.atomic_write_json(
-            path, body, keep_history=True, history_keep=self.history_keep
-        )
+        try:
+            return fileio.atomic_write_json(
+                path, body, keep_history=True, history_keep=self.history_keep
+            )
+        except OSError as exc:
+            raise StorageError(
+                f"{path}: the {kind} calibration could not be saved: {fileio.os_error_text(exc)}; "
+                f"the current file and {fileio.history_dir(path)} are unchanged"
+            ) from exc
 
     def save_camera(self, payload: Mapping[str, Any], camera_serial: str | None = None) -> Path:
         """Save the camera intrinsics (the OCam model dict) as `camera.json`."""

@@ -64,6 +64,11 @@ class ServiceConfig:
     max_line_bytes: int = 65536
     max_clients: int = 64
     max_inflight_per_client: int = 8
+    max_clients_per_peer: int = 16
+    idle_timeout_s: float = 600.0
+    line_timeout_s: float = 10.0
+    write_timeout_s: float = 10.0
+    overflow_grace_s: float = 2.0
     quick_timeout_s: float = 10.0
     job_timeout_s: float = 3600.0
     shutdown_timeout_s: float = 15.0
@@ -91,6 +96,11 @@ class ServiceConfig:
                 "max_line_bytes",
                 "max_clients",
                 "max_inflight_per_client",
+                "max_clients_per_peer",
+                "idle_timeout_s",
+                "line_timeout_s",
+                "write_timeout_s",
+                "overflow_grace_s",
                 "quick_timeout_s",
                 "job_timeout_s",
                 "shutdown_timeout_s",
@@ -126,6 +136,12 @@ class ServiceConfig:
             max_line_bytes=_integer(section, name, "max_line_bytes", 65536, 1024),
             max_clients=_integer(section, name, "max_clients", 64, 1),
             max_inflight_per_client=_integer(section, name, "max_inflight_per_client", 8, 1),
+            max_clients_per_peer=_integer(section, name, "max_clients_per_peer", 16, 1),
+            # 0: idle connections are never closed.
+            idle_timeout_s=_number(section, name, "idle_timeout_s", 600.0, 0.0),
+            line_timeout_s=_number(section, name, "line_timeout_s", 10.0, 0.1),
+            write_timeout_s=_number(section, name, "write_timeout_s", 10.0, 0.1),
+            overflow_grace_s=_number(section, name, "overflow_grace_s", 2.0, 0.1),
             quick_timeout_s=_number(section, name, "quick_timeout_s", 10.0, 0.1),
             job_timeout_s=_number(section, name, "job_timeout_s", 3600.0, 1.0),
             shutdown_timeout_s=_number(section, name, "shutdown_timeout_s", 15.0, 0.5),

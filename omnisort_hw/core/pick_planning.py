@@ -178,7 +178,7 @@ class PickPlan:
         return float(sum(m.traj.duration for m in self.moves))
 
 
-def _tool_pose(xyz: np.ndarray, yaw_deg: float) -> np.ndarray:
+def tool_pose(xyz: np.ndarray, yaw_deg: float) -> np.ndarray:
     """TCP pose in B pointing straight down, fingers closing along (cos a+90, sin a+90)."""
     a = math.radians(yaw_deg)
     x = np.array([math.cos(a), math.sin(a), 0.0])
@@ -514,9 +514,9 @@ class Planner:
         free: list[Box | FloorPlane],
         with_target: list[Box | FloorPlane],
     ) -> None:
-        T_app = _tool_pose(targets["approach"], yaw)
-        T_grasp = _tool_pose(targets["grasp"], yaw)
-        T_lift = _tool_pose(targets["lift"], yaw)
+        T_app = tool_pose(targets["approach"], yaw)
+        T_grasp = tool_pose(targets["grasp"], yaw)
+        T_lift = tool_pose(targets["lift"], yaw)
         q_app = self.ik(T_app, q_start)
         plan.approach = self.plan_joint_via(q_start, q_app, with_target, "move above the cube")
         plan.descend = self.plan_linear(q_app, T_grasp, free, "descend onto the cube")
@@ -527,7 +527,7 @@ class Planner:
         base = bin_yaw + 90.0 * round((yaw - bin_yaw) / 90.0)
         carry = self._first_path(
             q_lift,
-            [_tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)],
+            [tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)],
             free,
             "carry the cube to its bin",
         )

@@ -177,6 +177,7 @@ class Sorter:
         log: RunLog = NullLog,
         cancel: threading.Event | None = None,
         progress: Callable[[dict[str, Any]], None] | None = None,
+        on_pick: Callable[[str, CubeOutcome], None] | None = None,
     ) -> None:
         self.camera = camera
         self.arm = arm
@@ -187,6 +188,7 @@ class Sorter:
         self.log = log
         self.cancel = cancel or threading.Event()
         self.progress = progress
+        self.on_pick = on_pick  # pick phases: grasping, holding, released, empty
         self._executed: list[np.ndarray] = []
 
     # -- capture and location -------------------------------------------------------------
@@ -419,20 +421,31 @@ class Sorter:
         grip = arm.gripper
         assert plan.descend is not None and plan.lift is not None
         self.log.event("sorting/pick", f"cube {out.index} ({out.color}) -> bin {out.bin}")
+        phase = self.on_pick or (lambda _phase, _out: None)
         try:
             grip.open()
             for move in [*plan.approach, plan.descend]:
                 self._send(move)
+            phase("grasping", out)
             grip.close()
             if grip.holding is False:
                 out.status, out.reason = "failed", "the gripper closed on nothing"
                 grip.open()
+                phase("empty", out)
                 self._send(plan.lift)
                 self._go_home(planner)
                 return
+            phase("holding", out)
             for move in [plan.lift, *plan.carry]:
                 self._send(move)
+            if grip.holding is False:
+                out.status, out.reason = "failed", "the cube was lost on the way to its bin"
+                grip.open()
+                phase("empty", out)
+                self._go_home(planner)
+                return
             grip.open()
+            phase("released", out)
             for move in plan.back:
                 self._send(move)
             out.status = "sorted"

@@ -44,6 +44,36 @@ def write_config(out: Path, width: int) -> Path:
     return path
 
 
+def calibrate_from_truth(config: Path) -> None:
+    """Write camera.json and system.json (with the robot base) of the simulated cell of
+    `config` from the simulator's truth: for benchmarks and tests that exercise the service,
+    not the calibration (the demo itself calibrates through the protocol)."""
+    from datetime import UTC, datetime
+
+    from omnisort_hw.cell import Cell
+    from omnisort_hw.config.cell import load_cell_config
+
+    cell = Cell.from_settings(load_cell_config(config))
+    try:
+        cell.connect()
+        cam = cell.devices.camera
+        assert cam is not None
+        cam.grab(with_truth=True)
+        truth = cam.last_truth  # type: ignore[attr-defined]
+        system = {k: truth[k] for k in ("camera", "camera_rotation", "laser_plane", "target")}
+        system.update(
+            method="truth",
+            residuals={},
+            std={},
+            created=datetime.now(UTC).isoformat(timespec="seconds"),
+            robot_base=truth["robot_base"],
+        )
+        cell.store.save_camera(dict(truth["camera"]), camera_serial=cam.serial)
+        cell.store.save_system(system, camera_serial=cam.serial)
+    finally:
+        cell.close()
+
+
 def _brief(cmd: str, reply: dict[str, Any]) -> str:
     if not reply.get("ok"):
         err = reply["error"]

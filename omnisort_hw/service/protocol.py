@@ -48,6 +48,9 @@ ERROR_CODES: tuple[str, ...] = (
     "calibration_failed",
     "feature_not_found",
     "bad_calibration_file",
+    "storage_error",
+    "gripper_loaded",
+    "instance_locked",
 )
 
 MAX_ID_CHARS = 128
@@ -246,7 +249,19 @@ COMMANDS: dict[str, Command] = {
             needs_token=False,
             help="stop everything, laser off, latch the fault state (not a safety function)",
         ),
-        Command("reset", "control", help="leave the fault/stopped state when the arm is safe"),
+        Command(
+            "reset",
+            "control",
+            (
+                Arg(
+                    "gripper_empty",
+                    "bool",
+                    default=False,
+                    help="an operator confirms the gripper's load was removed by hand",
+                ),
+            ),
+            help="leave the fault/stopped state when the arm is safe",
+        ),
         Command("shutdown", "control", help="stop the cell and end the service (exit 0)"),
     )
 }

@@ -3,11 +3,12 @@
 `rotate_rrd_files` deletes the oldest files until at most `keep` remain and they add up to at
 most `max_total_bytes`; the file being written is never deleted. `RunLogRotator` holds the
 service's current `RunLog` and starts a new file when the current one grows past its size
-limit (only between jobs, so a job's entries stay in one file).
+limit, during jobs too, and notices a deleted or replaced log directory.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import threading
@@ -20,6 +21,9 @@ from omnisort_hw.runlog import RunLog
 
 log = logging.getLogger(__name__)
 RRD_GLOB = "*.rrd"
+# A file is rolled once it passes this fraction of its limit, so that what is written until the
+# next check (every second) still fits under the limit.
+ROLL_AT = 0.9
 
 
 @dataclass(frozen=True)
@@ -90,8 +94,30 @@ def new_run_path(log_dir: str | Path, prefix: str = "omnisort") -> Path:
     return Path(log_dir) / f"{prefix}-{stamp}-{os.getpid()}.rrd"
 
 
+@dataclass(frozen=True)
+class LogHealth:
+    """What `status` says about the run log: ok, or the problem and since when."""
+
+    ok: bool
+    rrd: str | None
+    problem: str | None = None
+    since: str | None = None
+
+
+def _dir_identity(folder: Path) -> tuple[int, int] | None:
+    try:
+        st = folder.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino)
+
+
 class RunLogRotator:
-    """The service's current RunLog, replaced by a fresh file when it grows too large."""
+    """The service's current RunLog, moved to a fresh file when the current one grows past its
+    size limit (during a job as well: the RunLog object stays the same, only its file changes),
+    when the file or the folder is deleted or replaced, and never raising: a folder that cannot
+    be written turns the run log off (the service logs to stderr only) until it can be again.
+    """
 
     def __init__(
         self,
@@ -108,48 +134,99 @@ class RunLogRotator:
         self.prefix = prefix
         self._lock = threading.Lock()
         self._log = RunLog(None)
+        self._dir_id: tuple[int, int] | None = None
+        self._problem: str | None = None
+        self._since: str | None = None
         if self.log_dir is not None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
-            self._log = RunLog(new_run_path(self.log_dir, self.prefix))
-            self.rotate()
+            self._open("started")
 
     @property
     def log(self) -> RunLog:
-        """The RunLog to write to now."""
+        """The RunLog to write to (always the same object; it follows the file changes)."""
         return self._log
 
     @property
     def path(self) -> Path | None:
         return self._log.path
 
+    def health(self) -> LogHealth:
+        path = self._log.path
+        return LogHealth(
+            self._problem is None, str(path) if path else None, self._problem, self._since
+        )
+
+    def _open(self, reason: str) -> None:
+        assert self.log_dir is not None
+        old = self._log.path
+        self._log.reopen(new_run_path(self.log_dir, self.prefix))
+        self._dir_id = _dir_identity(self.log_dir)
+        if old is not None:
+            level = logging.INFO if reason.startswith("reached") else logging.WARNING
+            log.log(level, "run log %s: %s; continuing in %s", old, reason, self._log.path)
+        if self._problem is not None:
+            log.warning("run log restored in %s (was: %s)", self._log.path, self._problem)
+            self._problem = self._since = None
+        self.rotate()
+
+    def _reason_for_new_file(self) -> str | None:
+        assert self.log_dir is not None
+        path = self._log.path
+        if path is None:
+            return "run log off after a failure; retrying"
+        if _dir_identity(self.log_dir) != self._dir_id:
+            return f"log directory {self.log_dir} was deleted or replaced"
+        try:
+            size = path.stat().st_size
+        except FileNotFoundError:
+            return "the file was deleted"
+        if self.max_file_bytes is not None and size > ROLL_AT * self.max_file_bytes:
+            return f"reached {size} bytes (limit {self.max_file_bytes})"
+        return None
+
+    def check(self) -> bool:
+        """Roll, notice a deleted or replaced file or folder, or degrade; never raises. True
+        when a new file was started."""
+        if self.log_dir is None:
+            return False
+        with self._lock:
+            try:
+                reason = self._reason_for_new_file()
+                if reason is None:
+                    return False
+                self._open(reason)
+                return True
+            except Exception as exc:
+                self._degrade(exc)
+                return False
+
+    def _degrade(self, exc: BaseException) -> None:
+        problem = f"run log unavailable in {self.log_dir}: {type(exc).__name__}: {exc}"
+        with contextlib.suppress(Exception):
+            self._log.reopen(None)
+        if problem != self._problem:
+            log.error("%s; logging to stderr only until it can be written again", problem)
+        if self._problem is None:
+            self._since = datetime.now(UTC).isoformat(timespec="seconds")
+        self._problem = problem
+
+    def roll_if_needed(self) -> bool:
+        """Start a new file if the current one is over `max_file_bytes` (see `check`)."""
+        return self.check()
+
     def rotate(self) -> RotationResult | None:
         """Apply the count and size limits, never deleting the current file."""
         if self.log_dir is None:
             return None
         current = [self._log.path] if self._log.path is not None else []
-        result = rotate_rrd_files(self.log_dir, self.keep, self.max_total_bytes, protect=current)
+        budget = self.max_total_bytes
+        if budget is not None and self.max_file_bytes is not None:
+            # Room for the current file to grow to its own limit.
+            budget = max(0, budget - self.max_file_bytes)
+        result = rotate_rrd_files(self.log_dir, self.keep, budget, protect=current)
         for p in result.deleted:
             log.info("deleted old run log %s", p)
         return result
-
-    def roll_if_needed(self) -> bool:
-        """Start a new file if the current one is over `max_file_bytes`; True when it did."""
-        path = self._log.path
-        if path is None or self.max_file_bytes is None:
-            return False
-        try:
-            size = path.stat().st_size
-        except FileNotFoundError:
-            return False
-        if size <= self.max_file_bytes:
-            return False
-        with self._lock:
-            old = self._log
-            self._log = RunLog(new_run_path(self.log_dir or path.parent, self.prefix))
-            old.close()
-        log.info("run log %s reached %d bytes; continuing in %s", path, size, self._log.path)
-        self.rotate()
-        return True
 
     def close(self) -> None:
         """Flush and close the current file."""

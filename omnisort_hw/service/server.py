@@ -22,170 +22,42 @@ import faulthandler
 import hmac
 import logging
 import os
-import queue
 import signal
 import sys
 import threading
 import time
-from collections import deque
-from collections.abc import AsyncIterator, Callable
-from concurrent.futures import Future
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from enum import StrEnum
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
-from omnisort_hw import __version__
+from omnisort_hw import __version__, fileio
 from omnisort_hw.cell import Cell
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.config.service import ServiceConfig, is_loopback
-from omnisort_hw.errors import ConfigError, OmnisortError
+from omnisort_hw.errors import ConfigError, MotionRefusedError, OmnisortError
+from omnisort_hw.instance_lock import InstanceLock
 from omnisort_hw.service import protocol as proto
+from omnisort_hw.service.connection import (
+    READ_CHUNK,
+    TOO_LONG,
+    Admission,
+    IdleTimeoutError,
+    LineReader,
+    LineTimeoutError,
+    peer_host,
+)
 from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.pool import DaemonPool
+from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
 
 log = logging.getLogger("omnisort.service")
 
-TOO_LONG = object()
 SWITCH_INTERVAL_S = 0.001
-WRITE_TIMEOUT_S = 30.0
-READ_CHUNK = 65536
-
-
-class State(StrEnum):
-    """The service's explicit state. `moving` is a single `move` command."""
-
-    IDLE = "idle"
-    CALIBRATING = "calibrating"
-    MAPPING = "mapping"
-    SORTING = "sorting"
-    MOVING = "moving"
-    STOPPED = "stopped"
-    FAULT = "fault"
-
-
-RESTING = frozenset({State.IDLE, State.STOPPED})
-
-
-@dataclass(frozen=True)
-class Transition:
-    """One state change, as logged and reported by `status`."""
-
-    at: str
-    old: str
-    new: str
-    reason: str
-
-
-class StateMachine:
-    """The current state with its reason; every change is logged and passed to `on_change`."""
-
-    def __init__(self, on_change: Callable[[Transition], None] | None = None) -> None:
-        self._lock = threading.Lock()
-        self._state = State.IDLE
-        self._reason = "started"
-        self._since = time.time()
-        self._history: deque[Transition] = deque(maxlen=50)
-        self._on_change = on_change
-
-    @property
-    def state(self) -> State:
-        return self._state
-
-    @property
-    def reason(self) -> str:
-        return self._reason
-
-    def set(self, new: State, reason: str) -> Transition:
-        with self._lock:
-            old = self._state
-            self._state, self._reason, self._since = new, reason, time.time()
-            tr = Transition(_iso(self._since), old.value, new.value, reason)
-            self._history.append(tr)
-        log.info("state %s -> %s (%s)", tr.old, tr.new, reason)
-        if self._on_change is not None:
-            try:
-                self._on_change(tr)
-            except Exception:
-                log.exception("state change hook failed")
-        return tr
-
-    def snapshot(self) -> dict[str, Any]:
-        with self._lock:
-            return {
-                "state": self._state.value,
-                "reason": self._reason,
-                "since": _iso(self._since),
-                "transitions": [t.__dict__ for t in list(self._history)[-10:]],
-            }
-
-
-def _iso(wall: float) -> str:
-    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
-
-
-class DaemonPool:
-    """A fixed pool of daemon worker threads (a hung device call never blocks the exit)."""
-
-    def __init__(self, name: str, workers: int) -> None:
-        self._q: queue.SimpleQueue[tuple[Callable[[], Any], Future[Any]] | None] = (
-            queue.SimpleQueue()
-        )
-        self._threads = [
-            threading.Thread(target=self._work, name=f"{name}-{i}", daemon=True)
-            for i in range(workers)
-        ]
-        for t in self._threads:
-            t.start()
-
-    def _work(self) -> None:
-        while True:
-            item = self._q.get()
-            if item is None:
-                return
-            fn, fut = item
-            if not fut.set_running_or_notify_cancel():
-                continue
-            try:
-                fut.set_result(fn())
-            except BaseException as exc:
-                fut.set_exception(exc)
-
-    def submit(self, fn: Callable[[], Any]) -> Future[Any]:
-        fut: Future[Any] = Future()
-        self._q.put((fn, fut))
-        return fut
-
-    def shutdown(self) -> None:
-        for _ in self._threads:
-            self._q.put(None)
-
-
-@dataclass
-class Job:
-    """The one long command running now."""
-
-    cmd: str
-    request_id: int | str | None
-    state: State
-    cancel: threading.Event = field(default_factory=threading.Event)
-    started: float = field(default_factory=time.monotonic)
-    stopped_by: str | None = None
-    progress: list[dict[str, Any]] = field(default_factory=list)
-
-    def report(self, event: dict[str, Any]) -> None:
-        """Progress from the running job (e.g. each cube sorted); `status` shows it."""
-        self.progress.append(dict(event))
-        del self.progress[:-50]
-
-    def describe(self) -> dict[str, Any]:
-        return {
-            "cmd": self.cmd,
-            "request_id": self.request_id,
-            "running_s": round(time.monotonic() - self.started, 3),
-            "cancelled": self.cancel.is_set(),
-            "progress": list(self.progress),
-        }
+SAFETY_INFLIGHT_PER_CLIENT = 4
+MAX_SAFETY_LINE_BYTES = 4096
+OVERFLOW_PER_CLIENT = 4
+LOG_CHECK_S = 1.0
 
 
 def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
@@ -230,6 +102,8 @@ class Service:
         self.config = config
         self.notifier = notifier or Notifier({})
         self.states = StateMachine(self._on_transition)
+        cell.actuation_guard = self._check_may_actuate
+        self._recover_interrupted_job()
         self._job: Job | None = None
         self._job_lock = threading.Lock()
         self._quick = DaemonPool("quick", 6)
@@ -241,8 +115,19 @@ class Service:
         self._clients: set[asyncio.StreamWriter] = set()
         self._started = time.monotonic()
         self.address: tuple[str, int] | None = None
-        self.counters = {"requests": 0, "errors": 0, "connections": 0}
+        self.counters = {
+            "requests": 0,
+            "errors": 0,
+            "connections": 0,
+            "slow_clients_dropped": 0,
+        }
+        self._admission = Admission(
+            config.max_clients,
+            config.max_clients_per_peer,
+            OVERFLOW_PER_CLIENT * config.max_clients,
+        )
         self.exit_problems: list[str] = []
+        self.log_check_s = LOG_CHECK_S
 
     # -- state -----------------------------------------------------------------------------
 
@@ -250,11 +135,31 @@ class Service:
         self.cell.runlog.event("service/state", f"{tr.old} -> {tr.new}: {tr.reason}")
         self.notifier.status(f"{tr.new}: {tr.reason}")
 
+    def _recover_interrupted_job(self) -> None:
+        """A job the previous process did not finish: report it and refuse motion until reset
+        (nothing resumes by itself)."""
+        rec = self.cell.journal.recover()
+        if rec is None:
+            return
+        cube = rec.get("in_flight")
+        flight = (
+            f"; cube {cube['cube']} ({cube['color']}, for bin {cube['bin']}) was {cube['phase']}"
+            if cube
+            else ""
+        )
+        msg = (
+            f"{rec['job']} (request {rec['request_id']}) was interrupted: {rec['outcome']} after "
+            f"{len(rec['progress'])} progress event(s){flight}; check the cell, then send reset"
+        )
+        log.error("%s", msg)
+        self.states.set(State.FAULT, msg)
+
     def service_status(self) -> dict[str, Any]:
         """The service's part of the `status` reply."""
         out = self.states.snapshot()
         job = self._job
         out["job"] = job.describe() if job is not None else None
+        out["last_run"] = self.cell.journal.record
         out["service"] = {
             "version": __version__,
             "pid": os.getpid(),
@@ -305,7 +210,10 @@ class Service:
         host, port = self.address or ("?", 0)
         self.notifier.ready(f"idle; listening on {host}:{port}")
         self.cell.runlog.event("service/state", f"ready on {host}:{port}")
-        tasks = [asyncio.create_task(self._housekeeping())]
+        tasks = [
+            asyncio.create_task(self._watchdog_pings()),
+            asyncio.create_task(self._log_checks()),
+        ]
         try:
             await self._stop_requested.wait()
         finally:
@@ -318,18 +226,30 @@ class Service:
             await self._shutdown()
         return 0
 
-    async def _housekeeping(self) -> None:
-        """Watchdog pings from the main loop and run-log rolling between jobs."""
+    async def _watchdog_pings(self) -> None:
+        """WATCHDOG=1 from the event loop and nothing else: a ping means the loop is alive."""
         interval = self.notifier.watchdog_interval_s
-        period = min(interval, 5.0) if interval else 5.0
-        next_roll = time.monotonic() + 30.0
+        if not interval:
+            return
         while True:
             self.notifier.watchdog()
-            if time.monotonic() >= next_roll:
-                next_roll = time.monotonic() + 30.0
-                if self._job is None:
-                    await asyncio.to_thread(self.cell.roll_runlog)
-            await asyncio.sleep(period)
+            await asyncio.sleep(interval)
+
+    async def _log_checks(self) -> None:
+        """Roll the run log by size (during jobs too) and notice a deleted or replaced log
+        directory; a failure is reported by the rotator and never ends this loop."""
+        last_problem: str | None = None
+        while True:
+            await asyncio.sleep(self.log_check_s)
+            try:
+                await asyncio.to_thread(self.cell.roll_runlog)
+                problem = self.cell.log_health().get("problem")
+            except Exception as exc:
+                problem = f"run log check failed: {exc}"
+                log.error("%s", problem)
+            if problem != last_problem:
+                self.notifier.status(f"run log: {problem}" if problem else "run log ok")
+                last_problem = problem
 
     async def _shutdown(self) -> None:
         reason = self._stop_reason or "shutdown"
@@ -363,53 +283,27 @@ class Service:
 
     # -- connections -----------------------------------------------------------------------
 
-    async def _lines(self, reader: asyncio.StreamReader) -> AsyncIterator[bytes | object]:
-        """Lines without their newline; TOO_LONG once for each over-long line (then skipped)."""
-        limit = self.config.max_line_bytes
-        buf = bytearray()
-        skipping = False
-        while True:
-            chunk = await reader.read(READ_CHUNK)
-            if not chunk:
-                if buf and not skipping:
-                    yield bytes(buf)
-                return
-            start = 0
-            while True:
-                nl = chunk.find(b"\n", start)
-                if nl < 0:
-                    if not skipping:
-                        buf += chunk[start:]
-                        if len(buf) > limit:
-                            buf.clear()
-                            skipping = True
-                            yield TOO_LONG
-                    break
-                if skipping:
-                    skipping = False
-                else:
-                    buf += chunk[start:nl]
-                    if len(buf) > limit:
-                        yield TOO_LONG
-                    else:
-                        yield bytes(buf[:-1] if buf.endswith(b"\r") else buf)
-                    buf.clear()
-                start = nl + 1
-
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        peer = writer.get_extra_info("peername")
+        host = peer_host(writer.get_extra_info("peername"))
         self.counters["connections"] += 1
-        write_lock = asyncio.Lock()
-        if len(self._clients) >= self.config.max_clients:
-            msg = f"too many clients ({self.config.max_clients}); try again later"
-            await self._send(writer, write_lock, proto.error_reply(None, proto.BUSY, msg))
-            writer.close()
+        refusal = self._admission.admit(host)
+        if refusal is not None:
+            await self._overflow(reader, writer, host, refusal)
             return
+        write_lock = asyncio.Lock()
         self._clients.add(writer)
         slots = asyncio.Semaphore(self.config.max_inflight_per_client)
+        safety_slots = asyncio.Semaphore(SAFETY_INFLIGHT_PER_CLIENT)
         tasks: set[asyncio.Task[None]] = set()
+        lines = LineReader(
+            reader,
+            self.config.max_line_bytes,
+            self.config.line_timeout_s,
+            self.config.idle_timeout_s or None,
+            busy=lambda: bool(tasks),
+        )
         try:
-            async for line in self._lines(reader):
+            while (line := await lines.next()) is not None and not writer.is_closing():
                 self.counters["requests"] += 1
                 if line is TOO_LONG:
                     msg = f"request line longer than {self.config.max_line_bytes} bytes; discarded"
@@ -423,18 +317,62 @@ class Service:
                 except proto.ProtocolError as exc:
                     await self._send(writer, write_lock, proto.reply_for(exc))
                     continue
-                await slots.acquire()
-                task = asyncio.create_task(self._serve(req, writer, write_lock, slots))
+                # Stop and estop never wait behind the client's other requests.
+                slot = safety_slots if req.command.kind == "safety" else slots
+                await slot.acquire()
+                task = asyncio.create_task(self._serve(req, writer, write_lock, slot))
                 tasks.add(task)
                 task.add_done_callback(tasks.discard)
+        except (LineTimeoutError, IdleTimeoutError) as exc:
+            log.info("closing connection from %s: %s", host, exc)
+            await self._send(
+                writer, write_lock, proto.error_reply(None, proto.BAD_REQUEST, f"{exc}; closing")
+            )
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
         except Exception:
-            log.exception("connection %s failed", peer)
+            log.exception("connection from %s failed", host)
         finally:
             if tasks:
-                await asyncio.wait(tasks, timeout=WRITE_TIMEOUT_S)
+                await asyncio.wait(tasks, timeout=self.config.write_timeout_s)
             self._clients.discard(writer)
+            self._admission.release(host)
+            writer.close()
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(writer.wait_closed(), 2.0)
+
+    async def _overflow(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, host: str, refusal: str
+    ) -> None:
+        """A connection over a limit: one `stop`/`estop` line is still served (the reserved
+        path); anything else, or nothing within the grace period, gets `busy` and is closed."""
+        lock = asyncio.Lock()
+        busy = proto.error_reply(
+            None, proto.BUSY, f"{refusal}; try again later (stop and estop are still served)"
+        )
+        if not self._admission.enter_overflow():
+            log.warning("refusing a connection from %s at once: %s", host, refusal)
+            await self._send(writer, lock, busy)
+            writer.close()
+            return
+        try:
+            lines = LineReader(reader, MAX_SAFETY_LINE_BYTES, self.config.overflow_grace_s, None)
+            try:
+                line = await asyncio.wait_for(lines.next(), self.config.overflow_grace_s)
+            except (TimeoutError, LineTimeoutError, ConnectionError):
+                line = None
+            req = None
+            if isinstance(line, bytes):
+                with contextlib.suppress(proto.ProtocolError):
+                    req = proto.parse_request(line, self._authorize)
+            if req is not None and req.command.kind == "safety":
+                self.counters["requests"] += 1
+                log.warning("%s from %s served on the reserved path (%s)", req.cmd, host, refusal)
+                await self._send(writer, lock, await self._reply(req))
+            else:
+                await self._send(writer, lock, busy)
+        finally:
+            self._admission.leave_overflow()
             writer.close()
             with contextlib.suppress(Exception):
                 await asyncio.wait_for(writer.wait_closed(), 2.0)
@@ -450,28 +388,41 @@ class Service:
                 return
             writer.write(data)
             try:
-                await asyncio.wait_for(writer.drain(), WRITE_TIMEOUT_S)
-            except (TimeoutError, ConnectionError):
+                await asyncio.wait_for(writer.drain(), self.config.write_timeout_s)
+            except TimeoutError:
+                self.counters["slow_clients_dropped"] += 1
+                log.warning(
+                    "client %s did not read its replies for %g s; disconnected",
+                    peer_host(writer.get_extra_info("peername")),
+                    self.config.write_timeout_s,
+                )
+                writer.transport.abort()
+            except ConnectionError:
                 writer.close()
+
+    async def _reply(self, req: proto.Request) -> dict[str, Any]:
+        try:
+            return await self.dispatch(req)
+        except proto.ProtocolError as exc:
+            return proto.reply_for(exc, req.id)
+        except Exception as exc:
+            log.exception("request %r failed", req.cmd)
+            code, msg, details = error_from_exception(exc)
+            return proto.error_reply(req.id, code, msg, **details)
 
     async def _serve(
         self,
         req: proto.Request,
         writer: asyncio.StreamWriter,
         lock: asyncio.Lock,
-        slots: asyncio.Semaphore,
+        slot: asyncio.Semaphore,
     ) -> None:
+        """Run one request and write its reply; the client's slot is freed only once the reply
+        is written (or the client dropped), so a client that does not read stops being read."""
         try:
-            reply = await self.dispatch(req)
-        except proto.ProtocolError as exc:
-            reply = proto.reply_for(exc, req.id)
-        except Exception as exc:
-            log.exception("request %r failed", req.cmd)
-            code, msg, details = error_from_exception(exc)
-            reply = proto.error_reply(req.id, code, msg, **details)
+            await self._send(writer, lock, await self._reply(req))
         finally:
-            slots.release()
-        await self._send(writer, lock, reply)
+            slot.release()
 
     def _authorize(self, spec: proto.Command, token: str | None, rid: int | str | None) -> None:
         """Commands that move, write or change state need the token when one is required."""
@@ -499,7 +450,10 @@ class Service:
             fn = self._stop if req.cmd == "stop" else self._estop
             return await self._in_pool(self._safety, req, fn, self.config.quick_timeout_s)
         if req.cmd == "reset":
-            return await self._in_pool(self._quick, req, self._reset, self.config.quick_timeout_s)
+            empty = bool(req.args.get("gripper_empty"))
+            return await self._in_pool(
+                self._quick, req, lambda: self._reset(empty), self.config.quick_timeout_s
+            )
         if req.cmd == "shutdown":
             self.request_shutdown(f"shutdown requested (request {req.id})")
             return proto.ok_reply(req.id, {"shutting_down": True})
@@ -507,10 +461,14 @@ class Service:
             # Answered in the event loop from the cell's snapshot: no device, no pool.
             ctx = Context(self.cell, threading.Event(), self.service_status)
             return proto.ok_reply(req.id, HANDLERS["status"](ctx, req.args))
-        if req.cmd == "laser" and self._job is not None:
-            raise proto.ProtocolError(
-                proto.BUSY, f"laser is in use by the running {self._job.cmd}; send stop first"
-            )
+        switches_laser = req.args.get("laser" if req.cmd == "capture" else "on")
+        if req.cmd in ("laser", "capture") and switches_laser is not None:
+            if self._job is not None:
+                raise proto.ProtocolError(
+                    proto.BUSY, f"laser is in use by the running {self._job.cmd}; send stop first"
+                )
+            if switches_laser:
+                self._check_may_actuate()
         handler = HANDLERS[req.cmd]
         ctx = Context(self.cell, threading.Event(), self.service_status)
         return await self._in_pool(
@@ -520,7 +478,17 @@ class Service:
     async def _in_pool(
         self, pool: DaemonPool, req: proto.Request, fn: Callable[[], dict[str, Any]], timeout: float
     ) -> dict[str, Any]:
-        fut = asyncio.wrap_future(pool.submit(lambda: self._then_refresh(fn)))
+        if pool is self._safety:
+            # The reply to stop/estop never waits for the status refresh's device reads.
+            def then_queue_refresh() -> dict[str, Any]:
+                try:
+                    return fn()
+                finally:
+                    self._quick.submit(lambda: self._then_refresh(lambda: {}))
+
+            fut = asyncio.wrap_future(pool.submit(then_queue_refresh))
+        else:
+            fut = asyncio.wrap_future(pool.submit(lambda: self._then_refresh(fn)))
         try:
             result = await asyncio.wait_for(fut, timeout)
         except TimeoutError:
@@ -563,15 +531,24 @@ class Service:
             "problems": problems,
         }
 
+    def _check_may_actuate(self) -> None:
+        """The state rule of every command that switches something on: none in `fault`."""
+        if self.states.state == State.FAULT:
+            raise MotionRefusedError(
+                f"refused: the cell is in fault ({self.states.reason}); clear the cause and "
+                "send reset"
+            )
+
     def _estop(self) -> dict[str, Any]:
         job = self._job
         if job is not None:
             job.stopped_by = "estop"
             job.cancel.set()
+        # Fault first: whatever is about to switch on from now is refused by the guard.
+        self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
         problems = self.cell.emergency_stop()
         if job is not None:
             self._keep_stopping(job)
-        self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
         return {
             "stopped_job": job.cmd if job is not None else None,
             "state": self.states.state.value,
@@ -591,13 +568,15 @@ class Service:
 
         threading.Thread(target=loop, name="keep-stopping", daemon=True).start()
 
-    def _reset(self) -> dict[str, Any]:
+    def _reset(self, gripper_empty: bool = False) -> dict[str, Any]:
         with self._job_lock:
             if self._job is not None:
                 raise proto.ProtocolError(
                     proto.BUSY, f"{self._job.cmd} is running; send stop first"
                 )
             safety = self.cell.check_safe_to_resume()
+            if gripper_empty:
+                self.cell.confirm_gripper_empty()
             old = self.states.state
             self.states.set(State.IDLE, f"reset from {old.value}")
         return {"state": State.IDLE.value, "previous": old.value, **safety}
@@ -626,7 +605,12 @@ class Service:
         self.cell.runlog.event("service/requests", f"{req.cmd} {req.args}")
         loop = asyncio.get_running_loop()
         done: asyncio.Future[dict[str, Any]] = loop.create_future()
-        ctx = Context(self.cell, job.cancel, self.service_status, job.report)
+
+        def report(event: dict[str, Any]) -> None:
+            job.report(event)
+            self.cell.journal.progress(event)
+
+        ctx = Context(self.cell, job.cancel, self.service_status, report)
         thread = threading.Thread(
             target=self._job_thread,
             args=(job, req, ctx, resting, loop, done),
@@ -657,6 +641,8 @@ class Service:
         done: asyncio.Future[dict[str, Any]],
     ) -> None:
         reply: dict[str, Any]
+        journal = self.cell.journal
+        journal.start(req.cmd, req.id, req.args)
         try:
             result = self._then_refresh(lambda: HANDLERS[req.cmd](ctx, req.args))
             if job.cancel.is_set():
@@ -680,6 +666,12 @@ class Service:
             with self._job_lock:
                 if self._job is job:
                     self._job = None
+        if reply["ok"]:
+            journal.finish("done", f"{req.cmd} done")
+        else:
+            err = reply["error"]
+            stopped = err["code"] == proto.STOPPED
+            journal.finish("stopped" if stopped else "failed", f"{err['code']}: {err['message']}")
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(_set_if_pending, done, reply)
 
@@ -745,6 +737,13 @@ def start_in_thread(service: Service, timeout_s: float = 10.0) -> RunningService
     return RunningService(service, thread, box["loop"], host, port, exit_code)
 
 
+def check_directories(settings: CellConfig) -> None:
+    """The state and log directories must be writable before anything else happens."""
+    fileio.check_writable(settings.storage.state_dir, "[storage] state_dir")
+    if settings.logging.rerun:
+        fileio.check_writable(settings.logging.log_dir, "[logging] log_dir")
+
+
 def serve(
     settings: CellConfig,
     host: str | None = None,
@@ -763,18 +762,20 @@ def serve(
     # A shorter GIL switch interval keeps the event loop answering while a job computes.
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     notifier = Notifier()
-    notifier.status("opening devices")
-    cell = cell or Cell.from_settings(settings)
-    try:
-        cell.connect()
-        service = Service(cell, cfg, notifier)
-    except BaseException:
-        cell.close()
-        raise
-    try:
-        code = asyncio.run(service.run())
-    finally:
-        notifier.close()
+    check_directories(settings)
+    with InstanceLock(settings.storage.state_dir):
+        notifier.status("opening devices")
+        cell = cell or Cell.from_settings(settings)
+        try:
+            cell.connect()
+            service = Service(cell, cfg, notifier)
+        except BaseException:
+            cell.close()
+            raise
+        try:
+            code = asyncio.run(service.run())
+        finally:
+            notifier.close()
     if service.exit_problems:
         log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
     return code

@@ -239,6 +239,7 @@ def make_cell(
     move_seconds: float = 0.5,
     calibrated: bool = True,
     journal_path: Path | None = None,
+    max_file_bytes: int | None = None,
 ) -> tuple[Cell, CellDevices, Journal]:
     from omnisort_hw.service.rrd import RunLogRotator
 
@@ -247,7 +248,11 @@ def make_cell(
     store = CalibrationStore(state_dir)
     if calibrated:
         write_calibration(store)
-    rotator = RunLogRotator(log_dir, keep=5) if log_dir is not None else None
+    rotator = (
+        RunLogRotator(log_dir, keep=5, max_file_bytes=max_file_bytes)
+        if log_dir is not None
+        else None
+    )
     cell = Cell(devices, store, rotator)
     cell.connect()
     return cell, devices, journal
