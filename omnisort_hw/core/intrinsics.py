@@ -188,13 +188,14 @@ def _linear_solve(
             M[: len(X), 0], M[: len(X), 1], M[: len(X), 2] = A, A * rho**2, -dv
             M[len(X) :, 0], M[len(X) :, 1], M[len(X) :, 2] = C, C * rho**2, -du
             rhs = np.concatenate([dv * zr, du * zr])
-            sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+            # Three unknowns: the normal equations are exact enough and far cheaper.
+            sol = np.linalg.solve(M.T @ M, M.T @ rhs)
             err = np.linalg.norm(M @ sol - rhs)
             if sol[0] > 0 and err < best_err:
                 best, best_err = ci, err
         choices.append(best)
     M, rhs = system(choices)
-    sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+    sol = _least_squares_normal(M, rhs)
     coeffs = sol[: len(powers)]
     poses = []
     sq_err = []
@@ -215,6 +216,15 @@ def _linear_solve(
     full = np.zeros(degree + 1)
     full[powers] = coeffs
     return full, poses, float(np.sqrt(np.mean(np.concatenate(sq_err))))
+
+
+def _least_squares_normal(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Linear least squares through the column-scaled normal equations: a few unknowns and
+    many rows, where LAPACK's lstsq spends most of its time on the tall matrix."""
+    scale = np.linalg.norm(M, axis=0)
+    scale[scale == 0] = 1.0
+    Ms = M / scale
+    return np.linalg.solve(Ms.T @ Ms, Ms.T @ rhs) / scale
 
 
 def search_centre(
@@ -383,12 +393,17 @@ def _to_model(x: np.ndarray, prob: _Problem, size: tuple[int, int]) -> OcamModel
 
 
 def _fit(
-    views: list[ImagePoints], image_size: tuple[int, int], degrees: list[int]
+    views: list[ImagePoints],
+    image_size: tuple[int, int],
+    degrees: list[int],
+    centre: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, _Problem, Any]:
-    """Centre search, linear estimate and refinement for each degree; the lowest degree whose
-    RMS is within 1% of the best wins (more terms would fit the noise, not the lens)."""
+    """Centre search (unless a start is given), linear estimate and refinement for each
+    degree; the lowest degree whose RMS is within 1% of the best wins (more terms would fit
+    the noise, not the lens)."""
     rho_scale = 0.5 * min(image_size)
-    centre = search_centre(views, image_size)
+    if centre is None:
+        centre = search_centre(views, image_size)
     fits = []
     for deg in degrees:
         g_lin, poses, _ = _linear_solve(views, centre, deg, rho_scale)
@@ -414,15 +429,30 @@ def _refit(
 
 
 def corner_limit_px(distances: np.ndarray) -> float:
-    """Robust residual limit for one corner, from the residuals themselves.
+    """Limit beyond which a corner's residual is a gross error, from the residuals themselves:
+    Tukey's outer fence, Q3 + 3 IQR. It assumes no particular law (real residuals have
+    heavier tails than Gaussian noise: blur, a board not quite flat), and it sits far
+    enough out that it trims gross errors, not the tail of the honest corners."""
+    q1, q3 = np.percentile(distances, [25.0, 75.0])
+    return float(q3 + 3.0 * (q3 - q1))
 
-    The scale comes from the median reprojection distance (for Gaussian noise the distance
-    follows a Rayleigh law, median = 1.177 sigma), and the limit is set where, for N
-    corners of pure noise, half a corner would be expected beyond it: sqrt(2 ln 2N) sigma
-    (3.8 sigma for 800 corners), never below 3 sigma."""
-    sigma = float(np.median(distances)) / np.sqrt(2.0 * np.log(2.0))
-    k = max(np.sqrt(2.0 * np.log(2.0 * len(distances))), 3.0)
-    return k * sigma
+
+def _neighbour_median(views: list[ImagePoints], prob: _Problem, res2: np.ndarray) -> np.ndarray:
+    """Per corner, the median residual of its neighbours on the board (the corners one
+    square away in the same image); a corner with no neighbour left gets zero."""
+    out = np.zeros_like(res2)
+    for k, view in enumerate(views):
+        idx = np.flatnonzero(prob.view == k)
+        b = view.board[:, :2]
+        d = np.linalg.norm(b[:, None, :] - b[None, :, :], axis=2)
+        step = np.min(d[d > 0]) if np.any(d > 0) else 1.0
+        near = (d > 0) & (d < 1.01 * step)
+        r = res2[idx]
+        for axis in (0, 1):
+            vals = np.where(near, r[None, :, axis], np.nan)
+            has = near.any(axis=1)
+            out[idx[has], axis] = np.nanmedian(vals[has], axis=1)
+    return out
 
 
 def min_corners(n_board: int) -> int:
@@ -437,13 +467,21 @@ def calibrate(
     rejected: list[Rejection] | None = None,
     corners_rejected: list[CornerRejection] | None = None,
     max_rounds: int = 4,
+    centre: tuple[float, float] | None = None,
+    outlier_factor: float = 3.0,
+    outlier_floor_px: float = 1.0,
 ) -> IntrinsicResult:
     """Calibrate from detected corners, dropping single bad corners, not whole images.
 
     `degree=None` picks the polynomial degree (4..8). After each fit, every corner whose
-    reprojection distance exceeds `corner_limit_px` is dropped with its reason and the fit is
-    repeated from where it was (at most `max_rounds` times); an image is dropped only when
-    fewer than `min_corners` of its corners remain. At least MIN_IMAGES must remain.
+    residual, both as it is and less the median of its board neighbours' residuals, exceeds
+    `corner_limit_px` of the latter is dropped with its reason: a gross error of one corner
+    stands out from its neighbours, a smooth trend (the lens model, a board not quite flat)
+    does not and is left for the report to show. The fit is repeated from where it was (at
+    most `max_rounds` times). An image is dropped only when fewer than `min_corners` of its
+    corners remain, or when its RMS exceeds `outlier_factor` times the median (and
+    `outlier_floor_px`): a whole board off together. At least MIN_IMAGES must remain.
+    `centre` starts the fit there instead of searching the distortion centre.
     """
     rejected = list(rejected or [])
     corners_rejected = list(corners_rejected or [])
@@ -454,41 +492,47 @@ def calibrate(
         )
     n_board = max(int(v.ids.max()) + 1 for v in views)
     degrees = [degree] if degree else [4, 5, 6, 7, 8]
-    x, prob, sol = _fit(views, image_size, degrees)
+    x, prob, sol = _fit(views, image_size, degrees, centre)
     limit = 0.0
     for _ in range(max_rounds):
-        dist = np.linalg.norm(sol.fun.reshape(-1, 2), axis=1)
-        limit = corner_limit_px(dist)
-        if not np.any(dist > limit):
+        res2 = sol.fun.reshape(-1, 2)
+        dist = np.linalg.norm(res2, axis=1)
+        local = np.linalg.norm(res2 - _neighbour_median(views, prob, res2), axis=1)
+        limit = corner_limit_px(local)
+        per_image = prob.per_image_rms(sol.fun)
+        image_limit = max(outlier_factor * float(np.median(per_image)), outlier_floor_px)
+        drop_all = (dist > limit) & (local > limit)
+        if not drop_all.any() and not np.any(per_image > image_limit):
             break
         names = [v.name for v in views]
         kept = []
         for k, view in enumerate(views):
-            d = dist[prob.view == k]
-            drop = d > limit
-            if len(view.ids) - drop.sum() < min_corners(n_board):
-                bad = int(np.sum(d > limit))
+            d, loc, drop = dist[prob.view == k], local[prob.view == k], drop_all[prob.view == k]
+            if len(view.ids) - drop.sum() < min_corners(n_board) or per_image[k] > image_limit:
                 rejected.append(
                     Rejection(
                         view.name,
-                        f"outlier image: {bad} of {len(d)} corners beyond the residual limit "
-                        f"{limit:.2f} px (RMS {np.sqrt(np.mean(d**2)):.2f} px)",
+                        f"outlier image: RMS {per_image[k]:.2f} px (limit {image_limit:.2f} px),"
+                        f" {int(drop.sum())} of {len(d)} corners beyond the corner limit",
                     )
                 )
                 continue
             corners_rejected += [
                 CornerRejection(
-                    view.name, int(c), f"residual {r:.2f} px > robust limit {limit:.2f} px"
+                    view.name,
+                    int(c),
+                    f"residual {r:.2f} px, {q:.2f} px off its neighbours' (limit {limit:.2f} px)",
                 )
-                for c, r in zip(view.ids[drop], d[drop], strict=True)
+                for c, r, q in zip(view.ids[drop], d[drop], loc[drop], strict=True)
             ]
             kept.append(view.without(drop))
         if len(kept) < MIN_IMAGES:
             raise CalibrationError(
                 f"only {len(kept)} image(s) keep enough good corners; at least {MIN_IMAGES} needed"
             )
+        kept_names = {v.name for v in kept}
         views = kept
-        x, prob, sol = _refit(views, names, x, prob)
+        x, prob, sol = _refit(views, names, x, prob) if kept_names else (x, prob, sol)
     return _result(views, image_size, x, prob, sol, rejected, corners_rejected, limit)
 
 
@@ -626,7 +670,14 @@ def calibrate_images(
         chosen[name] = plane if pick == "plane" else saddle[name]
         methods[name] = pick
     dropped_first = [r for r in first.images_rejected if r.name in found]
-    result = calibrate(list(chosen.values()), size, degree, rejected + dropped_first, at_detection)
+    result = calibrate(
+        list(chosen.values()),
+        size,
+        degree,
+        rejected + dropped_first,
+        at_detection,
+        centre=first.model.center_uv,
+    )
     result.refinement = {n: methods[n] for n in result.images_used}
     if log is not None:
         _log_result(log, result, grays)
