@@ -24,6 +24,13 @@ def register(sub: Any) -> None:
     cal.add_argument("--degree", type=int, default=None, help="polynomial degree (default: auto)")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
     cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    cal.add_argument(
+        "--refinement",
+        choices=("auto", "saddle", "plane"),
+        default="auto",
+        help="corner refinement: saddle points, re-measured on the board plane, or per image "
+        "whichever agrees better with the first model (default auto)",
+    )
     cal.set_defaults(func=cmd_calibrate)
 
     exp = isub.add_parser("export", help="camera.json -> OCamCalib calib_results.txt")
@@ -58,6 +65,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.camera_io import save_camera_json
     from omnisort_hw.core.checkerboard import BoardSpec
     from omnisort_hw.core.intrinsics import calibrate_images
+    from omnisort_hw.core.intrinsics_report import (
+        OUTER_BAND,
+        build_report,
+        encode_png,
+        log_report,
+    )
+    from omnisort_hw.fileio import atomic_write_bytes
     from omnisort_hw.runlog import RunLog
 
     try:
@@ -72,15 +86,31 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         RunLog(args.log) as log,
     ):
         result = calibrate_images(
-            images, board, degree=args.degree, on_detected=lambda _n: bar.update(1), log=log
+            images,
+            board,
+            degree=args.degree,
+            on_detected=lambda _n: bar.update(1),
+            log=log,
+            refinement=args.refinement,
         )
+        figures, picture = build_report(result, images)
+        log_report(log, figures, picture)
     record = {
         **result.record(),
         "board": {"inner_corners": [board.cols, board.rows], "square_mm": board.square_mm},
+        "coverage": {
+            "outer_band_fraction": OUTER_BAND,
+            "outer_band_covered": figures.outer_coverage,
+            "image_circle_radius_px": figures.circle_radius_px,
+            "warning": figures.warning,
+        },
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     save_camera_json(args.out, result.model, **record)
-    summary = {"out": str(args.out), **record, "model": result.model.to_dict()}
+    report_path = report_png_path(args.out)
+    atomic_write_bytes(report_path, encode_png(picture), keep_history=False)
+    summary = {"out": str(args.out), "report": str(report_path), **record}
+    summary["model"] = result.model.to_dict()
     if args.json:
         print(json.dumps(summary))
     else:
@@ -94,7 +124,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"    {rms:6.3f} px  {name}")
         for rej in result.images_rejected:
             print(f"  rejected {rej.name}: {rej.reason}")
+        for cr in result.corners_rejected:
+            print(f"  corner {cr.corner} of {cr.name} left out: {cr.reason}")
+        print(f"  outer {OUTER_BAND:.0%} of the image circle covered: {figures.outer_coverage:.0%}")
+        if figures.warning:
+            print(f"  WARNING: {figures.warning}")
+        print(f"  report                  {report_path}")
     return 0
+
+
+def report_png_path(camera_json: Path) -> Path:
+    """The report picture's place: beside camera.json, named after it."""
+    return camera_json.with_name(camera_json.stem + "_report.png")
 
 
 def horizontal_fov_deg(model: Any) -> float:
