@@ -194,6 +194,16 @@ def _is_saddle(changes: np.ndarray, symmetry: np.ndarray) -> np.ndarray:
     return (changes == 4) & (symmetry > 0.5)
 
 
+def saddle_mask(
+    gray: np.ndarray, points: np.ndarray, radius: np.ndarray, contrast_ref: float
+) -> np.ndarray:
+    """True where a point sits at a checkerboard saddle: two dark and two bright sectors,
+    point-symmetric, with at least a quarter of `contrast_ref` (the board's typical contrast,
+    so that noise in a flat square cannot pass)."""
+    changes, contrast, symmetry = saddle_scores(ring_profiles(gray, points, radius))
+    return _is_saddle(changes, symmetry) & (contrast >= 0.25 * contrast_ref)
+
+
 def _cell_values(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """Mean intensity inside each cell of a (r, c, 2) grid of corners: its centre and four
     points halfway to its corners, (r-1, c-1)."""
@@ -256,7 +266,11 @@ def _checker_problem(gray: np.ndarray, corners: np.ndarray, cols: int, rows: int
         past = (mid + 0.35 * (mid - 0.5 * (grid[0][:-1] + grid[0][1:]))).astype(np.float32)
         vals = cv2.remap(gray32, past[:, 0:1], past[:, 1:2], cv2.INTER_LINEAR).ravel()
         d = np.diff(vals.astype(np.float64))
-        if len(d) >= 2 and np.all(d[:-1] * d[1:] < 0) and np.all(np.abs(d) > contrast / 3):
+        # Steps between neighbours that are strong and flip sign like a checkerboard's; the
+        # last cells may run off the board into the rim, so three quarters suffice.
+        ok = np.abs(d) > contrast / 3
+        ok[1:] &= d[1:] * d[:-1] < 0
+        if len(d) >= 2 and np.mean(ok) >= 0.75:
             return "the grid continues past its edge (a larger board, or one shifted)"
     return None
 

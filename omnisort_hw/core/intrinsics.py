@@ -494,6 +494,7 @@ def calibrate(
     degrees = [degree] if degree else [4, 5, 6, 7, 8]
     x, prob, sol = _fit(views, image_size, degrees, centre)
     limit = 0.0
+    dropped_any = False
     for _ in range(max_rounds):
         res2 = sol.fun.reshape(-1, 2)
         dist = np.linalg.norm(res2, axis=1)
@@ -530,9 +531,12 @@ def calibrate(
             raise CalibrationError(
                 f"only {len(kept)} image(s) keep enough good corners; at least {MIN_IMAGES} needed"
             )
-        kept_names = {v.name for v in kept}
         views = kept
-        x, prob, sol = _refit(views, names, x, prob) if kept_names else (x, prob, sol)
+        x, prob, sol = _refit(views, names, x, prob)
+        dropped_any = True
+    if dropped_any and len(degrees) > 1:
+        # The degree was chosen with the bad data in; choose it again without.
+        x, prob, sol = _fit(views, image_size, degrees, (float(x[0]), float(x[1])))
     return _result(views, image_size, x, prob, sol, rejected, corners_rejected, limit)
 
 
