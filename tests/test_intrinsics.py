@@ -110,14 +110,19 @@ def test_outlier_image_is_rejected_with_its_reason() -> None:
 
 
 def test_one_corner_pushed_off_costs_that_corner_only() -> None:
+    """Also a corner far off (30 px, an image RMS of 4 px with it): still only that corner."""
     truth = truth_model()
     clean_views = synthetic_views(truth, seed=7)
     clean = calibrate(clean_views, truth.image_size)
     views = synthetic_views(truth, seed=7)
     views[5].pixels[20] += [3.0, 4.0]  # 5 px off
+    views[8].pixels[3] += [-24.0, 18.0]  # 30 px off: more than the image's RMS limit alone
     result = calibrate(views, truth.image_size)
     assert result.images_rejected == [] and len(result.images_used) == len(views)
-    assert [(r.name, r.corner) for r in result.corners_rejected] == [("synthetic5", 20)]
+    assert sorted((r.name, r.corner) for r in result.corners_rejected) == [
+        ("synthetic5", 20),
+        ("synthetic8", 3),
+    ]
     assert "px" in result.corners_rejected[0].reason
     # The model matches the clean fit within the clean fit's own uncertainty: the centre
     # within one standard deviation, the rays far inside the noise-limited 0.02 deg.

@@ -446,7 +446,7 @@ def _neighbour_median(views: list[ImagePoints], prob: _Problem, res2: np.ndarray
         b = view.board[:, :2]
         d = np.linalg.norm(b[:, None, :] - b[None, :, :], axis=2)
         step = np.min(d[d > 0]) if np.any(d > 0) else 1.0
-        near = (d > 0) & (d < 1.01 * step)
+        near = (d > 0) & (d < 1.5 * step)  # the 8 around it: one bad one cannot move the median
         r = res2[idx]
         for axis in (0, 1):
             vals = np.where(near, r[None, :, axis], np.nan)
@@ -466,7 +466,7 @@ def calibrate(
     degree: int | None = None,
     rejected: list[Rejection] | None = None,
     corners_rejected: list[CornerRejection] | None = None,
-    max_rounds: int = 4,
+    max_rounds: int = 6,
     centre: tuple[float, float] | None = None,
     outlier_factor: float = 3.0,
     outlier_floor_px: float = 1.0,
@@ -500,9 +500,17 @@ def calibrate(
         dist = np.linalg.norm(res2, axis=1)
         local = np.linalg.norm(res2 - _neighbour_median(views, prob, res2), axis=1)
         limit = corner_limit_px(local)
-        per_image = prob.per_image_rms(sol.fun)
+        # Worst first: a fit that still holds a gross error pulls other corners along (its
+        # neighbours, boards at the rim), so a round drops only those at least half as far
+        # off as the worst, and the next round judges the rest in a cleaner fit.
+        drop_all = (dist > limit) & (local > limit) & (local >= 0.5 * local.max())
+        # An image's RMS over the corners it keeps: one gross corner must not cost the image.
+        kept_sq = np.where(drop_all, 0.0, dist**2)
+        per_image = np.sqrt(
+            np.bincount(prob.view, kept_sq, prob.n_views)
+            / np.maximum(np.bincount(prob.view, ~drop_all, prob.n_views), 1)
+        )
         image_limit = max(outlier_factor * float(np.median(per_image)), outlier_floor_px)
-        drop_all = (dist > limit) & (local > limit)
         if not drop_all.any() and not np.any(per_image > image_limit):
             break
         names = [v.name for v in views]
@@ -532,11 +540,11 @@ def calibrate(
                 f"only {len(kept)} image(s) keep enough good corners; at least {MIN_IMAGES} needed"
             )
         views = kept
-        x, prob, sol = _refit(views, names, x, prob)
+        if dropped_any or len(degrees) == 1:
+            x, prob, sol = _refit(views, names, x, prob)
+        else:  # the degree was chosen with the bad data in: choose it again without
+            x, prob, sol = _fit(views, image_size, degrees, (float(x[0]), float(x[1])))
         dropped_any = True
-    if dropped_any and len(degrees) > 1:
-        # The degree was chosen with the bad data in; choose it again without.
-        x, prob, sol = _fit(views, image_size, degrees, (float(x[0]), float(x[1])))
     return _result(views, image_size, x, prob, sol, rejected, corners_rejected, limit)
 
 
@@ -602,6 +610,7 @@ def calibrate_images(
     on_detected: Any = None,
     log: Any = None,
     refinement: str = "auto",
+    max_rounds: int = 6,
 ) -> IntrinsicResult:
     """Detect, calibrate, re-measure every board on its plane, choose, calibrate again.
 
@@ -610,6 +619,7 @@ def calibrate_images(
     left out with its reason. `refinement` is "saddle" (sub-pixel saddle points only),
     "plane" (every board re-measured on its plane) or "auto": per image, the corners that
     agree better with the first model (pose fitted alone, model held) are kept.
+    `max_rounds` bounds the rounds of dropping corners with gross residuals (0: none).
     `on_detected(name)` is called as each detection finishes (for a progress bar); `log` is a
     RunLog (or None).
     """
@@ -658,7 +668,9 @@ def calibrate_images(
         )
     obj = board.object_points()
     saddle = {n: ImagePoints(n, d.corners, obj).without(~d.good) for n, d in found.items()}
-    first = calibrate(list(saddle.values()), size, degree, rejected, at_detection)
+    first = calibrate(
+        list(saddle.values()), size, degree, rejected, at_detection, max_rounds=max_rounds
+    )
     chosen: dict[str, ImagePoints] = {}
     methods: dict[str, str] = {}
     for name in first.images_used:
@@ -680,6 +692,7 @@ def calibrate_images(
         degree,
         rejected + dropped_first,
         at_detection,
+        max_rounds=max_rounds,
         centre=first.model.center_uv,
     )
     result.refinement = {n: methods[n] for n in result.images_used}
