@@ -585,6 +585,7 @@ class Cell:
         from omnisort_hw.core.camera_io import camera_record
         from omnisort_hw.core.checkerboard import BoardSpec
         from omnisort_hw.core.intrinsics import calibrate_images
+        from omnisort_hw.core.intrinsics_report import build_report, encode_png, log_report
         from omnisort_hw.errors import InputError
 
         try:
@@ -609,7 +610,18 @@ class Cell:
             "images_folder": str(folder),
             "created": datetime.now(UTC).isoformat(timespec="seconds"),
         }
+        figures, picture = build_report(result, images)
+        record["coverage"] = {
+            "outer_band_covered": figures.outer_coverage,
+            "warning": figures.warning,
+        }
         saved = self.store.save_camera(camera_record(result.model, **record))
+        log_report(rl, figures, picture)
+        report = fileio.atomic_write_bytes(
+            Path(saved).with_name(Path(saved).stem + "_report.png"),
+            encode_png(picture),
+            keep_history=False,
+        )
         model = result.model
         rl.scalar("calibration/intrinsics/rms_px", result.rms_px)
         rl.text(
@@ -621,6 +633,9 @@ class Cell:
             "rms_px": result.rms_px,
             "images_used": len(result.images_used),
             "images_rejected": record["images_rejected"],
+            "corners_rejected": len(result.corners_rejected),
+            "outer_band_covered": figures.outer_coverage,
+            "report": str(report),
             "center_uv": list(model.center_uv),
             "poly_degree": result.degree,
             "camera_serial": self.store.expected_serial,

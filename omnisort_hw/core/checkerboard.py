@@ -15,6 +15,7 @@ compare across images and with ground truth).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import cv2
@@ -275,7 +276,7 @@ def _checker_problem(gray: np.ndarray, corners: np.ndarray, cols: int, rows: int
     return None
 
 
-def _candidates(gray: np.ndarray, cols: int, rows: int):
+def _candidates(gray: np.ndarray, cols: int, rows: int) -> Iterator[tuple[np.ndarray, float]]:
     """Candidate grids (full-resolution pixel coordinates, scale) in the order to try."""
     scales = detection_scales((gray.shape[1], gray.shape[0]), (cols, rows))
     resized = {}

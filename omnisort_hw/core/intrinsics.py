@@ -88,7 +88,6 @@ class IntrinsicResult:
     corner_ids: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     refinement: dict[str, str] = field(default_factory=dict)
     corner_limit_px: float = 0.0
-    notes: list[str] = field(default_factory=list)
 
     def record(self) -> dict[str, Any]:
         """The calibration's record for camera.json (besides the model itself)."""

@@ -3,8 +3,8 @@
 With a first model and the board's pose, the image is resampled onto the board plane, where
 the grid is straight and axis-aligned; corners are found there by fitting the edge lines
 through each corner over whole squares and mapped back through the same model and pose, so
-the model's own error cancels to first order. Besides each corner, the fit gives its own
-uncertainty: the scatter of the edge points about the fitted lines, carried to the corner.
+the model's own error cancels to first order. `intrinsics.calibrate_images` decides, per
+image, whether these corners or the plain saddle points are kept.
 """
 
 from __future__ import annotations
