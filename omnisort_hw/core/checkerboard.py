@@ -31,7 +31,11 @@ _MIN_SQUARE_PX = 12.0
 # Smallest board a person would present: its squares span this fraction of what a board
 # filling the image's short side would have (a small board near the rim of the circle).
 _SMALLEST_BOARD = 0.25
-_LADDER = (0.25, 0.35, 0.5, 0.7, 1.0, 1.5, 2.0)
+_LADDER = (0.25, 0.35, 0.5, 0.7, 1.0, 1.5, 2.0, 2.5, 3.0)
+# The classic detector's quad linking succeeds or fails erratically with the scale, so a
+# calibration, where every board counts, searches a denser ladder (steps of ~1.2).
+_DENSE_LADDER = (0.25, 0.3, 0.35, 0.42, 0.5, 0.6, 0.7, 0.85, 1.0, 1.2, 1.45, 1.75, 2.1, 2.5, 3.0)
+_MAX_UPSAMPLED_PX = 2000  # short side of an upsampled copy, at most
 # Ring that samples the intensity around a corner, as a fraction of the local spacing.
 _RING = 0.35
 _RING_SAMPLES = 32
@@ -89,17 +93,23 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def detection_scales(image_size: tuple[int, int], board: tuple[int, int]) -> list[float]:
+def detection_scales(
+    image_size: tuple[int, int], board: tuple[int, int], dense: bool = False
+) -> list[float]:
     """Scales to search at, in order: from the coarsest that keeps the smallest plausible
-    squares at least _MIN_SQUARE_PX wide, finer up to full resolution, then upsampled while
-    the image stays below ~1600 px, then the coarser ones (a board close to the lens)."""
+    squares at least _MIN_SQUARE_PX wide, finer up to full resolution, then upsampled (cubic)
+    while the short side stays within _MAX_UPSAMPLED_PX, then the coarser ones (a board close
+    to the lens)."""
     short = min(image_size)
     smallest_square = _SMALLEST_BOARD * short / (max(board) + 1)
     s_min = _MIN_SQUARE_PX / smallest_square
-    fine = [s for s in _LADDER if s >= s_min * 0.999 and (s <= 1.0 or s * short <= 1600)]
+    ladder = _DENSE_LADDER if dense else _LADDER
+    fine = [
+        s for s in ladder if s >= s_min * 0.999 and (s <= 1.0 or s * short <= _MAX_UPSAMPLED_PX)
+    ]
     if not fine or fine[0] > 1.0:
-        fine = [s for s in _LADDER if s >= 1.0 and s * short <= 1600] or [1.0]
-    coarse = [s for s in reversed(_LADDER) if s < fine[0] and s * short >= 160]
+        fine = [s for s in ladder if s >= 1.0 and s * short <= _MAX_UPSAMPLED_PX] or [1.0]
+    coarse = [s for s in reversed(ladder) if s < fine[0] and s * short >= 160]
     return fine + coarse
 
 
@@ -175,7 +185,7 @@ def ring_profiles(gray: np.ndarray, points: np.ndarray, radius: np.ndarray) -> n
 
 
 def saddle_scores(profiles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per ring: number of dark/bright alternations, contrast, and point symmetry.
+    """Per ring: number of dark/bright alternations, relative contrast, and point symmetry.
 
     A checkerboard corner's ring crosses two dark and two bright sectors (4 sign changes
     about its middle level) and looks the same turned by 180 degrees (symmetry near 1); the
@@ -188,7 +198,8 @@ def saddle_scores(profiles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     turned = np.roll(centred, _RING_SAMPLES // 2, axis=1)
     denom = np.sqrt(np.sum(centred**2, axis=1) * np.sum(turned**2, axis=1)) + 1e-9
     symmetry = np.sum(centred * turned, axis=1) / denom
-    return changes, hi - lo, symmetry
+    # Michelson contrast: a gain (vignetting, uneven light) does not change it.
+    return changes, (hi - lo) / (hi + lo + 1.0), symmetry
 
 
 def _is_saddle(changes: np.ndarray, symmetry: np.ndarray) -> np.ndarray:
@@ -219,7 +230,8 @@ def _cell_values(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
         cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     )
-    return vals.reshape(pts.shape[:-1]).mean(axis=-1)
+    # In log intensity, so that a gain (vignetting, uneven light) cancels in differences.
+    return np.log1p(vals.reshape(pts.shape[:-1]).mean(axis=-1))
 
 
 def _alternation(values: np.ndarray, contrast: float) -> float:
@@ -266,7 +278,7 @@ def _checker_problem(gray: np.ndarray, corners: np.ndarray, cols: int, rows: int
         mid = 0.5 * (edge[:-1] + edge[1:])
         past = (mid + 0.35 * (mid - 0.5 * (grid[0][:-1] + grid[0][1:]))).astype(np.float32)
         vals = cv2.remap(gray32, past[:, 0:1], past[:, 1:2], cv2.INTER_LINEAR).ravel()
-        d = np.diff(vals.astype(np.float64))
+        d = np.diff(np.log1p(vals.astype(np.float64)))
         # Steps between neighbours that are strong and flip sign like a checkerboard's; the
         # last cells may run off the board into the rim, so three quarters suffice.
         ok = np.abs(d) > contrast / 3
@@ -276,12 +288,14 @@ def _checker_problem(gray: np.ndarray, corners: np.ndarray, cols: int, rows: int
     return None
 
 
-def _candidates(gray: np.ndarray, cols: int, rows: int) -> Iterator[tuple[np.ndarray, float]]:
+def _candidates(
+    gray: np.ndarray, cols: int, rows: int, dense: bool = False
+) -> Iterator[tuple[np.ndarray, float]]:
     """Candidate grids (full-resolution pixel coordinates, scale) in the order to try."""
-    scales = detection_scales((gray.shape[1], gray.shape[0]), (cols, rows))
+    scales = detection_scales((gray.shape[1], gray.shape[0]), (cols, rows), dense)
     resized = {}
     for s in scales:
-        interp = cv2.INTER_AREA if s < 1 else cv2.INTER_LINEAR
+        interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
         resized[s] = gray if s == 1.0 else cv2.resize(gray, None, fx=s, fy=s, interpolation=interp)
         ok, pts = cv2.findChessboardCorners(resized[s], (cols, rows), _CLASSIC_FLAGS)
         if ok:
@@ -292,13 +306,15 @@ def _candidates(gray: np.ndarray, cols: int, rows: int) -> Iterator[tuple[np.nda
             yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
 
 
-def detect_board(image: np.ndarray, board: tuple[int, int] | BoardSpec) -> BoardDetection:
+def detect_board(
+    image: np.ndarray, board: tuple[int, int] | BoardSpec, dense: bool = False
+) -> BoardDetection:
     """The full board's corners with per-corner checks, or FeatureNotFoundError (the reason
-    names the last check that failed)."""
+    names the last check that failed). `dense` searches the denser scale ladder (calibration)."""
     cols, rows = board.size if isinstance(board, BoardSpec) else board
     gray = to_gray(image)
     reason = "the detector found no grid at any scale"
-    for found, scale in _candidates(gray, cols, rows):
+    for found, scale in _candidates(gray, cols, rows, dense):
         problem = grid_problem(found, cols, rows) or _checker_problem(gray, found, cols, rows)
         if problem is not None:
             reason = problem
@@ -331,7 +347,7 @@ def _refined(
             rejected[int(k)] = f"refinement moved it {moved[k]:.1f} px (window {half} px)"
         elif low[k]:
             rejected[int(k)] = (
-                f"low contrast ({contrast[k]:.0f} vs median {np.median(contrast):.0f})"
+                f"low contrast ({contrast[k]:.2f} vs median {np.median(contrast):.2f})"
             )
         else:
             rejected[int(k)] = (

@@ -638,7 +638,7 @@ def calibrate_images(
     def detect(item: tuple[str, np.ndarray]) -> tuple[str, BoardDetection | Rejection]:
         name, gray = item
         try:
-            found: BoardDetection | Rejection = detect_board(gray, board)
+            found: BoardDetection | Rejection = detect_board(gray, board, dense=True)
         except FeatureNotFoundError as exc:
             found = Rejection(name, str(exc))
         if on_detected is not None:
