@@ -97,28 +97,77 @@ def reference(r: dict[str, Any]) -> str:
 
 def intrinsics(r: dict[str, Any]) -> str:
     i = r["intrinsics"]
+    f, u, peer = i["fisheye2"], i["unity"], i["peer_py_ocamcalib"]
+    pf, p2 = peer["fisheye2"], peer["second_lens_1032x778"]
+    ref, ren = f["refinements"], i["renders_refinements"]
+
+    def wall(x: dict[str, Any]) -> str:
+        return (
+            f"{x['calibration_s']:.2f} s wall, {x['calibration_cpu_s']:.2f} s CPU "
+            f"(load {x['load_average_1min']:.1f} on 2 cores)"
+        )
+
+    def corners(x: dict[str, Any]) -> str:
+        return (
+            f"**{x['rms_px_2d']:.4f} px** ({x['corners_rejected']} of "
+            f"{x['corners_used'] + x['corners_rejected']} corners dropped; "
+            f"{x['rms_px_2d_no_corner_dropped']:.4f} px with none dropped)"
+        )
+
+    def versus_truth(kind: str) -> str:
+        return ", ".join(
+            f"{m} {ren[kind][m]['corner_error_vs_truth_rms_px']:.4f}"
+            for m in ("saddle", "plane", "auto")
+        )
+
     rows = [
-        ["third-party set: images used", i["calibration_images_used"], i["opencv_images_found"]],
         [
-            "RMS reprojection error, 2D",
-            f"**{i['rms_px_2d']:.3f} px**",
-            f"{i['opencv_fisheye_rms_px_2d']:.3f} px",
+            "real `fisheye2` (748x480, 8x6, 117 mm): images used",
+            f"**{f['images_used']} of {f['images_given']}**",
+            f"{pf['images_used']} of {pf['of']}",
+            f"{f['opencv_images_found']} found",
         ],
         [
-            "RMS per coordinate",
-            f"{i['rms_px_per_coord']:.3f} px",
-            f"{i['opencv_fisheye_rms_px_per_coord']:.3f} px",
+            "`fisheye2` RMS, 2D distance",
+            corners(f),
+            f"{pf['rms_px_2d']:.3f} px",
+            f"{f['opencv_fisheye_rms_px_2d']:.4f} px",
+        ],
+        ["`fisheye2` whole calibration", wall(f), f"~{pf['time_s']} s", ""],
+        [
+            "`fisheye2` refinement forced: saddle / plane / per image (RMS px)",
+            " / ".join(f"{ref[m]['rms_px_2d']:.4f}" for m in ("saddle", "plane", "auto")),
+            "",
+            "",
         ],
         [
-            "whole calibration incl. reading and detection",
-            f"{i['calibration_9_images_s']:.2f} s",
-            f"{i['opencv_detect_s'] + i['opencv_calibrate_s']:.2f} s",
+            "second real lens (1032x778, 8x6, 32.5 mm), kept out of the repository",
+            "checked elsewhere",
+            f"{p2['images_used']} of {p2['of']}, {p2['rms_px_2d']:.3f} px, ~{p2['time_s']} s",
+            "diverges",
         ],
-        ["pixel → ray, 1 million points", f"{i['pixel_to_ray_1M_ms']:.0f} ms", ""],
-        ["ray → pixel, 1 million points", f"{i['ray_to_pixel_1M_ms']:.0f} ms", ""],
-        ["pixel → ray → pixel, worst error", f"{i['round_trip_max_error_px']:.1e} px", ""],
+        [
+            "Unity renders `a1..a9` (1920x1920, 9x6, 116 mm): images used",
+            f"**{u['images_used']} of {u['images_given']}**",
+            "",
+            f"{u['opencv_images_found']}",
+        ],
+        ["Unity RMS, 2D distance", corners(u), "", f"{u['opencv_fisheye_rms_px_2d']:.4f} px"],
+        [
+            "Unity focal length (a0)",
+            f"{u['focal_px']:.2f} px ({u['focal_minus_opencv_px']:+.2f} px from OpenCV)",
+            "",
+            f"{u['opencv_focal_px']:.2f} px",
+        ],
+        ["Unity whole calibration", wall(u), "", ""],
+        ["renders, clean: corner error vs truth (RMS px)", versus_truth("clean"), "", ""],
+        ["renders, degraded: corner error vs truth (RMS px)", versus_truth("degraded"), "", ""],
+        ["pixel → ray, 1 million points", f"{i['pixel_to_ray_1M_ms']:.0f} ms", "", ""],
+        ["ray → pixel, 1 million points", f"{i['ray_to_pixel_1M_ms']:.0f} ms", "", ""],
+        ["pixel → ray → pixel, worst error", f"{i['round_trip_max_error_px']:.1e} px", "", ""],
     ]
-    return _table(["measured", "omnisort", "OpenCV fisheye, same images"], rows)
+    head = ["measured", "omnisort", "py-OCamCalib (reference)", "OpenCV fisheye, same images"]
+    return _table(head, rows)
 
 
 def extrinsics_speed(r: dict[str, Any]) -> str:
@@ -219,8 +268,12 @@ def summary(r: dict[str, Any]) -> str:
     j, jd = t["clean_joint_mae"], t["degraded_joint_mae"]
     rows = [
         [
-            "fisheye intrinsics, third-party images",
-            f"RMS {i['rms_px_2d']:.3f} px (OpenCV fisheye {i['opencv_fisheye_rms_px_2d']:.3f} px)",
+            "fisheye intrinsics, real photographs (fisheye2) / Unity renders",
+            f"{i['fisheye2']['images_used']}/{i['fisheye2']['images_given']} images, RMS "
+            f"{i['fisheye2']['rms_px_2d']:.3f} px (py-OCamCalib "
+            f"{i['peer_py_ocamcalib']['fisheye2']['rms_px_2d']:.3f} px) / "
+            f"{i['unity']['images_used']}/{i['unity']['images_given']}, "
+            f"{i['unity']['rms_px_2d']:.3f} px",
             "[calibration](docs/calibration.md)",
         ],
         [

@@ -524,11 +524,15 @@ class Cell:
         _raise_if_cancelled(cancel, "calibration")
         result, record = cal.result, {**cal.record, "images_folder": str(folder)}
         saved = self.store.save_camera(camera_record(result.model, **record))
+        report = cal.write_report(saved)
         return {
             "path": str(saved),
             "rms_px": result.rms_px,
             "images_used": len(result.images_used),
             "images_rejected": record["images_rejected"],
+            "corners_rejected": len(result.corners_rejected),
+            "outer_band_covered": cal.figures.outer_coverage,
+            "report": str(report),
             "center_uv": list(result.model.center_uv),
             "poly_degree": result.degree,
             "camera_serial": self.store.expected_serial,

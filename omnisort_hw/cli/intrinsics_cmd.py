@@ -24,6 +24,13 @@ def register(sub: Any) -> None:
     cal.add_argument("--degree", type=int, default=None, help="polynomial degree (default: auto)")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
     cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    cal.add_argument(
+        "--refinement",
+        choices=("auto", "saddle", "plane"),
+        default="auto",
+        help="corner refinement: saddle points, re-measured on the board plane, or per image "
+        "whichever agrees better with the first model (default auto)",
+    )
     cal.set_defaults(func=cmd_calibrate)
 
     exp = isub.add_parser("export", help="camera.json -> OCamCalib calib_results.txt")
@@ -42,6 +49,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     from omnisort_hw.core.camera_io import save_camera_json
     from omnisort_hw.core.checkerboard import BoardSpec
+    from omnisort_hw.core.intrinsics_report import OUTER_BAND
     from omnisort_hw.pipeline.intrinsics import calibrate_intrinsics, read_images
     from omnisort_hw.runlog import RunLog
 
@@ -57,11 +65,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         RunLog(args.log) as log,
     ):
         cal = calibrate_intrinsics(
-            images, board, degree=args.degree, on_detected=lambda _n: bar.update(1), log=log
+            images,
+            board,
+            degree=args.degree,
+            on_detected=lambda _n: bar.update(1),
+            log=log,
+            refinement=args.refinement,
         )
-    result, record = cal.result, cal.record
+    result, record, figures = cal.result, cal.record, cal.figures
     save_camera_json(args.out, result.model, **record)
-    summary = {"out": str(args.out), **record, "model": result.model.to_dict()}
+    report_path = cal.write_report(args.out)
+    summary = {"out": str(args.out), "report": str(report_path), **record}
+    summary["model"] = result.model.to_dict()
     if args.json:
         print(json.dumps(summary))
     else:
@@ -75,6 +90,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"    {rms:6.3f} px  {name}")
         for rej in result.images_rejected:
             print(f"  rejected {rej.name}: {rej.reason}")
+        for cr in result.corners_rejected:
+            print(f"  corner {cr.corner} of {cr.name} left out: {cr.reason}")
+        print(f"  outer {OUTER_BAND:.0%} of the image circle covered: {figures.outer_coverage:.0%}")
+        if figures.warning:
+            print(f"  WARNING: {figures.warning}")
+        print(f"  report                  {report_path}")
     return 0
 
 

@@ -23,14 +23,13 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
-from scipy.ndimage import map_coordinates
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.checkerboard import BoardSpec, detect_corners, to_gray
+from omnisort_hw.core.checkerboard import BoardDetection, BoardSpec, detect_board, to_gray
+from omnisort_hw.core.plane_refinement import refine_on_board_plane
 from omnisort_hw.errors import CalibrationError, FeatureNotFoundError
 
 MIN_IMAGES = 3
@@ -38,16 +37,36 @@ MIN_IMAGES = 3
 
 @dataclass
 class ImagePoints:
-    """One image's detected corners and the matching board points (mm, Z = 0)."""
+    """One image's corners and the matching board points (mm, Z = 0); `ids` are the corners'
+    indices on the board, row by row (all of them unless some were dropped)."""
 
     name: str
     pixels: np.ndarray
     board: np.ndarray
+    ids: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+    def __post_init__(self) -> None:
+        if len(self.ids) != len(self.pixels):
+            self.ids = np.arange(len(self.pixels))
+
+    def without(self, drop: np.ndarray) -> ImagePoints:
+        """The same image without the corners where `drop` (a boolean mask) is set."""
+        keep = ~drop
+        return ImagePoints(self.name, self.pixels[keep], self.board[keep], self.ids[keep])
 
 
 @dataclass
 class Rejection:
     name: str
+    reason: str
+
+
+@dataclass
+class CornerRejection:
+    """One corner left out of the fit: image, board index (row-major) and why."""
+
+    name: str
+    corner: int
     reason: str
 
 
@@ -64,6 +83,11 @@ class IntrinsicResult:
     poses: dict[str, np.ndarray]  # name -> 4x4 board-to-camera transform (mm)
     residuals_px: dict[str, np.ndarray] = field(repr=False)
     degree: int = 0
+    corners_rejected: list[CornerRejection] = field(default_factory=list)
+    corners_px: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    corner_ids: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    refinement: dict[str, str] = field(default_factory=dict)
+    corner_limit_px: float = 0.0
 
     def record(self) -> dict[str, Any]:
         """The calibration's record for camera.json (besides the model itself)."""
@@ -72,6 +96,11 @@ class IntrinsicResult:
             "per_image_rms_px": self.per_image_rms_px,
             "images_used": self.images_used,
             "images_rejected": [{"file": r.name, "reason": r.reason} for r in self.images_rejected],
+            "corners_rejected": [
+                {"file": r.name, "corner": r.corner, "reason": r.reason}
+                for r in self.corners_rejected
+            ],
+            "corner_refinement": self.refinement,
             "std": self.std,
             "poly_degree": self.degree,
         }
@@ -158,13 +187,14 @@ def _linear_solve(
             M[: len(X), 0], M[: len(X), 1], M[: len(X), 2] = A, A * rho**2, -dv
             M[len(X) :, 0], M[len(X) :, 1], M[len(X) :, 2] = C, C * rho**2, -du
             rhs = np.concatenate([dv * zr, du * zr])
-            sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+            # Three unknowns: the normal equations are exact enough and far cheaper.
+            sol = np.linalg.solve(M.T @ M, M.T @ rhs)
             err = np.linalg.norm(M @ sol - rhs)
             if sol[0] > 0 and err < best_err:
                 best, best_err = ci, err
         choices.append(best)
     M, rhs = system(choices)
-    sol, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+    sol = _least_squares_normal(M, rhs)
     coeffs = sol[: len(powers)]
     poses = []
     sq_err = []
@@ -185,6 +215,15 @@ def _linear_solve(
     full = np.zeros(degree + 1)
     full[powers] = coeffs
     return full, poses, float(np.sqrt(np.mean(np.concatenate(sq_err))))
+
+
+def _least_squares_normal(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Linear least squares through the column-scaled normal equations: a few unknowns and
+    many rows, where LAPACK's lstsq spends most of its time on the tall matrix."""
+    scale = np.linalg.norm(M, axis=0)
+    scale[scale == 0] = 1.0
+    Ms = M / scale
+    return np.linalg.solve(Ms.T @ Ms, Ms.T @ rhs) / scale
 
 
 def search_centre(
@@ -353,12 +392,17 @@ def _to_model(x: np.ndarray, prob: _Problem, size: tuple[int, int]) -> OcamModel
 
 
 def _fit(
-    views: list[ImagePoints], image_size: tuple[int, int], degrees: list[int]
+    views: list[ImagePoints],
+    image_size: tuple[int, int],
+    degrees: list[int],
+    centre: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, _Problem, Any]:
-    """Centre search, linear estimate and refinement for each degree; the lowest degree whose
-    RMS is within 1% of the best wins (more terms would fit the noise, not the lens)."""
+    """Centre search (unless a start is given), linear estimate and refinement for each
+    degree; the lowest degree whose RMS is within 1% of the best wins (more terms would fit
+    the noise, not the lens)."""
     rho_scale = 0.5 * min(image_size)
-    centre = search_centre(views, image_size)
+    if centre is None:
+        centre = search_centre(views, image_size)
     fits = []
     for deg in degrees:
         g_lin, poses, _ = _linear_solve(views, centre, deg, rho_scale)
@@ -369,38 +413,151 @@ def _fit(
     return x, prob, sol
 
 
+def _refit(
+    views: list[ImagePoints], names: list[str], x: np.ndarray, prob: _Problem
+) -> tuple[np.ndarray, _Problem, Any]:
+    """Levenberg-Marquardt again from a previous solution (same degree), on `views`: the
+    images named `names` in the previous fit, some with fewer corners."""
+    centre = x[:2]
+    new = _Problem.build(views, prob.n_poly, prob.rho_scale, centre)
+    poses = x[prob.n_intr :].reshape(prob.n_views, 6)
+    index = {n: k for k, n in enumerate(names)}
+    x0 = np.concatenate([x[: prob.n_intr], *(poses[index[v.name]] for v in views)])
+    sol = least_squares(new.residuals, x0, jac=new.jacobian, method="lm", x_scale="jac")
+    return sol.x, new, sol
+
+
+def corner_limit_px(distances: np.ndarray) -> float:
+    """Limit beyond which a corner's residual is a gross error, from the residuals themselves:
+    Tukey's outer fence, Q3 + 3 IQR. It assumes no particular law (real residuals have
+    heavier tails than Gaussian noise: blur, a board not quite flat), and it sits far
+    enough out that it trims gross errors, not the tail of the honest corners."""
+    q1, q3 = np.percentile(distances, [25.0, 75.0])
+    return float(q3 + 3.0 * (q3 - q1))
+
+
+def _neighbour_median(views: list[ImagePoints], prob: _Problem, res2: np.ndarray) -> np.ndarray:
+    """Per corner, the median residual of its neighbours on the board (the corners one
+    square away in the same image); a corner with no neighbour left gets zero."""
+    out = np.zeros_like(res2)
+    for k, view in enumerate(views):
+        idx = np.flatnonzero(prob.view == k)
+        b = view.board[:, :2]
+        d = np.linalg.norm(b[:, None, :] - b[None, :, :], axis=2)
+        step = np.min(d[d > 0]) if np.any(d > 0) else 1.0
+        near = (d > 0) & (d < 1.5 * step)  # the 8 around it: one bad one cannot move the median
+        r = res2[idx]
+        for axis in (0, 1):
+            vals = np.where(near, r[None, :, axis], np.nan)
+            has = near.any(axis=1)
+            out[idx[has], axis] = np.nanmedian(vals[has], axis=1)
+    return out
+
+
+def min_corners(n_board: int) -> int:
+    """An image keeps its place while at least half of its board's corners are good."""
+    return max(6, (n_board + 1) // 2)
+
+
 def calibrate(
     views: list[ImagePoints],
     image_size: tuple[int, int],
     degree: int | None = None,
     rejected: list[Rejection] | None = None,
+    corners_rejected: list[CornerRejection] | None = None,
+    max_rounds: int = 6,
+    centre: tuple[float, float] | None = None,
     outlier_factor: float = 3.0,
     outlier_floor_px: float = 1.0,
 ) -> IntrinsicResult:
-    """Calibrate from detected corners.
+    """Calibrate from detected corners, dropping single bad corners, not whole images.
 
-    `degree=None` picks the polynomial degree (4..8). Images whose RMS exceeds
-    `outlier_factor` times the median (and `outlier_floor_px`) are rejected, one round, and
-    the fit is repeated without them; at least MIN_IMAGES must remain.
+    `degree=None` picks the polynomial degree (4..8). After each fit, every corner whose
+    residual, both as it is and less the median of its board neighbours' residuals, exceeds
+    `corner_limit_px` of the latter is dropped with its reason: a gross error of one corner
+    stands out from its neighbours, a smooth trend (the lens model, a board not quite flat)
+    does not and is left for the report to show. The fit is repeated from where it was (at
+    most `max_rounds` times). An image is dropped only when fewer than `min_corners` of its
+    corners remain, or when its RMS exceeds `outlier_factor` times the median (and
+    `outlier_floor_px`): a whole board off together. At least MIN_IMAGES must remain.
+    `centre` starts the fit there instead of searching the distortion centre.
     """
     rejected = list(rejected or [])
+    corners_rejected = list(corners_rejected or [])
     views = list(views)
     if len(views) < MIN_IMAGES:
         raise CalibrationError(
             f"only {len(views)} usable image(s); at least {MIN_IMAGES} with a full board are needed"
         )
+    n_board = max(int(v.ids.max()) + 1 for v in views)
     degrees = [degree] if degree else [4, 5, 6, 7, 8]
-    x, prob, sol = _fit(views, image_size, degrees)
-    per_image = prob.per_image_rms(sol.fun)
-    limit = max(outlier_factor * float(np.median(per_image)), outlier_floor_px)
-    bad = [k for k, r in enumerate(per_image) if r > limit]
-    if bad and len(views) - len(bad) >= MIN_IMAGES:
-        for k in reversed(bad):
-            rejected.append(
-                Rejection(views[k].name, f"outlier: RMS {per_image[k]:.2f} px > {limit:.2f} px")
+    x, prob, sol = _fit(views, image_size, degrees, centre)
+    limit = 0.0
+    dropped_any = False
+    for _ in range(max_rounds):
+        res2 = sol.fun.reshape(-1, 2)
+        dist = np.linalg.norm(res2, axis=1)
+        local = np.linalg.norm(res2 - _neighbour_median(views, prob, res2), axis=1)
+        limit = corner_limit_px(local)
+        # Worst first: a fit that still holds a gross error pulls other corners along (its
+        # neighbours, boards at the rim), so a round drops only those at least half as far
+        # off as the worst, and the next round judges the rest in a cleaner fit.
+        drop_all = (dist > limit) & (local > limit) & (local >= 0.5 * local.max())
+        # An image's RMS over the corners it keeps: one gross corner must not cost the image.
+        kept_sq = np.where(drop_all, 0.0, dist**2)
+        per_image = np.sqrt(
+            np.bincount(prob.view, kept_sq, prob.n_views)
+            / np.maximum(np.bincount(prob.view, ~drop_all, prob.n_views), 1)
+        )
+        image_limit = max(outlier_factor * float(np.median(per_image)), outlier_floor_px)
+        if not drop_all.any() and not np.any(per_image > image_limit):
+            break
+        names = [v.name for v in views]
+        kept = []
+        for k, view in enumerate(views):
+            d, loc, drop = dist[prob.view == k], local[prob.view == k], drop_all[prob.view == k]
+            if len(view.ids) - drop.sum() < min_corners(n_board) or per_image[k] > image_limit:
+                rejected.append(
+                    Rejection(
+                        view.name,
+                        f"outlier image: RMS {per_image[k]:.2f} px (limit {image_limit:.2f} px),"
+                        f" {int(drop.sum())} of {len(d)} corners beyond the corner limit",
+                    )
+                )
+                continue
+            corners_rejected += [
+                CornerRejection(
+                    view.name,
+                    int(c),
+                    f"residual {r:.2f} px, {q:.2f} px off its neighbours' (limit {limit:.2f} px)",
+                )
+                for c, r, q in zip(view.ids[drop], d[drop], loc[drop], strict=True)
+            ]
+            kept.append(view.without(drop))
+        if len(kept) < MIN_IMAGES:
+            raise CalibrationError(
+                f"only {len(kept)} image(s) keep enough good corners; at least {MIN_IMAGES} needed"
             )
-            del views[k]
-        x, prob, sol = _fit(views, image_size, degrees)
+        views = kept
+        if dropped_any or len(degrees) == 1:
+            x, prob, sol = _refit(views, names, x, prob)
+        else:  # the degree was chosen with the bad data in: choose it again without
+            x, prob, sol = _fit(views, image_size, degrees, (float(x[0]), float(x[1])))
+        dropped_any = True
+    return _result(views, image_size, x, prob, sol, rejected, corners_rejected, limit)
+
+
+def _result(
+    views: list[ImagePoints],
+    image_size: tuple[int, int],
+    x: np.ndarray,
+    prob: _Problem,
+    sol: Any,
+    rejected: list[Rejection],
+    corners_rejected: list[CornerRejection],
+    limit: float,
+) -> IntrinsicResult:
+    """The result record: model, residuals and the parameters' standard deviations."""
     res = sol.fun
     sigma2 = float(res @ res) / max(res.size - x.size, 1)
     J = prob.jacobian(x)
@@ -432,97 +589,17 @@ def calibrate(
         poses=poses,
         residuals_px={v.name: res2[prob.view == k] for k, v in enumerate(views)},
         degree=prob.n_poly,
+        corners_rejected=corners_rejected,
+        corners_px={v.name: v.pixels for v in views},
+        corner_ids={v.name: v.ids for v in views},
+        corner_limit_px=limit,
     )
 
 
-# ---- corner refinement on the board plane ----------------------------------------------
-
-
-def _edge_line_corners(
-    rect: np.ndarray, pts: np.ndarray, half_len: int, gap: int = 2, half_width: int = 4
-) -> np.ndarray:
-    """Refine corners of a fronto-parallel, axis-aligned checkerboard image.
-
-    For every corner, the vertical and the horizontal edge through it are located row by row
-    (column by column) as the centroid of the squared gradient across the edge, over
-    `half_len` pixels on each side (skipping `gap` pixels at the saddle), fitted with a
-    weighted line, and intersected. Long edges average out the staircase of aliased
-    renderings, which a small window around the saddle cannot. Vectorised over all corners.
-    """
-    img = rect.astype(np.float64)
-    gx2 = np.zeros_like(img)
-    gy2 = np.zeros_like(img)
-    gx2[:, 1:-1] = (0.5 * (img[:, 2:] - img[:, :-2])) ** 2
-    gy2[1:-1, :] = (0.5 * (img[2:, :] - img[:-2, :])) ** 2
-    along = np.concatenate([np.arange(-half_len, -gap + 1), np.arange(gap, half_len + 1)])
-    along = along.astype(float)
-    across = np.arange(-half_width, half_width + 1, dtype=float)
-    design = np.stack([np.ones_like(along), along], axis=1)
-    x0, y0 = pts[:, 0].astype(float).copy(), pts[:, 1].astype(float).copy()
-    slope_v = np.zeros(len(pts))
-    slope_h = np.zeros(len(pts))
-
-    def line_fit(vals: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        ata = np.einsum("mi,km,mj->kij", design, weights, design)
-        atb = np.einsum("mi,km,km->ki", design, weights, vals)
-        return np.linalg.solve(ata, atb[..., None])[..., 0]
-
-    for _ in range(3):
-        rows = y0[:, None] + along[None, :]
-        xs = (x0[:, None] + slope_v[:, None] * along[None, :])[..., None] + across
-        w_v = map_coordinates(
-            gx2, [np.broadcast_to(rows[..., None], xs.shape).ravel(), xs.ravel()], order=1
-        ).reshape(xs.shape)
-        sum_v = w_v.sum(-1) + 1e-12
-        edge_x = (w_v * xs).sum(-1) / sum_v
-        cols = x0[:, None] + along[None, :]
-        ys = (y0[:, None] + slope_h[:, None] * along[None, :])[..., None] + across
-        w_h = map_coordinates(
-            gy2, [ys.ravel(), np.broadcast_to(cols[..., None], ys.shape).ravel()], order=1
-        ).reshape(ys.shape)
-        sum_h = w_h.sum(-1) + 1e-12
-        edge_y = (w_h * ys).sum(-1) / sum_h
-        a, slope_v = line_fit(edge_x, sum_v).T
-        c, slope_h = line_fit(edge_y, sum_h).T
-        # x = a + bv (y - y0), y = c + bh (x - x0)
-        x_new = (a + slope_v * (c - y0) - slope_v * slope_h * x0) / (1.0 - slope_v * slope_h)
-        y0 = c + slope_h * (x_new - x0)
-        x0 = x_new
-    return np.stack([x0, y0], axis=1)
-
-
-def refine_on_board_plane(
-    gray: np.ndarray,
-    board: BoardSpec,
-    model: OcamModel,
-    pose: np.ndarray,
-    px_per_square: int = 60,
-    blur_sigma: float = 1.0,
-) -> np.ndarray:
-    """Corners re-measured on the board's own plane (Datta et al.'s iterative refinement).
-
-    The image is resampled through the current model and pose onto the board plane, where
-    the grid is straight and axis-aligned; corners are found there by edge-line fitting and
-    mapped back through the same model and pose, so the model's own error cancels to first
-    order. Returns (cols*rows, 2) pixels.
-    """
-    ppm = px_per_square / board.square_mm
-    margin = 0.5 * board.square_mm
-    width = round((board.cols - 1) * px_per_square + 2 * margin * ppm)
-    height = round((board.rows - 1) * px_per_square + 2 * margin * ppm)
-    gx, gy = np.meshgrid(np.arange(width) / ppm - margin, np.arange(height) / ppm - margin)
-    plane = np.stack([gx, gy, np.zeros_like(gx)], axis=-1) @ pose[:3, :3].T + pose[:3, 3]
-    maps = model.ray_to_pixel(plane).astype(np.float32)
-    src = cv2.GaussianBlur(gray, (0, 0), blur_sigma) if blur_sigma > 0 else gray
-    rect = cv2.remap(src, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR)
-    start = (board.object_points()[:, :2] + margin) * ppm
-    refined = _edge_line_corners(rect, start, int(0.48 * px_per_square))
-    mm = refined / ppm - margin
-    pts = np.column_stack([mm, np.zeros(len(mm))]) @ pose[:3, :3].T + pose[:3, 3]
-    return model.ray_to_pixel(pts)
-
-
 # ---- images -> model -------------------------------------------------------------------
+
+
+REFINEMENTS = ("auto", "saddle", "plane")
 
 
 def calibrate_images(
@@ -531,13 +608,22 @@ def calibrate_images(
     degree: int | None = None,
     on_detected: Any = None,
     log: Any = None,
+    refinement: str = "auto",
+    max_rounds: int = 6,
 ) -> IntrinsicResult:
-    """Detect, calibrate, re-measure every board on its plane, calibrate again.
+    """Detect, calibrate, re-measure every board on its plane, choose, calibrate again.
 
     `images` are (name, grayscale or BGR image) of one camera; an image whose full board is
-    not found is rejected with the reason. `on_detected(name)` is called as each detection
-    finishes (for a progress bar); `log` is a RunLog (or None).
+    not found is rejected with the reason, a corner that is not at an intensity saddle is
+    left out with its reason. `refinement` is "saddle" (sub-pixel saddle points only),
+    "plane" (every board re-measured on its plane) or "auto": per image, the corners that
+    agree better with the first model (pose fitted alone, model held) are kept.
+    `max_rounds` bounds the rounds of dropping corners with gross residuals (0: none).
+    `on_detected(name)` is called as each detection finishes (for a progress bar); `log` is a
+    RunLog (or None).
     """
+    if refinement not in REFINEMENTS:
+        raise ValueError(f"refinement must be one of {REFINEMENTS}, got {refinement!r}")
     if not images:
         raise CalibrationError("no images given")
     size = (images[0][1].shape[1], images[0][1].shape[0])
@@ -549,10 +635,10 @@ def calibrate_images(
             )
     grays = {name: to_gray(img) for name, img in images}
 
-    def detect(item: tuple[str, np.ndarray]) -> tuple[str, np.ndarray | Rejection]:
+    def detect(item: tuple[str, np.ndarray]) -> tuple[str, BoardDetection | Rejection]:
         name, gray = item
         try:
-            found: np.ndarray | Rejection = detect_corners(gray, board)
+            found: BoardDetection | Rejection = detect_board(gray, board, dense=True)
         except FeatureNotFoundError as exc:
             found = Rejection(name, str(exc))
         if on_detected is not None:
@@ -561,41 +647,79 @@ def calibrate_images(
 
     with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
         detections = list(pool.map(detect, grays.items()))
-    views = [
-        ImagePoints(n, d, board.object_points()) for n, d in detections if isinstance(d, np.ndarray)
-    ]
     rejected = [d for _, d in detections if isinstance(d, Rejection)]
-    if len(views) < MIN_IMAGES:
+    found = {n: d for n, d in detections if isinstance(d, BoardDetection)}
+    at_detection = [
+        CornerRejection(n, k, reason) for n, d in found.items() for k, reason in d.rejected.items()
+    ]
+    need = min_corners(board.cols * board.rows)
+    for name, det in list(found.items()):
+        if int(det.good.sum()) < need:
+            rejected.append(
+                Rejection(name, f"only {int(det.good.sum())} corners pass the saddle check")
+            )
+            del found[name]
+    if len(found) < MIN_IMAGES:
         reasons = "; ".join(f"{r.name}: {r.reason}" for r in rejected)
         raise CalibrationError(
-            f"only {len(views)} of {len(images)} image(s) show the full {board.cols}x{board.rows} "
+            f"only {len(found)} of {len(images)} image(s) show the full {board.cols}x{board.rows} "
             f"board, at least {MIN_IMAGES} are needed" + (f" ({reasons})" if reasons else "")
         )
-    first = calibrate(views, size, degree, rejected)
-    refined = [
-        ImagePoints(
-            v.name,
-            refine_on_board_plane(grays[v.name], board, first.model, first.poses[v.name]),
-            v.board,
-        )
-        for v in views
-        if v.name in first.poses
-    ]
-    result = calibrate(refined, size, degree, list(first.images_rejected))
+    obj = board.object_points()
+    saddle = {n: ImagePoints(n, d.corners, obj).without(~d.good) for n, d in found.items()}
+    first = calibrate(
+        list(saddle.values()), size, degree, rejected, at_detection, max_rounds=max_rounds
+    )
+    chosen: dict[str, ImagePoints] = {}
+    methods: dict[str, str] = {}
+    for name in first.images_used:
+        plane_px = refine_on_board_plane(grays[name], board, first.model, first.poses[name])
+        plane = ImagePoints(name, plane_px, obj).without(~found[name].good)
+        pick = refinement
+        if refinement == "auto":
+            rms = {
+                m: pose_only_rms(first.model, v, first.poses[name])
+                for m, v in (("saddle", saddle[name]), ("plane", plane))
+            }
+            pick = min(rms, key=rms.__getitem__)
+        chosen[name] = plane if pick == "plane" else saddle[name]
+        methods[name] = pick
+    dropped_first = [r for r in first.images_rejected if r.name in found]
+    result = calibrate(
+        list(chosen.values()),
+        size,
+        degree,
+        rejected + dropped_first,
+        at_detection,
+        max_rounds=max_rounds,
+        centre=first.model.center_uv,
+    )
+    result.refinement = {n: methods[n] for n in result.images_used}
     if log is not None:
-        _log_result(log, result, grays, {v.name: v.pixels for v in refined})
+        _log_result(log, result, grays)
     return result
 
 
-def _log_result(
-    log: Any, result: IntrinsicResult, grays: dict[str, np.ndarray], corners: dict[str, np.ndarray]
-) -> None:
-    """Per image: the image, detected corners, reprojected corners and residual figures."""
+def pose_only_rms(model: OcamModel, view: ImagePoints, pose: np.ndarray) -> float:
+    """RMS reprojection distance of one image with the model held and only its pose fitted."""
+    x0 = np.concatenate([Rotation.from_matrix(pose[:3, :3]).as_rotvec(), pose[:3, 3]])
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        pts = Rotation.from_rotvec(x[:3]).apply(view.board) + x[3:]
+        return (model.ray_to_pixel(pts) - view.pixels).ravel()
+
+    sol = least_squares(residuals, x0, method="lm", x_scale="jac")
+    return float(np.sqrt(np.mean(np.sum(sol.fun.reshape(-1, 2) ** 2, axis=1))))
+
+
+def _log_result(log: Any, result: IntrinsicResult, grays: dict[str, np.ndarray]) -> None:
+    """Per image: the image, used corners, reprojected corners and residual figures."""
     for step, name in enumerate(result.images_used):
+        corners = result.corners_px[name]
         log.set_step("image", step)
         log.image("intrinsics/image", grays[name])
-        log.points2d("intrinsics/image/detected", corners[name], color=(0, 200, 0), radius=4.0)
-        reproj = corners[name] + result.residuals_px[name]
+        log.points2d("intrinsics/image/detected", corners, color=(0, 200, 0), radius=4.0)
+        reproj = corners + result.residuals_px[name]
         log.points2d("intrinsics/image/reprojected", reproj, color=(255, 0, 0), radius=2.0)
         log.scalar("intrinsics/rms_px_per_image", result.per_image_rms_px[name])
     log.text(

@@ -2,7 +2,8 @@
 
 One use case for the CLI (`omnisort intrinsics calibrate`) and the service
 (`calibrate what=intrinsics`): read the images (every one must be readable, or nothing is
-done), calibrate with the core, and build the camera.json record once.
+done), calibrate with the core, build the camera.json record and the technician's report
+(PNG beside camera.json, and in the run log) once.
 """
 
 from __future__ import annotations
@@ -20,7 +21,15 @@ import numpy as np
 
 from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.intrinsics import IntrinsicResult, calibrate_images
+from omnisort_hw.core.intrinsics_report import (
+    OUTER_BAND,
+    ReportFigures,
+    build_report,
+    encode_png,
+    log_report,
+)
 from omnisort_hw.errors import InputError, MotionRefusedError
+from omnisort_hw.fileio import atomic_write_bytes
 from omnisort_hw.runlog import NullLog, RunLog
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -28,10 +37,23 @@ IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
 
 @dataclass
 class IntrinsicCalibration:
-    """The core's result and the record camera.json stores with the model."""
+    """The core's result, the record camera.json stores with the model, and the report."""
 
     result: IntrinsicResult
     record: dict[str, Any]
+    figures: ReportFigures
+    picture: np.ndarray
+
+    def write_report(self, camera_json: str | Path) -> Path:
+        """Write the report picture beside `camera_json` (atomically); its path."""
+        path = report_png_path(Path(camera_json))
+        atomic_write_bytes(path, encode_png(self.picture), keep_history=False)
+        return path
+
+
+def report_png_path(camera_json: Path) -> Path:
+    """The report picture's place: beside camera.json, named after it."""
+    return camera_json.with_name(camera_json.stem + "_report.png")
 
 
 def board_record(board: BoardSpec) -> dict[str, Any]:
@@ -73,12 +95,24 @@ def calibrate_intrinsics(
     degree: int | None = None,
     on_detected: Callable[[str], None] | None = None,
     log: RunLog = NullLog,
+    refinement: str = "auto",
 ) -> IntrinsicCalibration:
-    """Calibrate from (name, image) pairs; the record holds the board and the creation time."""
-    result = calibrate_images(images, board, degree=degree, on_detected=on_detected, log=log)
+    """Calibrate from (name, image) pairs; the record holds the board, the outer-band coverage
+    and the creation time; the report goes to the run log."""
+    result = calibrate_images(
+        images, board, degree=degree, on_detected=on_detected, log=log, refinement=refinement
+    )
+    figures, picture = build_report(result, images)
+    log_report(log, figures, picture)
     record = {
         **result.record(),
         "board": board_record(board),
+        "coverage": {
+            "outer_band_fraction": OUTER_BAND,
+            "outer_band_covered": figures.outer_coverage,
+            "image_circle_radius_px": figures.circle_radius_px,
+            "warning": figures.warning,
+        },
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     log.scalar("calibration/intrinsics/rms_px", result.rms_px)
@@ -86,4 +120,4 @@ def calibrate_intrinsics(
         "calibration/intrinsics/parameters",
         json.dumps({"model": result.model.to_dict(), "std": result.std}, indent=1, default=str),
     )
-    return IntrinsicCalibration(result, record)
+    return IntrinsicCalibration(result, record, figures, picture)

@@ -109,6 +109,37 @@ def test_outlier_image_is_rejected_with_its_reason() -> None:
     assert result.rms_px < 0.155
 
 
+def test_one_corner_pushed_off_costs_that_corner_only() -> None:
+    """Also a corner far off (30 px, an image RMS of 4 px with it): still only that corner."""
+    truth = truth_model()
+    clean_views = synthetic_views(truth, seed=7)
+    clean = calibrate(clean_views, truth.image_size)
+    views = synthetic_views(truth, seed=7)
+    views[5].pixels[20] += [3.0, 4.0]  # 5 px off
+    views[8].pixels[3] += [-24.0, 18.0]  # 30 px off: more than the image's RMS limit alone
+    result = calibrate(views, truth.image_size)
+    assert result.images_rejected == [] and len(result.images_used) == len(views)
+    assert sorted((r.name, r.corner) for r in result.corners_rejected) == [
+        ("synthetic5", 20),
+        ("synthetic8", 3),
+    ]
+    assert "px" in result.corners_rejected[0].reason
+    # The model matches the clean fit within the clean fit's own uncertainty: the centre
+    # within one standard deviation, the rays far inside the noise-limited 0.02 deg.
+    shift = np.subtract(result.model.center_uv, clean.model.center_uv)
+    assert np.all(np.abs(shift) < np.asarray(clean.std["center_uv"]))
+    u, v = np.meshgrid(np.arange(0, 1920, 16.0), np.arange(0, 1920, 16.0))
+    uv = np.stack([u.ravel(), v.ravel()], axis=1)
+    uv = uv[np.hypot(uv[:, 0] - 959.5, uv[:, 1] - 959.5) < 900]
+    dots = np.sum(result.model.pixel_to_ray(uv) * clean.model.pixel_to_ray(uv), axis=1)
+    moved_deg = np.degrees(np.arccos(np.clip(dots, -1, 1))).max()
+    assert moved_deg < 0.005
+    # Kept in, the same corner would have pulled the model measurably further.
+    kept = calibrate(views, truth.image_size, degree=clean.degree, max_rounds=0)
+    dots = np.sum(kept.model.pixel_to_ray(uv) * clean.model.pixel_to_ray(uv), axis=1)
+    assert np.degrees(np.arccos(np.clip(dots, -1, 1))).max() > 2 * moved_deg
+
+
 def test_too_few_views_is_an_error() -> None:
     truth = truth_model()
     with pytest.raises(CalibrationError, match="at least 3"):
