@@ -185,9 +185,13 @@ WRITER = textwrap.dedent(
     big = [float(i) * 0.5 for i in range(150_000)]
     tag = int(sys.argv[2])
     print("ready", flush=True)
+    first = True
     while True:
         tag += 1
         store.save_camera({**model, "tag": tag, "table": big})
+        if first:
+            print("saved", flush=True)
+            first = False
     """
 )
 
@@ -215,6 +219,8 @@ def test_sigkill_during_write_keeps_a_loadable_calibration(tmp_path: Path) -> No
         try:
             assert proc.stdout is not None
             assert proc.stdout.readline().strip() == b"ready"
+            if run % 2:  # every other run: killed only after a save completed, however slow
+                assert proc.stdout.readline().strip() == b"saved"
             time.sleep(rng.uniform(0.02, 1.0))
             proc.send_signal(signal.SIGKILL)
             proc.wait(timeout=10)
