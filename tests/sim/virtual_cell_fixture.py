@@ -12,9 +12,9 @@ from sim_backend.virtual_cell.launcher import VirtualCellError, VirtualCellProce
 
 
 @contextmanager
-def virtual_cell(scene: str = "sorting", width: int = 256, **kw: object) -> Iterator[
-    VirtualCellProcess
-]:
+def virtual_cell(
+    scene: str = "sorting", width: int = 256, **kw: object
+) -> Iterator[VirtualCellProcess]:
     vc = VirtualCellProcess(scene, width=width, **kw)  # type: ignore[arg-type]
     try:
         vc.start()
