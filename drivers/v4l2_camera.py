@@ -12,6 +12,9 @@ called plus the exposure time, i.e. a frame whose exposure began after the call.
 timestamps are not on the monotonic clock it falls back to discarding frames that were already
 queued (a grab that returns in less than half a frame period). After an exposure or gain
 change the next `settle_frames` frames are discarded too. File sources return the next frame.
+Streams carry no capture time: frames already buffered (they arrive in less than half a frame
+period) are discarded, and the second frame that had to be waited for is returned, so the
+picture was sent after `grab()` was called.
 
 Timeouts: every OpenCV call that can block (open, grab) runs in a helper thread that is waited
 for at most `open_timeout_s` / `read_timeout_s`; a camera that stops delivering frames raises
@@ -45,6 +48,7 @@ from drivers.errors import (
     DeviceTimeoutError,
     UnsupportedError,
 )
+from drivers.stream_source import is_stream_url, probe_stream, stream_serial
 
 log = logging.getLogger("drivers.camera")
 T = TypeVar("T")
@@ -54,6 +58,7 @@ _APIS = {
     "ffmpeg": cv2.CAP_FFMPEG,
     "images": cv2.CAP_IMAGES,
     "any": cv2.CAP_ANY,
+    "stream": cv2.CAP_FFMPEG,
 }
 _V4L2_EXPOSURE_MANUAL = 1  # V4L2_EXPOSURE_MANUAL, passed through by OpenCV's V4L2 backend
 _V4L2_EXPOSURE_UNIT_MS = 0.1  # V4L2_CID_EXPOSURE_ABSOLUTE counts 100 µs
@@ -72,7 +77,7 @@ class V4L2CameraConfig:
     SECTION: ClassVar[str] = "camera"
 
     device: str = "/dev/video0"
-    api: Literal["v4l2", "ffmpeg", "images", "any"] = "v4l2"
+    api: Literal["v4l2", "ffmpeg", "images", "any", "stream"] = "v4l2"
     pixel_format: Literal["MJPG", "YUYV"] = "MJPG"
     width: int = 1920
     height: int = 1080
@@ -92,6 +97,12 @@ class V4L2CameraConfig:
         s = self.SECTION
         require(bool(str(self.device)), s, "device", "give /dev/videoN, an index or a file")
         require(self.api in _APIS, s, "api", f"must be one of {sorted(_APIS)}")
+        require(
+            (self.api == "stream") == is_stream_url(str(self.device)),
+            s,
+            "device",
+            'api = "stream" takes an http://, https:// or rtsp:// URL (and only it does)',
+        )
         require(self.pixel_format in ("MJPG", "YUYV"), s, "pixel_format", "MJPG or YUYV")
         require(self.width > 0 and self.height > 0, s, "width", "width and height must be > 0")
         require(self.fps > 0, s, "fps", f"must be > 0, got {self.fps}")
@@ -200,7 +211,9 @@ class V4L2Camera(Camera):
     def _check_source_exists(self) -> None:
         cfg = self.config
         target = str(cfg.device)
-        if cfg.api == "images":
+        if cfg.api == "stream":
+            probe_stream(target, cfg.open_timeout_s)
+        elif cfg.api == "images":
             first = _first_sequence_file(target)
             if first is None:
                 raise DeviceNotFoundError(
@@ -221,6 +234,14 @@ class V4L2Camera(Camera):
         api = _APIS[cfg.api]
 
         def do_open() -> Any:
+            if cfg.api == "stream":
+                ms = [
+                    cv2.CAP_PROP_OPEN_TIMEOUT_MSEC,
+                    int(cfg.open_timeout_s * 1000),
+                    cv2.CAP_PROP_READ_TIMEOUT_MSEC,  # the driver's own wait ends first
+                    int((cfg.read_timeout_s + cfg.open_timeout_s) * 1000),
+                ]
+                return cv2.VideoCapture(source, api, ms)
             return cv2.VideoCapture(source, api)
 
         cap = self._blocking(do_open, cfg.open_timeout_s, "open")
@@ -242,6 +263,8 @@ class V4L2Camera(Camera):
             if cfg.api == "v4l2":
                 self._configure_v4l2(cap)
                 serial = v4l2_serial(source)
+            elif cfg.api == "stream":
+                serial = stream_serial(cfg.device)
             else:
                 serial = f"file:{os.path.abspath(cfg.device)}"
         except DeviceError:
@@ -386,6 +409,8 @@ class V4L2Camera(Camera):
                 self._reconnect(deadline)
             if cfg.api == "v4l2":
                 image, stamp = self._grab_fresh(t_call, deadline)
+            elif cfg.api == "stream":
+                image, stamp = self._grab_stream(deadline)
             else:
                 image, stamp = self._read_one(deadline)
             frame = Frame(
@@ -448,6 +473,24 @@ class V4L2Camera(Camera):
                 return self._retrieve(), now
         raise DeviceTimeoutError(
             f"{self.name}: only stale frames within the timeout", device=cfg.device
+        )
+
+    def _grab_stream(self, deadline: float) -> tuple[np.ndarray, float]:
+        """The second frame that had to be waited for (buffered ones are discarded)."""
+        half_period = 0.5 / self.config.fps
+        waited = 0
+        try:
+            for _ in range(64):
+                if self._grab_once(deadline) >= half_period:
+                    waited += 1
+                    if waited == 2:
+                        return self._retrieve(), time.monotonic()
+        except DeviceTimeoutError:
+            self._release()
+            self._lost = True
+            raise
+        raise DeviceTimeoutError(
+            f"{self.name}: only buffered frames within the timeout", device=self.config.device
         )
 
     def _apply_exposure(self, cap: Any, exposure_ms: float) -> None:
