@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import threading
 import time
 from typing import Any
 
@@ -150,6 +151,7 @@ class RTDEWorker:
         self.state_timeout_s = state_timeout_s
         self._conn: Any = None
         self._proc: Any = None
+        self._lock = threading.Lock()  # one request and its reply at a time
 
     @property
     def alive(self) -> bool:
@@ -169,6 +171,20 @@ class RTDEWorker:
         self._receive("connect", timeout_s)
 
     def call(self, name: str, *args: Any, timeout_s: float) -> Any:
+        """Run one request in the child; thread-safe (requests from several threads queue)."""
+        deadline = time.monotonic() + timeout_s
+        if not self._lock.acquire(timeout=timeout_s):
+            raise DeviceTimeoutError(
+                f"UR controller at {self.host}: {name} waited {timeout_s:.1f} s for another "
+                "request to finish",
+                device=self.host,
+            )
+        try:
+            return self._call(name, args, max(0.0, deadline - time.monotonic()))
+        finally:
+            self._lock.release()
+
+    def _call(self, name: str, args: tuple, timeout_s: float) -> Any:
         if not self.alive:
             raise DeviceDisconnectedError(
                 f"UR controller at {self.host}: not connected", device=self.host

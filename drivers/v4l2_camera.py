@@ -12,9 +12,8 @@ called plus the exposure time, i.e. a frame whose exposure began after the call.
 timestamps are not on the monotonic clock it falls back to discarding frames that were already
 queued (a grab that returns in less than half a frame period). After an exposure or gain
 change the next `settle_frames` frames are discarded too. File sources return the next frame.
-Streams carry no capture time: frames already buffered (they arrive in less than half a frame
-period) are discarded, and the second frame that had to be waited for is returned, so the
-picture was sent after `grab()` was called.
+Streams carry no capture time: a reader thread keeps reading and stamps each frame on arrival,
+and `grab()` returns the first frame that arrived one frame period after the call.
 
 Timeouts: every OpenCV call that can block (open, grab) runs in a helper thread that is waited
 for at most `open_timeout_s` / `read_timeout_s`; a camera that stops delivering frames raises
@@ -48,7 +47,7 @@ from drivers.errors import (
     DeviceTimeoutError,
     UnsupportedError,
 )
-from drivers.stream_source import is_stream_url, probe_stream, stream_serial
+from drivers.stream_source import StreamReader, is_stream_url, probe_stream, stream_serial
 
 log = logging.getLogger("drivers.camera")
 T = TypeVar("T")
@@ -153,6 +152,7 @@ class V4L2Camera(Camera):
     def __init__(self, config: V4L2CameraConfig) -> None:
         self.config = config
         self._cap: Any = None
+        self._reader: StreamReader | None = None
         self._lock = threading.RLock()
         self._hung: threading.Thread | None = None
         self._lost = False
@@ -238,8 +238,8 @@ class V4L2Camera(Camera):
                 ms = [
                     cv2.CAP_PROP_OPEN_TIMEOUT_MSEC,
                     int(cfg.open_timeout_s * 1000),
-                    cv2.CAP_PROP_READ_TIMEOUT_MSEC,  # the driver's own wait ends first
-                    int((cfg.read_timeout_s + cfg.open_timeout_s) * 1000),
+                    cv2.CAP_PROP_READ_TIMEOUT_MSEC,  # grab() has its own timeout; a still
+                    3_600_000,  # stream (the server sends nothing while the arm moves) is fine
                 ]
                 return cv2.VideoCapture(source, api, ms)
             return cv2.VideoCapture(source, api)
@@ -285,6 +285,8 @@ class V4L2Camera(Camera):
         height = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
         self._resolution = (width, height)
         self._cap = cap
+        if cfg.api == "stream":
+            self._reader = StreamReader(cap, cfg.device)
         self._lost = False
         self._backoff.reset()
 
@@ -341,7 +343,10 @@ class V4L2Camera(Camera):
 
     def _release(self) -> None:
         cap, self._cap = self._cap, None
-        if cap is not None and (self._hung is None or not self._hung.is_alive()):
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            reader.stop()  # its thread releases the capture
+        elif cap is not None and (self._hung is None or not self._hung.is_alive()):
             cap.release()
 
     def _mark_lost(self, why: str) -> DeviceDisconnectedError:
@@ -410,7 +415,7 @@ class V4L2Camera(Camera):
             if cfg.api == "v4l2":
                 image, stamp = self._grab_fresh(t_call, deadline)
             elif cfg.api == "stream":
-                image, stamp = self._grab_stream(deadline)
+                image, stamp = self._grab_stream(t_call, deadline)
             else:
                 image, stamp = self._read_one(deadline)
             frame = Frame(
@@ -475,23 +480,21 @@ class V4L2Camera(Camera):
             f"{self.name}: only stale frames within the timeout", device=cfg.device
         )
 
-    def _grab_stream(self, deadline: float) -> tuple[np.ndarray, float]:
-        """The second frame that had to be waited for (buffered ones are discarded)."""
-        half_period = 0.5 / self.config.fps
-        waited = 0
+    def _grab_stream(self, t_call: float, deadline: float) -> tuple[np.ndarray, float]:
+        """The first frame that arrived one frame period after the call (see module doc)."""
+        reader = self._reader
+        assert reader is not None
         try:
-            for _ in range(64):
-                if self._grab_once(deadline) >= half_period:
-                    waited += 1
-                    if waited == 2:
-                        return self._retrieve(), time.monotonic()
-        except DeviceTimeoutError:
-            self._release()
-            self._lost = True
-            raise
-        raise DeviceTimeoutError(
-            f"{self.name}: only buffered frames within the timeout", device=self.config.device
-        )
+            got = reader.frame_after(t_call + 1.0 / self.config.fps, deadline)
+        except EOFError as exc:
+            raise self._mark_lost(str(exc)) from None
+        if got is None:
+            raise DeviceTimeoutError(
+                f"{self.name}: no frame within the timeout (stream stalled? check the camera "
+                "and the network)",
+                device=self.config.device,
+            )
+        return _to_bgr(got[0]), got[1]
 
     def _apply_exposure(self, cap: Any, exposure_ms: float) -> None:
         ok = cap.set(cv2.CAP_PROP_AUTO_EXPOSURE, _V4L2_EXPOSURE_MANUAL) and cap.set(
@@ -514,6 +517,12 @@ class V4L2Camera(Camera):
         if self._cap is None:
             raise DeviceDisconnectedError(
                 f"{self.name} is not connected", device=self.config.device
+            )
+        if self._reader is not None:
+            raise UnsupportedError(
+                f"{self.name}: a network stream has no exposure or gain control here (set them "
+                "in the camera's own web page)",
+                device=self.config.device,
             )
         return self._cap
 

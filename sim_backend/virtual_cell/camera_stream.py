@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing as mp
+import select
 import socket
 import threading
 import time
@@ -119,7 +120,25 @@ class FrameSource:
         if not self._conn.poll(timeout_s):
             raise RuntimeError("the camera renderer did not start")
         self._conn.recv()
+        self._render(timeout_s)  # the first frame is there before the cell says ready
         self._thread.start()
+
+    def _render(self, timeout_s: float) -> bool:
+        """Render the world's current state; False if stopped or the renderer died."""
+        state = world_state(self.cell)
+        key = state_key(state)
+        self._conn.send(state)
+        deadline = time.monotonic() + timeout_s
+        while not self._conn.poll(0.5):
+            if self.stop.is_set() or not self._proc.is_alive() or time.monotonic() > deadline:
+                return False
+        _, image = self._conn.recv()
+        with self.cond:
+            self.image, self.key = image, key
+            self._encoded.clear()
+            self.renders += 1
+            self.cond.notify_all()
+        return True
 
     def current(self) -> tuple | None:
         """The key of the world's state now (None while the arm moves)."""
@@ -138,18 +157,8 @@ class FrameSource:
             if key == self.key or moving:
                 time.sleep(0.02)
                 continue
-            t0 = time.monotonic()
-            self._conn.send(state)
-            while not self._conn.poll(0.5):
-                if self.stop.is_set() or not self._proc.is_alive():
-                    return
-            _, image = self._conn.recv()
-            with self.cond:
-                self.image, self.key = image, key
-                self._encoded.clear()
-                self.renders += 1
-                self.cond.notify_all()
-            log.debug("rendered in %.2f s", time.monotonic() - t0)
+            if not self._render(600.0):
+                return
 
     def encoded(self, quality: int, sampling: str) -> tuple[tuple | None, bytes | None]:
         """(key, JPEG bytes) of the latest frame at this quality (cached per frame)."""
@@ -177,6 +186,25 @@ class FrameSource:
         if self._proc.is_alive():
             self._proc.kill()
             self._proc.join(2.0)
+
+
+def _writable(sock: socket.socket) -> bool:
+    """True when the socket can take more data now (the client keeps reading)."""
+    return bool(select.select([], [sock], [], 0)[1])
+
+
+def _send_all(sock: socket.socket, data: bytes, stop: threading.Event) -> None:
+    """Send a whole part (never half a frame), however slowly the client reads; the server
+    stopping ends it."""
+    view = memoryview(data)
+    while view:
+        if stop.is_set():
+            raise OSError("server stopping")
+        try:
+            sent = sock.send(view)
+        except TimeoutError:
+            continue
+        view = view[sent:]
 
 
 class CameraStreamServer:
@@ -272,15 +300,16 @@ class CameraStreamServer:
                 if self._wait_current(stop) is None:
                     return
                 _, data = frames.encoded(quality, sampling)
-                if not data:
+                if not data or not _writable(sock):
+                    time.sleep(period)  # the client is not reading: drop frames, keep it
                     continue
-                sock.settimeout(10.0)
-                sock.sendall(
+                part = (
                     b"--frame\r\nContent-Type: image/jpeg\r\n"
                     + f"Content-Length: {len(data)}\r\n\r\n".encode()
                     + data
                     + b"\r\n"
                 )
+                _send_all(sock, part, stop)
                 self.frames_sent += 1
                 time.sleep(max(0.0, period - (time.monotonic() - t0)))
         finally:

@@ -163,6 +163,7 @@ class URController:
         self._async_id = 0
         self._gripper_level = False
         self._phys_due = 0.0
+        self._q_prev_deg = np.rad2deg(self.q)
         self._last_tick = time.monotonic()
         self.snapshot: dict[str, Any] = {}
         self.publish(self._last_tick)
@@ -359,12 +360,18 @@ class URController:
             self._drive_gripper()
             q_deg = np.rad2deg(self.q)
         with self.cell.lock:
-            self.world.set_joints(q_deg)
+            # Physics at its own 240 Hz, the arm moved through the joints in between (a held
+            # cube follows a path, not a jump, however late this tick is).
             self._phys_due += (now - self._last_tick) / self.world.time_step
             steps = min(int(self._phys_due), 24)
             self._phys_due = min(self._phys_due - steps, 1.0)
-            if steps:
-                self.world.step(steps)
+            q_prev = self._q_prev_deg
+            for i in range(1, steps + 1):
+                self.world.set_joints(q_prev + (q_deg - q_prev) * (i / steps))
+                self.world.step(1)
+            if not steps:
+                self.world.set_joints(q_deg)
+            self._q_prev_deg = q_deg
         self._last_tick = now
         with self.lock:
             self.publish(now)
