@@ -355,9 +355,7 @@ class DashboardServer:
         if cmd == "restart safety":
             ctl.release_emergency_stop()
             return "Restarting safety"
-        if cmd == "stop":
-            if ctl.runtime_state != 2:
-                return "Failed to execute: stop"
+        if cmd == "stop":  # idempotent: ur-rtde's reconnect sends it after stopping its script
             ctl.stop_program("dashboard stop")
             return "Stopped"
         if cmd == "pause":

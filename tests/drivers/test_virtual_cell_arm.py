@@ -135,3 +135,65 @@ def test_controller_killed_mid_move_is_device_disconnected_within_the_timeout() 
                 arm.joint_positions()
         finally:
             arm.close()
+
+
+def _dashboard(host: str, *lines: str) -> list[str]:
+    import socket
+
+    with socket.create_connection((host, 29999), timeout=5) as s:
+        f = s.makefile("rwb")
+        f.readline()
+        replies = []
+        for line in lines:
+            f.write(line.encode() + b"\n")
+            f.flush()
+            replies.append(f.readline().decode().strip())
+        return replies
+
+
+def test_emergency_stop_then_power_on_and_brake_release(vc) -> None:
+    from drivers.errors import DeviceNotReadyError
+
+    with make_arm(vc.host) as arm:
+        start = arm.joint_positions()
+        target = start + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 40.0])
+        thread, box = _move_in_thread(lambda: arm.move_joints(target, speed_deg_s=20.0))
+        time.sleep(0.5)
+        vc.control("emergency_stop")
+        thread.join(10.0)
+        assert isinstance(box.get("error"), SafetyStopError), box
+        assert box["error"].kind == "emergency"
+        vc.control("release_emergency_stop")
+        deadline = time.monotonic() + 2.0
+        while arm.safety_status().emergency_stop and time.monotonic() < deadline:
+            time.sleep(0.02)  # the next RTDE package carries it
+        with pytest.raises(DeviceNotReadyError):
+            arm.move_joints(start)
+        assert _dashboard(vc.host, "power on", "brake release", "robotmode") == [
+            "Powering on",
+            "Brake releasing",
+            "Robotmode: RUNNING",
+        ]
+        deadline = time.monotonic() + 2.0
+        while arm.safety_status().robot_mode != "RUNNING" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        arm.move_joints(start)
+        np.testing.assert_allclose(arm.joint_positions(), start, atol=0.01)
+
+
+def test_dropped_connection_reconnects_without_moving(vc) -> None:
+    with make_arm(vc.host) as arm:
+        before = arm.joint_positions()
+        motions = vc.control("status")["motions"]
+        assert vc.control("drop", what="arm")["closed"] >= 1
+        deadline = time.monotonic() + 10.0
+        while True:  # the driver reconnects with back-off; a read may fail meanwhile
+            try:
+                now = arm.joint_positions()
+                break
+            except (DeviceDisconnectedError, DeviceTimeoutError):
+                assert time.monotonic() < deadline, "no reconnect within 10 s"
+                time.sleep(0.2)
+        np.testing.assert_allclose(now, before, atol=1e-9)
+        assert vc.control("status")["motions"] == motions, "a motion was resent"
+        arm.move_joints(before + np.array([2.0, 0, 0, 0, 0, 0]))
