@@ -16,19 +16,29 @@ one long before ur-rtde's own 2.5 s receive deadline drops the connection.
 from __future__ import annotations
 
 import contextlib
-import multiprocessing as mp
+import os
+import socket
+import subprocess
+import sys
 import threading
 import time
+from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 from drivers.errors import DeviceDisconnectedError, DeviceError, DeviceTimeoutError
 
+_ROOT = str(Path(__file__).resolve().parents[1])
 _IO_BIT_OFFSET = {"standard": 0, "configurable": 8, "tool": 16}
 _SETTERS = {
     "tool": "setToolDigitalOut",
     "standard": "setStandardDigitalOut",
     "configurable": "setConfigurableDigitalOut",
 }
+
+
+class _LostError(Exception):
+    """The connection was lost and re-established under a command."""
 
 
 class _StaleError(Exception):
@@ -81,9 +91,6 @@ class _Session:
         if name == "close":
             with contextlib.suppress(RuntimeError):
                 ctl.stopScript()
-            for iface in (ctl, io, rcv):
-                with contextlib.suppress(RuntimeError):
-                    iface.disconnect()
             return None
         if name == "reconnect":
             return bool(rcv.reconnect() and ctl.reconnect() and io.reconnect())
@@ -102,7 +109,13 @@ class _Session:
         if name in ("move_j", "move_l"):
             self.ensure_program()
             fn = ctl.moveJ if name == "move_j" else ctl.moveL
-            return bool(fn(list(args[0]), float(args[1]), float(args[2]), True))
+            accepted = bool(fn(list(args[0]), float(args[1]), float(args[2]), True))
+            if not accepted and not ctl.isProgramRunning() and rcv.getSafetyMode() == 1:
+                raise _LostError(
+                    "the control script stopped during the command (ur-rtde re-established a "
+                    "dropped connection); the command was not carried out"
+                )
+            return accepted
         if name == "is_moving":
             return bool(ctl.getAsyncOperationProgressEx().isAsyncOperationRunning())
         if name == "set_output":
@@ -117,6 +130,11 @@ class _Session:
             )
             return bool((int(bits) >> (_IO_BIT_OFFSET[kind] + int(pin))) & 1)
         raise ValueError(f"unknown worker request {name!r}")
+
+
+def _quiet_disconnect(iface: Any) -> None:
+    with contextlib.suppress(RuntimeError):
+        iface.disconnect()
 
 
 def _worker_main(conn: Any, host: str, state_timeout_s: float) -> None:
@@ -136,10 +154,21 @@ def _worker_main(conn: Any, host: str, state_timeout_s: float) -> None:
             conn.send(("ok", session.call(name, args)))
         except _StaleError as exc:
             conn.send(("error", "stale", str(exc)))
+        except _LostError as exc:
+            conn.send(("error", "disconnected", str(exc)))
         except RuntimeError as exc:
             kind = "disconnected" if not session.is_connected() else "runtime"
             conn.send(("error", kind, str(exc)))
         if name == "close":
+            # the caller has its answer; ur-rtde's disconnects sleep 0.5 s each (GIL released)
+            threads = [
+                threading.Thread(target=_quiet_disconnect, args=(i,))
+                for i in (session.ctl, session.io, session.rcv)
+            ]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join(5.0)
             return
 
 
@@ -155,19 +184,30 @@ class RTDEWorker:
 
     @property
     def alive(self) -> bool:
-        return self._proc is not None and self._proc.is_alive()
+        return self._proc is not None and self._proc.poll() is None
 
     def start(self, timeout_s: float) -> None:
-        ctx = mp.get_context("spawn")
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(
-            target=_worker_main,
-            args=(child, self.host, self.state_timeout_s),
-            name=f"ur-rtde-{self.host}",
-            daemon=True,
-        )
-        self._proc.start()
-        child.close()
+        """Start the child (`python -m drivers.ur_rtde_worker`, not multiprocessing's spawn,
+        which would re-import the caller's main module) and wait for it to connect."""
+        parent, child = socket.socketpair()
+        try:
+            self._proc = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "drivers.ur_rtde_worker",
+                    str(child.fileno()),
+                    self.host,
+                    str(self.state_timeout_s),
+                ],
+                pass_fds=(child.fileno(),),
+                stdin=subprocess.DEVNULL,
+                cwd=_ROOT,
+                env={**os.environ, "PYTHONPATH": _pythonpath()},
+            )
+        finally:
+            child.close()
+        self._conn = Connection(parent.detach())
         self._receive("connect", timeout_s)
 
     def call(self, name: str, *args: Any, timeout_s: float) -> Any:
@@ -251,15 +291,42 @@ class RTDEWorker:
             with contextlib.suppress(OSError):
                 self._conn.close()
             self._conn = None
-        if proc is not None and proc.is_alive():
-            proc.kill()
-            proc.join(2.0)
+        if proc is not None:
+            if proc.poll() is None:
+                proc.kill()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(2.0)
 
     def close(self, timeout_s: float = 3.0) -> None:
         """Disconnect cleanly if the child answers in time; kill it otherwise."""
         if self.alive:
             with contextlib.suppress(DeviceError):
                 self.call("close", timeout_s=timeout_s)
-            if self._proc is not None:
-                self._proc.join(timeout_s)
+            proc, self._proc = self._proc, None
+            if proc is not None:  # it disconnects and exits by itself; reap it meanwhile
+                threading.Thread(target=_reap, args=(proc, timeout_s + 5.0), daemon=True).start()
         self.kill()
+
+
+def _reap(proc: subprocess.Popen[bytes], timeout_s: float) -> None:
+    try:
+        proc.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+def _pythonpath() -> str:
+    extra = os.environ.get("PYTHONPATH", "")
+    return _ROOT + (os.pathsep + extra if extra else "")
+
+
+def main(argv: list[str]) -> int:
+    """Child entry point: `python -m drivers.ur_rtde_worker FD HOST STATE_TIMEOUT_S`."""
+    conn = Connection(int(argv[0]))
+    _worker_main(conn, argv[1], float(argv[2]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -115,7 +115,7 @@ def test_stalled_controller_gives_device_timeout(vc) -> None:
 
 def test_controller_killed_mid_move_is_device_disconnected_within_the_timeout() -> None:
     with virtual_cell(width=64) as doomed:
-        arm = make_arm(doomed.host, reconnect_attempts=1, connect_timeout_s=2.0)
+        arm = make_arm(doomed.host, reconnect_attempts=1)
         arm.connect()
         try:
             target = arm.joint_positions() + np.array([40.0, 0.0, 0.0, 0.0, 0.0, 0.0])
@@ -196,4 +196,11 @@ def test_dropped_connection_reconnects_without_moving(vc) -> None:
                 time.sleep(0.2)
         np.testing.assert_allclose(now, before, atol=1e-9)
         assert vc.control("status")["motions"] == motions, "a motion was resent"
-        arm.move_joints(before + np.array([2.0, 0, 0, 0, 0, 0]))
+        target = before + np.array([2.0, 0, 0, 0, 0, 0])
+        try:  # ur-rtde may still be re-establishing its own connection: then this one is lost
+            arm.move_joints(target)
+        except DeviceDisconnectedError:
+            assert vc.control("status")["motions"] == motions
+            time.sleep(0.5)
+            arm.move_joints(target)
+        np.testing.assert_allclose(arm.joint_positions(), target, atol=0.01)
