@@ -78,6 +78,28 @@ def _rtde_figures(host: str) -> dict[str, Any]:
     }
 
 
+def _fault_during_move(arm: Any, fault: Any) -> tuple[float, str]:
+    """Start a slow joint move, inject `fault()` 0.5 s in; seconds until the move's typed
+    error, and its code."""
+    from drivers.errors import DeviceError
+
+    box: dict[str, Any] = {}
+
+    def move() -> None:
+        try:
+            arm.move_joints(arm.joint_positions() + np.array([30.0, 0, 0, 0, 0, 0]), 20.0)
+        except DeviceError as exc:
+            box["t"], box["code"] = time.monotonic(), exc.code
+
+    th = threading.Thread(target=move)
+    th.start()
+    time.sleep(0.5)
+    t0 = time.monotonic()
+    fault()
+    th.join(15)
+    return round(box["t"] - t0, 3), box["code"]
+
+
 def _fault_figures(vc: VirtualCellProcess) -> dict[str, Any]:
     from drivers.errors import DeviceError
     from drivers.ur_arm import URArm, URArmConfig
@@ -87,33 +109,10 @@ def _fault_figures(vc: VirtualCellProcess) -> dict[str, Any]:
     t0 = time.monotonic()
     arm.connect()
     out["ur_driver_connect_s"] = round(time.monotonic() - t0, 2)
-    box: dict[str, float] = {}
-
-    def move() -> None:
-        try:
-            arm.move_joints(
-                arm.joint_positions() + np.array([30.0, 0, 0, 0, 0, 0]), speed_deg_s=20.0
-            )
-        except DeviceError as exc:
-            box["t"] = time.monotonic()
-            box["code"] = exc.code  # type: ignore[assignment]
-
-    th = threading.Thread(target=move)
-    th.start()
-    time.sleep(0.5)
-    t_stop = time.monotonic()
-    vc.control("protective_stop")
-    th.join(10)
-    out["protective_stop_to_safety_stop_s"] = round(box["t"] - t_stop, 3)
+    seconds, _ = _fault_during_move(arm, lambda: vc.control("protective_stop"))
+    out["protective_stop_to_safety_stop_s"] = seconds
     time.sleep(0.3)
-    import socket
-
-    with socket.create_connection((vc.host, 29999), timeout=5) as s:
-        f = s.makefile("rwb")
-        f.readline()
-        f.write(b"unlock protective stop\n")
-        f.flush()
-        f.readline()
+    vc.dashboard("unlock protective stop")
     vc.control("stall", what="arm", seconds=3.0)
     t_stall = time.monotonic()
     try:
@@ -175,29 +174,13 @@ def run(shared: Path) -> dict[str, Any]:
         figures.update(_fault_figures(vc))
         figures.update(_stripe_figures(vc.host))
     with VirtualCellProcess("sorting", width=128) as doomed:
-        from drivers.errors import DeviceError
         from drivers.ur_arm import URArm, URArmConfig
 
         arm = URArm(URArmConfig(host=doomed.host, poll_period_s=0.01, reconnect_attempts=1))
         arm.connect()
-        box: dict[str, Any] = {}
-
-        def move() -> None:
-            try:
-                arm.move_joints(
-                    arm.joint_positions() + np.array([30.0, 0, 0, 0, 0, 0]), speed_deg_s=20.0
-                )
-            except DeviceError as exc:
-                box["t"], box["code"] = time.monotonic(), exc.code
-
-        th = threading.Thread(target=move)
-        th.start()
-        time.sleep(0.5)
-        t_kill = time.monotonic()
-        doomed.kill()
-        th.join(15)
-        figures["killed_to_error_s"] = round(box["t"] - t_kill, 3)
-        figures["killed_error"] = box["code"]
+        seconds, code = _fault_during_move(arm, doomed.kill)
+        figures["killed_to_error_s"] = seconds
+        figures["killed_error"] = code
         arm.close()
     from sim_backend.virtual_cell.demo import run as run_demo
 

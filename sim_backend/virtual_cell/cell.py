@@ -38,6 +38,7 @@ from sim_backend.virtual_cell.servers import (
     RTDEServer,
     ScriptServer,
     all_status,
+    serve_lines,
 )
 
 log = logging.getLogger("virtual_cell")
@@ -208,23 +209,14 @@ class VirtualCell:
         return {}
 
     def _control(self, sock: socket.socket) -> None:
-        stop = self.control.stop
-        buf = b""
-        while not stop.is_set():
+        def reply(line: str) -> str:
             try:
-                chunk = sock.recv(4096)
-            except TimeoutError:
-                continue
-            if not chunk:
-                return
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                try:
-                    reply = {"ok": True, "result": self.command(json.loads(line))}
-                except (ValueError, TypeError, AttributeError) as exc:
-                    reply = {"ok": False, "error": str(exc)}
-                sock.sendall(json.dumps(reply).encode() + b"\n")
+                answer = {"ok": True, "result": self.command(json.loads(line))}
+            except (ValueError, TypeError, AttributeError) as exc:
+                answer = {"ok": False, "error": str(exc)}
+            return json.dumps(answer)
+
+        serve_lines(sock, self.control.stop, reply)
 
     # ---- shutdown ---------------------------------------------------------------------------
 

@@ -152,6 +152,18 @@ class VirtualCellProcess:
     def truth(self) -> dict[str, Any]:
         return self.control("truth")
 
+    def dashboard(self, *lines: str, timeout_s: float = 5.0) -> list[str]:
+        """Send dashboard commands (as a technician or ur-rtde would); their replies."""
+        with socket.create_connection((self.host, DASHBOARD_PORT), timeout=timeout_s) as s:
+            f = s.makefile("rwb")
+            f.readline()
+            replies = []
+            for line in lines:
+                f.write(line.encode() + b"\n")
+                f.flush()
+                replies.append(f.readline().decode().strip())
+            return replies
+
     def _close_control(self) -> None:
         for f in (self._rfile, self._sock):
             if f is not None:

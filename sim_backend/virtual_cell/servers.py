@@ -132,6 +132,31 @@ def _recv_exact(sock: socket.socket, n: int, stop: threading.Event) -> bytes:
     return buf
 
 
+def serve_lines(
+    sock: socket.socket,
+    stop: threading.Event,
+    reply: Callable[[str], str | None],
+    last: str = "",
+) -> None:
+    """One line in, one line out until EOF or stop; `reply` returning None sends `last` and
+    ends the connection."""
+    buf = b""
+    while not stop.is_set():
+        try:
+            chunk = sock.recv(4096)
+        except TimeoutError:
+            continue
+        if not chunk:
+            return
+        buf += chunk
+        while b"\n" in buf:
+            line, buf = buf.split(b"\n", 1)
+            answer = reply(line.decode(errors="replace").strip())
+            sock.sendall((last if answer is None else answer).encode() + b"\n")
+            if answer is None:
+                return
+
+
 class RTDEServer:
     """RTDE protocol 2 on port 30004: version, setup, start/pause, data packages."""
 
@@ -300,22 +325,13 @@ class DashboardServer:
     def _handle(self, sock: socket.socket) -> None:
         stop = self.listener.stop
         sock.sendall(b"Connected: Universal Robots Dashboard Server\n")
-        buf = b""
-        while not stop.is_set():
-            try:
-                chunk = sock.recv(4096)
-            except TimeoutError:
-                continue
-            if not chunk:
-                return
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                self.faults.wait("dashboard", stop)
-                reply = self.answer(line.decode(errors="replace").strip())
-                sock.sendall(reply.encode() + b"\n")
-                if reply == "Disconnected":
-                    return
+
+        def reply(line: str) -> str | None:
+            self.faults.wait("dashboard", stop)
+            answer = self.answer(line)
+            return None if answer == "Disconnected" else answer
+
+        serve_lines(sock, stop, reply, last="Disconnected")
 
     def answer(self, line: str) -> str:
         """The reply of a UR controller (PolyScope 5) to one dashboard command."""

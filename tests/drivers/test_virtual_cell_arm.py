@@ -80,14 +80,7 @@ def test_protective_stop_during_a_move_is_safety_stop_and_nothing_is_resent(vc) 
         with pytest.raises(SafetyStopError):
             arm.move_joints(start)
         time.sleep(0.3)
-        import socket
-
-        with socket.create_connection((vc.host, 29999), timeout=5) as s:
-            f = s.makefile("rwb")
-            f.readline()
-            f.write(b"unlock protective stop\n")
-            f.flush()
-            assert f.readline().strip() == b"Protective stop releasing"
+        assert vc.dashboard("unlock protective stop") == ["Protective stop releasing"]
         motions = vc.control("status")["motions"]
         time.sleep(1.0)
         after = vc.control("status")
@@ -137,20 +130,6 @@ def test_controller_killed_mid_move_is_device_disconnected_within_the_timeout() 
             arm.close()
 
 
-def _dashboard(host: str, *lines: str) -> list[str]:
-    import socket
-
-    with socket.create_connection((host, 29999), timeout=5) as s:
-        f = s.makefile("rwb")
-        f.readline()
-        replies = []
-        for line in lines:
-            f.write(line.encode() + b"\n")
-            f.flush()
-            replies.append(f.readline().decode().strip())
-        return replies
-
-
 def test_emergency_stop_then_power_on_and_brake_release(vc) -> None:
     from drivers.errors import DeviceNotReadyError
 
@@ -169,7 +148,7 @@ def test_emergency_stop_then_power_on_and_brake_release(vc) -> None:
             time.sleep(0.02)  # the next RTDE package carries it
         with pytest.raises(DeviceNotReadyError):
             arm.move_joints(start)
-        assert _dashboard(vc.host, "power on", "brake release", "robotmode") == [
+        assert vc.dashboard("power on", "brake release", "robotmode") == [
             "Powering on",
             "Brake releasing",
             "Robotmode: RUNNING",

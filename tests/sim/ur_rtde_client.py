@@ -73,7 +73,7 @@ def main(host: str) -> dict:
     control(host, "protective_stop")
     out["protective_seen"] = wait_until(rcv.isProtectiveStopped)
     out["safety_mode"] = rcv.getSafetyMode()
-    out["program_running_after_stop"] = ctl.isProgramRunning()
+    out["program_running_after_stop"] = not wait_until(lambda: not ctl.isProgramRunning())
     out["movej_refused_in_stop"] = not ctl.moveJ(list(q0), 0.5, 1.0)
     time.sleep(0.3)
     db.unlockProtectiveStop()
