@@ -51,14 +51,22 @@ def world_state(cell: Any) -> dict[str, Any]:
     return state
 
 
-def state_key(state: dict[str, Any]) -> tuple:
-    """A key that changes when the picture would (0.01 deg, 0.1 mm, 1e-3 quaternion)."""
-    q = tuple(np.round(state.get("q", []), 2))
-    cubes = tuple(
-        (*np.round(np.asarray(pos) * 1e4).astype(int), *np.round(np.asarray(orn) * 1e3).astype(int))
-        for pos, orn in state["cubes"]
-    )
-    return (state["laser"], q, round(state.get("fingers_mm", 0.0), 1), cubes)
+def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
+    """True when states a and b look the same to the camera: the laser alike, joints within
+    0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm and 0.15 deg (tolerances, not
+    rounding, so a cube's physics jitter never makes the picture out of date)."""
+    if a is None or a["laser"] != b["laser"] or len(a["cubes"]) != len(b["cubes"]):
+        return False
+    if "q" in b and np.max(np.abs(np.subtract(a["q"], b["q"]))) >= 0.01:
+        return False
+    if abs(a.get("fingers_mm", 0.0) - b.get("fingers_mm", 0.0)) >= 0.1:
+        return False
+    for (pa, oa), (pb, ob) in zip(a["cubes"], b["cubes"], strict=True):
+        if np.max(np.abs(np.subtract(pa, pb))) >= 0.5e-3:  # pybullet metres
+            return False
+        if 1.0 - abs(float(np.dot(oa, ob))) >= 1e-6:  # about 0.16 deg
+            return False
+    return True
 
 
 def _render_worker(
@@ -107,7 +115,8 @@ class FrameSource:
             daemon=True,
         )
         self.image: np.ndarray | None = None
-        self.key: tuple | None = None
+        self.shown: dict[str, Any] | None = None  # the state the image shows
+        self.key = 0  # which frame (for the encoding cache)
         self.renders = 0
         self.clients = 0
         self.cond = threading.Condition()
@@ -126,7 +135,6 @@ class FrameSource:
     def _render(self, timeout_s: float) -> bool:
         """Render the world's current state; False if stopped or the renderer died."""
         state = world_state(self.cell)
-        key = state_key(state)
         self._conn.send(state)
         deadline = time.monotonic() + timeout_s
         while not self._conn.poll(0.5):
@@ -134,38 +142,38 @@ class FrameSource:
                 return False
         _, image = self._conn.recv()
         with self.cond:
-            self.image, self.key = image, key
+            self.image, self.shown = image, state
+            self.key += 1
             self._encoded.clear()
             self.renders += 1
             self.cond.notify_all()
         return True
 
-    def current(self) -> tuple | None:
-        """The key of the world's state now (None while the arm moves)."""
+    def current(self) -> bool:
+        """True when the latest frame shows the world as it is now (never while the arm
+        moves)."""
         if self.controller is not None and self.controller.moving:
-            return None
-        return state_key(world_state(self.cell))
+            return False
+        return same_picture(self.shown, world_state(self.cell))
 
     def _run(self) -> None:
         while not self.stop.is_set():
             if self.clients == 0:
                 time.sleep(0.05)
                 continue
-            state = world_state(self.cell)
-            key = state_key(state)
             moving = self.controller is not None and self.controller.moving
-            if key == self.key or moving:
+            if moving or same_picture(self.shown, world_state(self.cell)):
                 time.sleep(0.02)
                 continue
             if not self._render(600.0):
                 return
 
-    def encoded(self, quality: int, sampling: str) -> tuple[tuple | None, bytes | None]:
+    def encoded(self, quality: int, sampling: str) -> tuple[int, bytes | None]:
         """(key, JPEG bytes) of the latest frame at this quality (cached per frame)."""
         with self.cond:
             image, key = self.image, self.key
             if image is None:
-                return None, None
+                return key, None
             cached = self._encoded.get((quality, sampling))
         if cached is None:
             params = [cv2.IMWRITE_JPEG_QUALITY, quality]
@@ -256,14 +264,13 @@ class CameraStreamServer:
         else:
             sock.sendall(b"HTTP/1.0 404 Not Found\r\n\r\n")
 
-    def _wait_current(self, stop: threading.Event) -> tuple | None:
-        """Block until the latest frame shows the current state; its key."""
+    def _wait_current(self, stop: threading.Event) -> int | None:
+        """Block until the latest frame shows the current state; its number."""
         frames = self.frames
         while not stop.is_set():
             self.faults.wait("camera", stop)
-            key = frames.current()
-            if key is not None and key == frames.key:
-                return key
+            if frames.image is not None and frames.current():
+                return frames.key
             with frames.cond:
                 frames.cond.wait(0.05)
         return None
