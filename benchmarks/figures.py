@@ -263,8 +263,73 @@ def service(r: dict[str, Any]) -> str:
     return _table([*head, "max"], rows)
 
 
+def virtual_cell(r: dict[str, Any]) -> str:
+    """The real drivers against the virtual cell (`benchmarks/bench_virtual_cell.py`)."""
+    v = r["virtual_cell"]
+    rows = [
+        [
+            "RTDE round trip (ur-rtde `setStandardDigitalOut` until "
+            "`actual_digital_output_bits` shows it), median / p99",
+            f"{v['rtde_round_trip_median_ms']:.2f} ms / {v['rtde_round_trip_p99_ms']:.2f} ms",
+        ],
+        [
+            "control-script command handshake (`moveJ` async: command → done → clear), median",
+            f"{v['command_handshake_median_ms']:.2f} ms",
+        ],
+        ["joint error after `moveJ` (5 random moves), max", f"{v['movej_joint_error_max_deg']}°"],
+        ["TCP error after `moveL` (5 random moves), max", f"{v['movel_tcp_error_max_mm']:.3g} mm"],
+        [
+            "UR driver connect (worker process, three ur-rtde interfaces, script upload)",
+            f"{v['ur_driver_connect_s']:.2f} s",
+        ],
+        [
+            "protective stop during a move → `safety_stop`",
+            f"{v['protective_stop_to_safety_stop_s']:.3f} s",
+        ],
+        [
+            f"stalled controller → `{v['stall_error']}` (`state_timeout_s` 0.5)",
+            f"{v['stall_to_error_s']:.3f} s",
+        ],
+        [f"controller killed mid-move → `{v['killed_error']}`", f"{v['killed_to_error_s']:.3f} s"],
+        [
+            "`omnisort serve` + `deploy/cell.virtual.toml` sort: cubes in their bin, collisions",
+            f"{v['sort_cubes_in_their_bin']}/{v['sort_cubes']}, {v['sort_collisions']}",
+        ],
+        [
+            "time per pick (sort step / cubes placed; real-time controller, `[sorting]` speeds "
+            "120°/s, 300 mm/s)",
+            f"{v['sort_seconds_per_pick']:.2f} s",
+        ],
+    ]
+    return _table(["figure", "value"], rows)
+
+
+def stream_stripe(r: dict[str, Any]) -> str:
+    """What the camera stream's compression costs the laser stripe, against the lossless frame."""
+    v = r["virtual_cell"]
+    rows: list[list[Any]] = [
+        ["lossless PNG (reference)", v["stripe_points_lossless"], 0, 0, 0],
+    ]
+    for key, label in (
+        ("q80", "JPEG quality 80, 4:2:0"),
+        ("q95", "JPEG quality 95, 4:2:0"),
+        ("q100_444", "JPEG quality 100, 4:4:4 (near-lossless, `deploy/cell.virtual.toml`)"),
+    ):
+        rows.append(
+            [
+                label,
+                v[f"stripe_{key}_points"],
+                f"{v[f'stripe_{key}_median_px']:.3f} px",
+                f"{v[f'stripe_{key}_p95_px']:.3f} px",
+                v[f"stripe_{key}_image_max_abs_diff"],
+            ]
+        )
+    return _table(["stream", "stripe points", "median", "p95", "largest pixel difference"], rows)
+
+
 def summary(r: dict[str, Any]) -> str:
     t, e, i, s, k = r["table3"], r["extrinsics"], r["intrinsics"], r["sorting"], r["kinematics"]
+    vc = r["virtual_cell"]
     j, jd = t["clean_joint_mae"], t["degraded_joint_mae"]
     rows = [
         [
@@ -298,6 +363,12 @@ def summary(r: dict[str, Any]) -> str:
             f"collisions, cubes {s['truth_mean_position_error_mm']:.2f} mm",
             "[sorting](docs/sorting.md)",
         ],
+        [
+            "the real drivers on the virtual cell: `omnisort serve` sorts",
+            f"{vc['sort_cubes_in_their_bin']}/{vc['sort_cubes']} in their bin, "
+            f"{vc['sort_collisions']} collisions, {vc['sort_seconds_per_pick']:.1f} s per pick",
+            "[virtual cell](docs/virtual_cell.md)",
+        ],
     ]
     return _table(["what", "measured", "more"], rows) + f"\nMachine: {_machine(r)}.\n"
 
@@ -311,6 +382,8 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "kinematics": kinematics,
     "sorting": sorting,
     "service": service,
+    "virtual_cell": virtual_cell,
+    "stream_stripe": stream_stripe,
 }
 
 

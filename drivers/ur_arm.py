@@ -119,6 +119,8 @@ class URArmConfig:
     gripper_sense_pin: int = -1
     reconnect_attempts: int = 3
     reconnect_backoff_s: float = 0.5
+    call_timeout_s: float = 2.0
+    state_timeout_s: float = 0.5
 
     def __post_init__(self) -> None:
         s = self.SECTION
@@ -138,6 +140,8 @@ class URArmConfig:
             "position_tolerance_mm",
             "poll_period_s",
             "reconnect_backoff_s",
+            "call_timeout_s",
+            "state_timeout_s",
         ):
             require(getattr(self, key) > 0, s, key, f"must be > 0, got {getattr(self, key)}")
         require(self.gripper_settle_s >= 0, s, "gripper_settle_s", "must be >= 0")
@@ -262,7 +266,7 @@ class URArm(Arm):
         if link is None:
             from drivers.ur_rtde_adapter import RTDELink
 
-            link = RTDELink()
+            link = RTDELink(config.call_timeout_s, config.state_timeout_s)
         self._link = link
         self._limits = config.limits()
         self._gripper = URGripper(self)

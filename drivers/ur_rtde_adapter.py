@@ -2,20 +2,18 @@
 
 `URLink` is the boundary the `URArm` driver is written against: SI units as the controller uses
 them (radians, metres, rotation vectors in radians), raw robot and safety mode numbers, and typed
-`DeviceError`s instead of ur-rtde's `RuntimeError`s. `RTDELink` implements it with ur-rtde.
-No controller (or URSim) can run where the tests run, so everything above this boundary is
-tested against a recording stand-in that implements `URLink` (`tests/drivers/ur_standin.py`);
-this file is kept as thin as possible and is exercised only up to the network probe.
+`DeviceError`s instead of ur-rtde's `RuntimeError`s. `RTDELink` implements it with ur-rtde,
+run in a worker process (`drivers.ur_rtde_worker`) so that no ur-rtde call can block this one.
+The unit tests run `URArm` against a recording stand-in (`tests/drivers/ur_standin.py`); the
+virtual cell (`omnisort sim virtual-cell`) runs this link, and ur-rtde itself, end to end.
 """
 
 from __future__ import annotations
 
 import socket
 import struct
-from collections.abc import Callable
-from typing import Any, Literal, Protocol, TypeVar
+from typing import Any, Literal, Protocol
 
-from drivers._common import StillRunningError, call_with_timeout
 from drivers.errors import (
     BadReplyError,
     DeviceDisconnectedError,
@@ -23,14 +21,11 @@ from drivers.errors import (
     DeviceNotFoundError,
     DeviceTimeoutError,
 )
+from drivers.ur_rtde_worker import RTDEWorker
 
 IOKind = Literal["tool", "standard", "configurable"]
 RTDE_PORT = 30004
 _RTDE_REQUEST_PROTOCOL_VERSION = 86  # 'V'
-T = TypeVar("T")
-
-# Bit offsets of each output/input group in actual_digital_{output,input}_bits.
-_IO_BIT_OFFSET = {"standard": 0, "configurable": 8, "tool": 16}
 
 
 class URLink(Protocol):
@@ -122,154 +117,106 @@ def probe_rtde(host: str, timeout_s: float, port: int = RTDE_PORT) -> None:
         )
 
 
-def _with_timeout(fn: Callable[[], T], timeout_s: float, what: str, host: str) -> T:
-    """Run a blocking ur-rtde call in a helper thread; raise `DeviceTimeoutError` after timeout.
-
-    This bounds the wait only if the call releases the GIL; ur-rtde's constructors do not,
-    which is why `probe_rtde` runs first.
-    """
-    try:
-        return call_with_timeout(fn, timeout_s, f"ur-{what}")
-    except StillRunningError:
-        raise DeviceTimeoutError(
-            f"UR controller at {host}: {what} did not finish within {timeout_s:.1f} s",
-            device=host,
-        ) from None
-
-
 class RTDELink:
-    """`URLink` over ur-rtde. Imports ur-rtde on `open()` only."""
+    """`URLink` over ur-rtde, which runs in a worker process (`drivers.ur_rtde_worker`): every
+    call waits at most `call_timeout_s`, a stalled controller gives `DeviceTimeoutError`, a
+    vanished one `DeviceDisconnectedError`, and no ur-rtde call can hang this process."""
 
-    def __init__(self) -> None:
+    def __init__(self, call_timeout_s: float = 2.0, state_timeout_s: float = 0.5) -> None:
         self.host = ""
-        self._rcv: Any = None
-        self._ctl: Any = None
-        self._io: Any = None
+        self.call_timeout_s = call_timeout_s
+        self.state_timeout_s = state_timeout_s
+        self._worker: RTDEWorker | None = None
 
-    def _fail(self, what: str, exc: BaseException) -> DeviceError:
-        if self._rcv is not None and not self._rcv.isConnected():
-            return DeviceDisconnectedError(
-                f"UR controller at {self.host}: connection lost during {what} ({exc})",
-                device=self.host,
-            )
-        return DeviceError(f"UR controller at {self.host}: {what} failed: {exc}", device=self.host)
-
-    def _call(self, what: str, fn: Callable[[], T]) -> T:
-        if self._rcv is None:
+    def _call(self, name: str, *args: Any) -> Any:
+        if self._worker is None:
             raise DeviceDisconnectedError(
                 f"UR controller at {self.host or '?'} is not connected", device=self.host
             )
-        try:
-            return fn()
-        except RuntimeError as exc:
-            raise self._fail(what, exc) from exc
+        return self._worker.call(name, *args, timeout_s=self.call_timeout_s)
 
     def open(self, host: str, timeout_s: float) -> None:
         self.host = host
         probe_rtde(host, min(timeout_s, 2.0))
-        import rtde_control
-        import rtde_io
-        import rtde_receive
-
-        def build() -> tuple[Any, Any, Any]:
-            rcv = rtde_receive.RTDEReceiveInterface(host)
-            ctl = rtde_control.RTDEControlInterface(host)
-            io = rtde_io.RTDEIOInterface(host)
-            return rcv, ctl, io
-
-        try:
-            self._rcv, self._ctl, self._io = _with_timeout(build, timeout_s, "connect", host)
-        except RuntimeError as exc:
-            raise DeviceError(
-                f"UR controller at {host} refused the RTDE connection ({exc}): put the robot in "
-                "Remote Control mode and make sure no other program holds the RTDE control "
-                "interface",
-                device=host,
-            ) from exc
+        worker = RTDEWorker(host, self.state_timeout_s)
+        worker.start(timeout_s)
+        self._worker = worker
 
     def close(self) -> None:
-        for iface in (self._ctl, self._io, self._rcv):
-            if iface is not None:
-                try:
-                    if hasattr(iface, "stopScript"):
-                        iface.stopScript()
-                    iface.disconnect()
-                except RuntimeError:
-                    pass
-        self._rcv = self._ctl = self._io = None
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.close(self.call_timeout_s)
 
     def is_connected(self) -> bool:
-        return all(i is not None and i.isConnected() for i in (self._rcv, self._ctl, self._io))
+        if self._worker is None or not self._worker.alive:
+            return False
+        try:
+            return bool(self._call("is_connected"))
+        except DeviceError:
+            return False
 
     def reconnect(self, timeout_s: float) -> None:
-        if self._rcv is None:
-            raise DeviceDisconnectedError(
-                f"UR controller at {self.host or '?'} was never connected", device=self.host
-            )
-        probe_rtde(self.host, min(timeout_s, 2.0))
-
-        def again() -> bool:
-            return bool(self._rcv.reconnect() and self._ctl.reconnect() and self._io.reconnect())
-
-        if not _with_timeout(again, timeout_s, "reconnect", self.host):
-            raise DeviceDisconnectedError(
-                f"UR controller at {self.host}: reconnect failed", device=self.host
-            )
+        """A fresh worker and fresh connections; no motion is resent."""
+        if not self.host:
+            raise DeviceDisconnectedError("UR controller was never connected", device=self.host)
+        if self._worker is not None:
+            self._worker.kill()
+            self._worker = None
+        self.open(self.host, timeout_s)
 
     def actual_q(self) -> list[float]:
-        return list(self._call("getActualQ", lambda: self._rcv.getActualQ()))
+        return list(self._call("actual_q"))
 
     def actual_tcp_pose(self) -> list[float]:
-        return list(self._call("getActualTCPPose", lambda: self._rcv.getActualTCPPose()))
+        return list(self._call("actual_tcp_pose"))
 
     def robot_mode(self) -> int:
-        return int(self._call("getRobotMode", lambda: self._rcv.getRobotMode()))
+        return int(self._call("modes")[0])
 
     def safety_mode(self) -> int:
-        return int(self._call("getSafetyMode", lambda: self._rcv.getSafetyMode()))
+        return int(self._call("modes")[1])
 
     def move_j(self, q: list[float], speed: float, accel: float) -> None:
-        if not self._call("moveJ", lambda: self._ctl.moveJ(q, speed, accel, True)):
-            raise DeviceError(f"UR controller at {self.host} rejected moveJ", device=self.host)
+        if not self._call("move_j", q, speed, accel):
+            raise self._rejected("moveJ")
 
     def move_l(self, pose: list[float], speed: float, accel: float) -> None:
-        if not self._call("moveL", lambda: self._ctl.moveL(pose, speed, accel, True)):
-            raise DeviceError(f"UR controller at {self.host} rejected moveL", device=self.host)
+        if not self._call("move_l", pose, speed, accel):
+            raise self._rejected("moveL")
+
+    def _rejected(self, what: str) -> DeviceError:
+        robot, safety = self._call("modes")
+        if safety != 1:
+            from drivers.errors import SafetyStopError
+
+            kind = "emergency" if safety in (6, 7) else "protective"
+            return SafetyStopError(
+                f"UR controller at {self.host} rejected {what}: safety mode {safety}",
+                kind=kind,
+                device=self.host,
+            )
+        return DeviceError(
+            f"UR controller at {self.host} rejected {what} (robot mode {robot})", device=self.host
+        )
 
     def is_moving(self) -> bool:
-        status = self._call(
-            "getAsyncOperationProgressEx", lambda: self._ctl.getAsyncOperationProgressEx()
-        )
-        return bool(status.isAsyncOperationRunning())
+        return bool(self._call("is_moving"))
 
     def stop_j(self, decel: float) -> None:
-        self._call("stopJ", lambda: self._ctl.stopJ(decel))
+        self._call("stop_j", decel)
 
     def stop_l(self, decel: float) -> None:
-        self._call("stopL", lambda: self._ctl.stopL(decel))
+        self._call("stop_l", decel)
 
     def set_output(self, kind: IOKind, pin: int, value: bool) -> None:
-        method = {
-            "tool": "setToolDigitalOut",
-            "standard": "setStandardDigitalOut",
-            "configurable": "setConfigurableDigitalOut",
-        }[kind]
-        if not self._call(
-            f"set {kind} output {pin}", lambda: getattr(self._io, method)(pin, value)
-        ):
+        if not self._call("set_output", kind, pin, value):
             raise DeviceError(
                 f"UR controller at {self.host} rejected setting {kind} output {pin}",
                 device=self.host,
             )
 
     def output(self, kind: IOKind, pin: int) -> bool:
-        bits = int(
-            self._call("getActualDigitalOutputBits", lambda: self._rcv.getActualDigitalOutputBits())
-        )
-        return bool((bits >> (_IO_BIT_OFFSET[kind] + pin)) & 1)
+        return bool(self._call("output", kind, pin))
 
     def input(self, kind: IOKind, pin: int) -> bool:
-        bits = int(
-            self._call("getActualDigitalInputBits", lambda: self._rcv.getActualDigitalInputBits())
-        )
-        return bool((bits >> (_IO_BIT_OFFSET[kind] + pin)) & 1)
+        return bool(self._call("input", kind, pin))

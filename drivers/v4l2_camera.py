@@ -12,6 +12,8 @@ called plus the exposure time, i.e. a frame whose exposure began after the call.
 timestamps are not on the monotonic clock it falls back to discarding frames that were already
 queued (a grab that returns in less than half a frame period). After an exposure or gain
 change the next `settle_frames` frames are discarded too. File sources return the next frame.
+Streams carry no capture time: a reader thread keeps reading and stamps each frame on arrival,
+and `grab()` returns the first frame that arrived one frame period after the call.
 
 Timeouts: every OpenCV call that can block (open, grab) runs in a helper thread that is waited
 for at most `open_timeout_s` / `read_timeout_s`; a camera that stops delivering frames raises
@@ -45,6 +47,7 @@ from drivers.errors import (
     DeviceTimeoutError,
     UnsupportedError,
 )
+from drivers.stream_source import StreamReader, is_stream_url, probe_stream, stream_serial
 
 log = logging.getLogger("drivers.camera")
 T = TypeVar("T")
@@ -54,6 +57,7 @@ _APIS = {
     "ffmpeg": cv2.CAP_FFMPEG,
     "images": cv2.CAP_IMAGES,
     "any": cv2.CAP_ANY,
+    "stream": cv2.CAP_FFMPEG,
 }
 _V4L2_EXPOSURE_MANUAL = 1  # V4L2_EXPOSURE_MANUAL, passed through by OpenCV's V4L2 backend
 _V4L2_EXPOSURE_UNIT_MS = 0.1  # V4L2_CID_EXPOSURE_ABSOLUTE counts 100 µs
@@ -72,7 +76,7 @@ class V4L2CameraConfig:
     SECTION: ClassVar[str] = "camera"
 
     device: str = "/dev/video0"
-    api: Literal["v4l2", "ffmpeg", "images", "any"] = "v4l2"
+    api: Literal["v4l2", "ffmpeg", "images", "any", "stream"] = "v4l2"
     pixel_format: Literal["MJPG", "YUYV"] = "MJPG"
     width: int = 1920
     height: int = 1080
@@ -92,6 +96,12 @@ class V4L2CameraConfig:
         s = self.SECTION
         require(bool(str(self.device)), s, "device", "give /dev/videoN, an index or a file")
         require(self.api in _APIS, s, "api", f"must be one of {sorted(_APIS)}")
+        require(
+            (self.api == "stream") == is_stream_url(str(self.device)),
+            s,
+            "device",
+            'api = "stream" takes an http://, https:// or rtsp:// URL (and only it does)',
+        )
         require(self.pixel_format in ("MJPG", "YUYV"), s, "pixel_format", "MJPG or YUYV")
         require(self.width > 0 and self.height > 0, s, "width", "width and height must be > 0")
         require(self.fps > 0, s, "fps", f"must be > 0, got {self.fps}")
@@ -142,6 +152,7 @@ class V4L2Camera(Camera):
     def __init__(self, config: V4L2CameraConfig) -> None:
         self.config = config
         self._cap: Any = None
+        self._reader: StreamReader | None = None
         self._lock = threading.RLock()
         self._hung: threading.Thread | None = None
         self._lost = False
@@ -200,7 +211,9 @@ class V4L2Camera(Camera):
     def _check_source_exists(self) -> None:
         cfg = self.config
         target = str(cfg.device)
-        if cfg.api == "images":
+        if cfg.api == "stream":
+            probe_stream(target, cfg.open_timeout_s)
+        elif cfg.api == "images":
             first = _first_sequence_file(target)
             if first is None:
                 raise DeviceNotFoundError(
@@ -221,6 +234,14 @@ class V4L2Camera(Camera):
         api = _APIS[cfg.api]
 
         def do_open() -> Any:
+            if cfg.api == "stream":
+                ms = [
+                    cv2.CAP_PROP_OPEN_TIMEOUT_MSEC,
+                    int(cfg.open_timeout_s * 1000),
+                    cv2.CAP_PROP_READ_TIMEOUT_MSEC,  # grab() has its own timeout; a still
+                    3_600_000,  # stream (the server sends nothing while the arm moves) is fine
+                ]
+                return cv2.VideoCapture(source, api, ms)
             return cv2.VideoCapture(source, api)
 
         cap = self._blocking(do_open, cfg.open_timeout_s, "open")
@@ -242,6 +263,8 @@ class V4L2Camera(Camera):
             if cfg.api == "v4l2":
                 self._configure_v4l2(cap)
                 serial = v4l2_serial(source)
+            elif cfg.api == "stream":
+                serial = stream_serial(cfg.device)
             else:
                 serial = f"file:{os.path.abspath(cfg.device)}"
         except DeviceError:
@@ -262,6 +285,8 @@ class V4L2Camera(Camera):
         height = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
         self._resolution = (width, height)
         self._cap = cap
+        if cfg.api == "stream":
+            self._reader = StreamReader(cap, cfg.device)
         self._lost = False
         self._backoff.reset()
 
@@ -318,7 +343,10 @@ class V4L2Camera(Camera):
 
     def _release(self) -> None:
         cap, self._cap = self._cap, None
-        if cap is not None and (self._hung is None or not self._hung.is_alive()):
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            reader.stop()  # its thread releases the capture
+        elif cap is not None and (self._hung is None or not self._hung.is_alive()):
             cap.release()
 
     def _mark_lost(self, why: str) -> DeviceDisconnectedError:
@@ -386,6 +414,8 @@ class V4L2Camera(Camera):
                 self._reconnect(deadline)
             if cfg.api == "v4l2":
                 image, stamp = self._grab_fresh(t_call, deadline)
+            elif cfg.api == "stream":
+                image, stamp = self._grab_stream(t_call, deadline)
             else:
                 image, stamp = self._read_one(deadline)
             frame = Frame(
@@ -450,6 +480,22 @@ class V4L2Camera(Camera):
             f"{self.name}: only stale frames within the timeout", device=cfg.device
         )
 
+    def _grab_stream(self, t_call: float, deadline: float) -> tuple[np.ndarray, float]:
+        """The first frame that arrived one frame period after the call (see module doc)."""
+        reader = self._reader
+        assert reader is not None
+        try:
+            got = reader.frame_after(t_call + 1.0 / self.config.fps, deadline)
+        except EOFError as exc:
+            raise self._mark_lost(str(exc)) from None
+        if got is None:
+            raise DeviceTimeoutError(
+                f"{self.name}: no frame within the timeout (stream stalled? check the camera "
+                "and the network)",
+                device=self.config.device,
+            )
+        return _to_bgr(got[0]), got[1]
+
     def _apply_exposure(self, cap: Any, exposure_ms: float) -> None:
         ok = cap.set(cv2.CAP_PROP_AUTO_EXPOSURE, _V4L2_EXPOSURE_MANUAL) and cap.set(
             cv2.CAP_PROP_EXPOSURE, exposure_ms / _V4L2_EXPOSURE_UNIT_MS
@@ -471,6 +517,12 @@ class V4L2Camera(Camera):
         if self._cap is None:
             raise DeviceDisconnectedError(
                 f"{self.name} is not connected", device=self.config.device
+            )
+        if self._reader is not None:
+            raise UnsupportedError(
+                f"{self.name}: a network stream has no exposure or gain control here (set them "
+                "in the camera's own web page)",
+                device=self.config.device,
             )
         return self._cap
 

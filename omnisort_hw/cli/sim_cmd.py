@@ -1,4 +1,5 @@
-"""`omnisort sim render|dataset|checkerboard-views|scenes`: the simulated cell's images."""
+"""`omnisort sim render|dataset|checkerboard-views|scenes|virtual-cell`: the simulated cell's
+images, and the simulated cell behind the real protocols."""
 
 from __future__ import annotations
 
@@ -50,6 +51,15 @@ def register(sub: Any) -> None:
 
     sc = ssub.add_parser("scenes", help="list the shipped scene files")
     sc.set_defaults(func=cmd_scenes)
+
+    from sim_backend.virtual_cell.run import add_arguments
+
+    vc = ssub.add_parser(
+        "virtual-cell",
+        help="serve a simulated cell over RTDE, dashboard, Modbus TCP and an MJPEG stream",
+    )
+    add_arguments(vc)
+    vc.set_defaults(func=cmd_virtual_cell)
 
 
 def _width(value: int | None) -> int | None:
@@ -121,3 +131,9 @@ def cmd_scenes(args: argparse.Namespace) -> int:
     for name in shipped_scenes():
         print(f"{name:<16} {SCENES_DIR / (name + '.toml')}")
     return 0
+
+
+def cmd_virtual_cell(args: argparse.Namespace) -> int:
+    from sim_backend.virtual_cell.run import serve
+
+    return serve(args)

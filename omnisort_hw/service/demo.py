@@ -101,8 +101,11 @@ def _brief(cmd: str, reply: dict[str, Any]) -> str:
     return json.dumps(res)[:160]
 
 
-def run(out: Path, width: int = 960, views: int = 10) -> dict[str, Any]:
-    """Run the demo into `out`; returns the summary (steps, replies, .rrd path, exit code)."""
+def run(
+    out: Path, width: int = 960, views: int = 10, config: Path | None = None
+) -> dict[str, Any]:
+    """Run the demo into `out`; returns the summary (steps, replies, .rrd path, exit code).
+    `config` is a cell file to serve instead of the simulated cell's (the virtual cell's)."""
     from omnisort_hw.service.client import Client
     from omnisort_hw.service.launch import start_service
     from sim_backend.dataset import checkerboard_views
@@ -111,7 +114,7 @@ def run(out: Path, width: int = 960, views: int = 10) -> dict[str, Any]:
     views_dir = out / "views"
     print(f"rendering {views} checkerboard views ({width}x{width}) into {views_dir}", flush=True)
     checkerboard_views(views_dir, n=views, seed=1, width=width, progress=False)
-    config = write_config(out, width)
+    config = config or write_config(out, width)
     print(f"starting omnisort serve --config {config}", flush=True)
     svc = start_service(config, out)
     steps: list[tuple[str, str, dict[str, Any]]] = [

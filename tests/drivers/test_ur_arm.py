@@ -1,8 +1,8 @@
 """UR arm driver above the `URLink` boundary, against a recording stand-in with fault injection.
 
-No UR controller (or URSim) can run here, so `drivers/ur_rtde_adapter.py` is the only code not
-exercised end to end; these tests prove unit conversion, the order of checks (limits before
-anything is sent), safety stops, timeouts, drops and reconnects, and the gripper output.
+These tests prove unit conversion, the order of checks (limits before anything is sent),
+safety stops, timeouts, drops and reconnects, and the gripper output with injected faults;
+`test_virtual_cell_arm.py` runs the same driver through ur-rtde against the virtual cell.
 """
 
 from __future__ import annotations

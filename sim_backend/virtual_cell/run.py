@@ -1,0 +1,78 @@
+"""Run one virtual cell in this process until SIGTERM/SIGINT; prints `ready HOST` once every
+port accepts (what `omnisort sim virtual-cell` and `launcher.VirtualCellProcess` call)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--scene", default="sorting", help="scene file or shipped scene name")
+    ap.add_argument("--host", default="127.0.0.2", help="address to serve on (default 127.0.0.2)")
+    ap.add_argument("--width", type=int, default=None, help="camera image size (default: scene)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--fps", type=float, default=10.0, help="camera stream frame rate")
+    ap.add_argument("--degraded", action="store_true", help='"real camera" mode for the stream')
+    ap.add_argument(
+        "--unlock-delay",
+        type=float,
+        default=5.0,
+        help="seconds before a protective stop may be unlocked (5 on a real controller)",
+    )
+    ap.add_argument(
+        "--gripper-output",
+        default="tool:0",
+        help="digital output driving the gripper, GROUP:PIN (tool, standard, configurable)",
+    )
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Start the cell, print `ready HOST`, wait for SIGTERM or SIGINT, close in order."""
+    from sim_backend.virtual_cell.cell import VirtualCell
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    group, _, pin = args.gripper_output.partition(":")
+    if group not in ("tool", "standard", "configurable") or not pin.isdigit():
+        print(
+            f"--gripper-output must look like tool:0, got {args.gripper_output!r}", file=sys.stderr
+        )
+        return 2
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    try:
+        cell = VirtualCell(
+            args.scene,
+            args.host,
+            width=args.width,
+            seed=args.seed,
+            fps=args.fps,
+            unlock_delay_s=args.unlock_delay,
+            gripper_output=(group, int(pin)),
+            degraded=args.degraded,
+        )
+    except OSError as exc:
+        print(f"cannot serve on {args.host}: {exc} (another virtual cell there?)", file=sys.stderr)
+        return 1
+    try:
+        cell.start()
+        print(f"ready {args.host}", flush=True)
+        while not stop.wait(0.5):
+            pass
+    finally:
+        cell.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sim_backend.virtual_cell.run", description=__doc__)
+    add_arguments(ap)
+    return serve(ap.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
