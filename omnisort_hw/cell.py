@@ -714,7 +714,7 @@ class Cell:
     ) -> dict[str, Any]:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
 
-        `with_points` adds the points themselves (S, mm, 0.1 mm) to the result."""
+        `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels."""
         from omnisort_hw.extrinsics_pipeline import check_image_size
 
         calib = self.system_calibration()
@@ -722,28 +722,17 @@ class Cell:
         _raise_if_cancelled(cancel, "mapping")
         check_image_size(img, calib.model, source)
         with core_component("map"):
-            from omnisort_hw.core.laser_stripe import laser_stripe_points
-            from omnisort_hw.core.mapping import pixels_to_plane, segments
+            from omnisort_hw.core.mapping import laser_map
 
-            pixels = laser_stripe_points(img)
-            points = pixels_to_plane(pixels, calib)
-            segs = segments(points, calib)
+            lmap = laser_map(img, calib)
         rl = self.runlog
-        finite = points[np.all(np.isfinite(points), axis=1)]
+        finite = lmap.points_S[np.all(np.isfinite(lmap.points_S), axis=1)]
         rl.image("map/image", img)
-        rl.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
+        rl.points2d("map/image/laser", lmap.pixels, color=(255, 0, 0), radius=1)
         rl.points3d("map/points_S", finite, color=(255, 0, 0))
-        for i, seg in enumerate(segs):
+        for i, seg in enumerate(lmap.segments):
             rl.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
-        out: dict[str, Any] = {
-            "image": record,
-            "points": len(pixels),
-            "points_on_plane": len(finite),
-            "segments": [seg.summary() for seg in segs],
-        }
-        if with_points:
-            out["points_S"] = np.round(finite, 1).tolist()
-        return out
+        return {"image": record, **lmap.summary(with_points)}
 
     def register_robot(self, image: str | None, cancel: threading.Event) -> dict[str, Any]:
         """Robot base pose from the floor checkerboard, stored in system.json."""

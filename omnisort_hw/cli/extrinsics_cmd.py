@@ -42,6 +42,11 @@ def register(sub: Any) -> None:
     mp.add_argument("image", type=Path)
     mp.add_argument("--system", type=Path, required=True, help="system.json")
     mp.add_argument("--json", action="store_true")
+    mp.add_argument(
+        "--points",
+        action="store_true",
+        help="with --json: every laser point in S (mm) and its pixel (points_S, pixels)",
+    )
     mp.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
     mp.set_defaults(func=cmd_map)
 
@@ -111,27 +116,24 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from omnisort_hw.core.laser_stripe import laser_stripe_points
-    from omnisort_hw.core.mapping import pixels_to_plane, segments
+    from omnisort_hw.core.mapping import laser_map
     from omnisort_hw.extrinsics_pipeline import check_image_size, read_image
     from omnisort_hw.runlog import RunLog
 
     calib = load_system(args.system)
     image = read_image(args.image)
     check_image_size(image, calib.model, str(args.image))
-    pixels = laser_stripe_points(image)
-    points = pixels_to_plane(pixels, calib)
-    segs = segments(points, calib)
+    lmap = laser_map(image, calib)
+    pixels, points = lmap.pixels, lmap.points_S
     with RunLog(args.log) as log:
         log.image("map/image", image)
         log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
         log.points3d("map/points_S", points[~(points != points).any(axis=1)], color=(255, 0, 0))
-    result = {"points": len(pixels), "segments": [s.summary() for s in segs]}
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(lmap.summary(with_points=args.points)))
     else:
-        print(f"{len(pixels)} laser points, {len(segs)} segments")
-        for i, s in enumerate(segs):
+        print(f"{len(pixels)} laser points, {len(lmap.segments)} segments")
+        for i, s in enumerate(lmap.segments):
             print(
                 f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"
                 f"  bearing {s.bearing_deg:7.1f} deg  length {s.length_mm:7.1f} mm"

@@ -110,3 +110,37 @@ def segments(
             )
         )
     return sorted(out, key=lambda s: s.distance_mm)
+
+
+@dataclass
+class LaserMap:
+    """One image's laser map: stripe pixels, their points on the laser plane (S, mm; NaN where
+    a ray misses the plane) and the segments. The one use case behind `omnisort map` and the
+    service's `map`."""
+
+    pixels: np.ndarray
+    points_S: np.ndarray
+    segments: list[Segment]
+
+    def summary(self, with_points: bool = False) -> dict[str, Any]:
+        """Counts and segments; `with_points` adds every point on the plane (S, 0.1 mm) and,
+        in the same order, its pixel (0.01 px)."""
+        finite = np.all(np.isfinite(self.points_S), axis=1)
+        out: dict[str, Any] = {
+            "points": len(self.pixels),
+            "points_on_plane": int(finite.sum()),
+            "segments": [s.summary() for s in self.segments],
+        }
+        if with_points:
+            out["points_S"] = np.round(self.points_S[finite], 1).tolist()
+            out["pixels"] = np.round(self.pixels[finite], 2).tolist()
+        return out
+
+
+def laser_map(image_bgr: np.ndarray, calib: SystemCalibration) -> LaserMap:
+    """Stripe pixels of an image -> points on the laser plane -> segments."""
+    from omnisort_hw.core.laser_stripe import laser_stripe_points
+
+    pixels = laser_stripe_points(image_bgr)
+    points = pixels_to_plane(pixels, calib)
+    return LaserMap(pixels, points, segments(points, calib))

@@ -186,13 +186,13 @@ def _arc(a: np.ndarray, b: np.ndarray, normal: np.ndarray, t: np.ndarray) -> np.
 # ---- markers ---------------------------------------------------------------------------------
 
 
-def _blueness(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Blue saturation: (b - min(r, g)) where blue is the strongest channel (else 0), as float32,
-    and its ratio to the blue level (b + 8). The ratio separates saturated markers from the
-    grey-blue floor whatever the lighting; the difference mixes linearly at a marker's edge."""
+def _blueness(image: np.ndarray) -> np.ndarray:
+    """Blue saturation: (b - min(r, g)) where blue is the strongest channel (else 0), over the
+    blue level (b + 8), float32. The ratio separates saturated markers from the grey-blue
+    floor whatever the lighting (it finds markers; their coverage is `_linear_blueness`)."""
     b, g, r = (c.astype(np.float32) for c in cv2.split(image))
     blue = np.where(b > np.maximum(r, g) + 8.0, b - np.minimum(r, g), 0.0)
-    return blue, blue / (b + 8.0)
+    return blue / (b + 8.0)
 
 
 def _linear_blueness(patch: np.ndarray, tone: ToneCurve) -> np.ndarray:
@@ -207,7 +207,7 @@ def find_blue_markers(image_bgr: np.ndarray, tone: ToneCurve = SRGB) -> list[Blo
     `tone` is the camera's tone curve (coverage is measured in linear light)."""
     img = check_bgr(image_bgr)
     h, w = img.shape[:2]
-    blue, ratio = _blueness(img)
+    ratio = _blueness(img)
     background = float(np.percentile(ratio[::4, ::4], 99))
     above = ratio[ratio > background]
     if above.size < 8:
