@@ -33,6 +33,12 @@ def register(sub: Any) -> None:
         default=None,
         help="default: the best one for the target",
     )
+    cal.add_argument(
+        "--tone-curve",
+        default="srgb",
+        help="the camera's tone curve: srgb (default, 8-bit cameras), linear, gamma:G, or a "
+        "JSON table of 256 light values (measured)",
+    )
     cal.add_argument("--out", type=Path, required=True, help="system.json to write")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
     cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
@@ -66,6 +72,7 @@ def load_system(path: Path) -> Any:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.camera_io import load_camera_json
+    from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.extrinsics_pipeline import calibrate_system, image_record, read_image
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.runlog import RunLog
@@ -76,6 +83,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cols, rows = (int(v) for v in args.board.lower().split("x"))
     except ValueError as exc:
         raise InputError(f"--board must look like 9x6, got {args.board!r}") from exc
+    tone = ToneCurve.parse(args.tone_curve)
     model, _ = load_camera_json(args.camera)
     image = read_image(args.image)
     with RunLog(args.log) as log:
@@ -89,6 +97,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             square_mm=args.square,
             source=str(args.image),
             log=log,
+            tone=tone,
         )
     calib.image = image_record(args.image)
     payload = calib.to_json()
