@@ -102,9 +102,8 @@ def test_map_cli_prints_every_point_with_its_pixel_and_keeps_the_dashed_stripe(
         str(system),
     )
     assert cal.returncode == 0, cal.stderr
-    proc = cli(
-        "map", str(reference_dir / "mapping_cubes.jpg"), "--system", str(system), "--json", "--points"
-    )
+    image = str(reference_dir / "mapping_cubes.jpg")
+    proc = cli("map", image, "--system", str(system), "--json", "--points")
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
     pts, px = np.asarray(res["points_S"]), np.asarray(res["pixels"])
