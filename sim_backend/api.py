@@ -106,6 +106,7 @@ def render_world(
             "face_px": world.scene.render.face_px,
             "supersampling": world.scene.render.supersampling,
             "adaptive": world.scene.render.adaptive,
+            "tone_curve": world.scene.render.tone_curve,
             "seconds": {k: round(v, 4) for k, v in result.stats.items() if k.endswith("_s")},
         }
     return image, truth
