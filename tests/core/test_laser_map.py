@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -75,18 +73,11 @@ def test_map_cli_prints_every_point_with_its_pixel_and_keeps_the_dashed_stripe(
     the cubes (pixels u 1040-1180, v 385-405) is mapped into one long straight segment."""
     from omnisort_hw.core.camera_io import save_camera_json
     from omnisort_hw.reference_accuracy import SEPARATION_MM, intrinsics_model
+    from tests.test_extrinsics_cli import run_cli as cli
 
     camera = tmp_path / "camera.json"
     save_camera_json(camera, intrinsics_model(reference_dir))
     system = tmp_path / "system.json"
-
-    def cli(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "omnisort_hw.cli", *args],
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
 
     cal = cli(
         "extrinsics",
