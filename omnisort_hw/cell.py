@@ -616,17 +616,14 @@ class Cell:
     ) -> dict[str, Any]:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
 
-        `with_points` adds the points themselves (S, mm, 0.1 mm) to the result."""
+        `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels."""
         from omnisort_hw.pipeline.laser_map import map_laser
 
         calib = self.system_calibration()
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "mapping")
         laser_map = map_laser(img, calib, source, self.runlog)
-        out: dict[str, Any] = {"image": record, **laser_map.summary()}
-        if with_points:
-            out["points_S"] = np.round(laser_map.finite_points_S, 1).tolist()
-        return out
+        return {"image": record, **laser_map.summary(with_points)}
 
     def _image(self, image: str | None, laser: bool) -> np.ndarray:
         """The file `image`, or a capture with the laser switched to `laser` (off after)."""
