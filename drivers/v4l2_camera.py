@@ -45,6 +45,8 @@ from drivers.errors import (
     DeviceTimeoutError,
     UnsupportedError,
 )
+from omnisort_hw.core.radiometry import ToneCurve
+from omnisort_hw.errors import InputError
 
 log = logging.getLogger("drivers.camera")
 T = TypeVar("T")
@@ -87,9 +89,14 @@ class V4L2CameraConfig:
     reconnect_backoff_s: float = 0.5
     reconnect_backoff_max_s: float = 8.0
     expected_serial: str = ""
+    tone_curve: str = "srgb"
 
     def __post_init__(self) -> None:
         s = self.SECTION
+        try:
+            ToneCurve.parse(self.tone_curve)
+        except InputError as exc:
+            require(False, s, "tone_curve", str(exc))
         require(bool(str(self.device)), s, "device", "give /dev/videoN, an index or a file")
         require(self.api in _APIS, s, "api", f"must be one of {sorted(_APIS)}")
         require(self.pixel_format in ("MJPG", "YUYV"), s, "pixel_format", "MJPG or YUYV")
@@ -170,6 +177,10 @@ class V4L2Camera(Camera):
     @property
     def serial(self) -> str:
         return self._serial
+
+    @property
+    def tone_curve(self) -> str:
+        return self.config.tone_curve
 
     @property
     def sequence(self) -> int:
