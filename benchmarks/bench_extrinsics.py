@@ -86,7 +86,32 @@ def _reference(shared: Path) -> dict[str, Any]:
     return out
 
 
+def _reference_accuracy(shared: Path) -> dict[str, Any]:
+    """Signed errors against the authors' settings, with the camera's tone curve modelled
+    (sRGB, `after`) and ignored (values taken as light, as before: `before`)."""
+    from omnisort_hw.core.radiometry import SRGB, ToneCurve
+    from omnisort_hw.evaluation.reference_accuracy import (
+        intrinsics_model,
+        intrinsics_spread,
+        run_reference,
+        scene_check,
+        summary,
+    )
+
+    ref = shared / "reference" / "unity"
+    if not (ref / "intrinsics").is_dir():
+        return {"reference_errors": f"skipped: no reference images under {ref}"}
+    model = intrinsics_model(ref)
+    return {
+        "reference_errors_before": summary(run_reference(ref, model, ToneCurve.identity())),
+        "reference_errors_after": summary(run_reference(ref, model, SRGB)),
+        "reference_intrinsics_jackknife_half_range": intrinsics_spread(ref, SRGB),
+        "reference_scene_with_authors_settings": scene_check(ref, model, SRGB),
+    }
+
+
 def run(shared: Path) -> dict[str, Any]:
     figures = _speed()
     figures.update(_reference(shared))
+    figures.update(_reference_accuracy(shared))
     return figures

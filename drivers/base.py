@@ -246,6 +246,13 @@ class Camera(Device):
     def serial(self) -> str:
         """A stable identifier of the physical camera, used to detect a swapped camera."""
 
+    @property
+    def tone_curve(self) -> str:
+        """The camera's transfer curve from light to pixel value, as a `ToneCurve.parse` spec
+        (srgb, linear, gamma:G or a measured table's JSON file). Edge location undoes it, as a
+        blurred step is antisymmetric only in light; sRGB is what 8-bit cameras write."""
+        return "srgb"
+
     def get_exposure_ms(self) -> float:
         """Current manual exposure time in milliseconds."""
         raise UnsupportedError(f"camera {self.name} has no readable exposure", device=self.name)

@@ -48,6 +48,8 @@ from drivers.errors import (
     UnsupportedError,
 )
 from drivers.stream_source import StreamReader, is_stream_url, probe_stream, stream_serial
+from omnisort_hw.core.radiometry import ToneCurve
+from omnisort_hw.errors import InputError
 
 log = logging.getLogger("drivers.camera")
 T = TypeVar("T")
@@ -91,9 +93,14 @@ class V4L2CameraConfig:
     reconnect_backoff_s: float = 0.5
     reconnect_backoff_max_s: float = 8.0
     expected_serial: str = ""
+    tone_curve: str = "srgb"
 
     def __post_init__(self) -> None:
         s = self.SECTION
+        try:
+            ToneCurve.parse(self.tone_curve)
+        except InputError as exc:
+            require(False, s, "tone_curve", str(exc))
         require(bool(str(self.device)), s, "device", "give /dev/videoN, an index or a file")
         require(self.api in _APIS, s, "api", f"must be one of {sorted(_APIS)}")
         require(
@@ -181,6 +188,10 @@ class V4L2Camera(Camera):
     @property
     def serial(self) -> str:
         return self._serial
+
+    @property
+    def tone_curve(self) -> str:
+        return self.config.tone_curve
 
     @property
     def sequence(self) -> int:

@@ -43,6 +43,7 @@ from omnisort_hw.runlog import RunLog
 from omnisort_hw.storage import CalibrationStore
 
 if TYPE_CHECKING:
+    from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.service.rrd import RunLogRotator
 
 log = logging.getLogger(__name__)
@@ -577,6 +578,7 @@ class Cell:
                 "(or kind in the configuration's [target] section)"
             )
         model = self.store.camera_model()
+        tone = self.camera_tone_curve()
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "calibration")
         separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
@@ -590,6 +592,7 @@ class Cell:
             square_mm=square_mm or 97.0,
             source=source,
             log=self.runlog,
+            tone=tone,
         )
         _raise_if_cancelled(cancel, "calibration")
         saved = self.store.save_system(system_payload(calib, record))
@@ -601,7 +604,17 @@ class Cell:
             "std": calib.std,
             "residuals": calib.residuals,
             "image": record,
+            "tone_curve": tone.name,
         }
+
+    def camera_tone_curve(self) -> ToneCurve:
+        """The camera's transfer curve, undone wherever edges are located in its images (the
+        extrinsic target's borders and markers); sRGB when the cell has no camera, what 8-bit
+        image files hold."""
+        from omnisort_hw.core.radiometry import ToneCurve
+
+        camera = self.devices.camera
+        return ToneCurve.parse(camera.tone_curve if camera is not None else None)
 
     def system_calibration(self) -> SystemCalibration:
         """The verified system.json as the core's SystemCalibration."""
@@ -616,17 +629,14 @@ class Cell:
     ) -> dict[str, Any]:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
 
-        `with_points` adds the points themselves (S, mm, 0.1 mm) to the result."""
+        `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels."""
         from omnisort_hw.pipeline.laser_map import map_laser
 
         calib = self.system_calibration()
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "mapping")
         laser_map = map_laser(img, calib, source, self.runlog)
-        out: dict[str, Any] = {"image": record, **laser_map.summary()}
-        if with_points:
-            out["points_S"] = np.round(laser_map.finite_points_S, 1).tolist()
-        return out
+        return {"image": record, **laser_map.summary(with_points)}
 
     def _image(self, image: str | None, laser: bool) -> np.ndarray:
         """The file `image`, or a capture with the laser switched to `laser` (off after)."""

@@ -79,20 +79,26 @@ def make_dataset(
     degraded: bool = False,
     scenes: Sequence[str | Path] = TABLE3_SCENES,
     progress: bool = True,
+    tone_curve: str = "srgb",
 ) -> Path:
-    """Render an experiment into `out_dir`; returns the path of `dataset.json`."""
+    """Render an experiment into `out_dir`; returns the path of `dataset.json`. `tone_curve`:
+    the simulated camera's ("srgb" as real cameras, or "linear"), recorded in the index."""
     if experiment not in EXPERIMENTS:
         raise InputError(f"unknown experiment {experiment!r} (known: {', '.join(EXPERIMENTS)})")
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     out = Path(out_dir)
-    bases = [(Path(str(s)).stem, sized(load_scene(s), width)) for s in scenes]
+    bases = [
+        (Path(str(s)).stem, sized(load_scene(s), width).replace(render={"tone_curve": tone_curve}))
+        for s in scenes
+    ]
     configs = table3_configs(n, seed)
     index: dict[str, Any] = {
         "experiment": experiment,
         "n": n,
         "seed": seed,
         "degraded": degraded,
+        "tone_curve": tone_curve,
         "scenes": [name for name, _ in bases],
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "configs": [],

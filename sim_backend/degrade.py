@@ -4,7 +4,8 @@ The renderer keeps the laser light apart from the scene colour. `compose` adds i
 that dominates the surface it falls on (`laser.surface_hide`), like a camera exposed for the
 laser line. `degrade` first makes the light uneven (a smooth random field along the stripe)
 and speckled (gamma-distributed grain), then applies, in the order light takes through a
-camera: ambient light, exposure, vignetting, optical blur, gamma, shot and read noise,
+camera: ambient light, exposure, vignetting, optical blur, a gamma deviation from the
+nominal curve, the tone curve (sRGB unless the scene says linear), shot and read noise,
 8-bit quantisation and JPEG compression. Every random draw comes from one seeded generator,
 so a seed gives the same bytes.
 """
@@ -16,6 +17,7 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
+from omnisort_hw.core.radiometry import linear_to_srgb
 from sim_backend.scene import DegradeSpec, LaserSpec
 
 
@@ -71,6 +73,11 @@ def compose(base: np.ndarray, laser: np.ndarray, spec: LaserSpec) -> np.ndarray:
     return base * (1.0 - hide) + lit * np.asarray(spec.color.rgb, np.float32)
 
 
+def encode(rgb: np.ndarray, tone_curve: str) -> np.ndarray:
+    """Light in [0, 1] -> the camera's encoded values (sRGB or unchanged for "linear")."""
+    return linear_to_srgb(rgb) if tone_curve == "srgb" else rgb
+
+
 def to_bgr8(rgb: np.ndarray) -> np.ndarray:
     """Float RGB in [0, 1] -> uint8 BGR (OpenCV order, as the Camera interface returns)."""
     out = np.clip(rgb * 255.0 + 0.5, 0.0, 255.0).astype(np.uint8)
@@ -90,8 +97,10 @@ def degrade(
     spec: LaserSpec,
     params: DegradeParams,
     rng: np.random.Generator,
+    tone_curve: str = "linear",
 ) -> np.ndarray:
-    """The "real camera" image (uint8 BGR) of a rendered frame."""
+    """The "real camera" image (uint8 BGR) of a rendered frame (`base` and `laser` in linear
+    light when `tone_curve` is "srgb")."""
     h, w = laser.shape
     light = laser.copy()
     on = light > 1e-4
@@ -110,7 +119,7 @@ def degrade(
     img *= (1.0 - params.vignetting * np.clip(r2, 0.0, 1.0))[..., None]
     if params.blur_sigma_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), params.blur_sigma_px)
-    img = np.clip(img, 0.0, 1.0) ** np.float32(params.gamma)
+    img = encode(np.clip(img, 0.0, 1.0) ** np.float32(params.gamma), tone_curve)
     sigma = np.sqrt(params.noise_shot**2 * img + params.noise_read**2)
     img = img + sigma * rng.standard_normal(img.shape, dtype=np.float32)
     bgr = to_bgr8(img)

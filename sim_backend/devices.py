@@ -199,6 +199,11 @@ class SimCamera(_Connectable, Camera):
         return (self.cell.scene.camera.width, self.cell.scene.camera.height)
 
     @property
+    def tone_curve(self) -> str:
+        """The curve the scene renders with (`[render] tone_curve`)."""
+        return self.cell.scene.render.tone_curve
+
+    @property
     def serial(self) -> str:
         cam = self.cell.scene.camera
         model = cam.model_file or f"equidistant{cam.fov_deg:g}"
@@ -671,6 +676,11 @@ class SimWristCamera(_Connectable, Camera):
     @property
     def serial(self) -> str:
         return f"SIM-wrist-{self.cell.scene.name}-{self.width}x{self.height}"
+
+    @property
+    def tone_curve(self) -> str:
+        """pybullet's rasteriser writes its shading as computed."""
+        return "linear"
 
     def pose_S(self) -> np.ndarray:
         """Camera pose in S (4x4 mm): on the gripper body, looking along the tool z."""

@@ -37,6 +37,7 @@ import numpy as np
 import pybullet as p
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.radiometry import srgb_to_linear
 from sim_backend.laser import HALL_RADIUS_MM, LaserFan, LaserPlane
 from sim_backend.world import MM, AnalyticBox, AnalyticCylinder, Panel, SimWorld
 
@@ -435,6 +436,8 @@ class Shader:
         light = np.asarray(ren.light_direction, float)
         self.light = light / np.linalg.norm(light)
         self.ambient, self.diffuse = ren.ambient, ren.diffuse
+        # sRGB scenes: colours (albedo x shading) are encoded values; light is linear
+        self.decode = ren.tone_curve == "srgb"
         self.hall = np.asarray(ren.hall_color.rgb, np.float32)
         self.sky = np.asarray(ren.sky_color.rgb, np.float32)
         self.plane = LaserPlane(world.laser_normal, world.laser_distance)
@@ -691,7 +694,8 @@ class Shader:
         laser = np.zeros(n, np.float32)
         if self.laser_on:
             self._laser(rays, hits, laser)
-        return Shaded(hits.rgb, laser, hits.key)
+        rgb = srgb_to_linear(hits.rgb) if self.decode else hits.rgb
+        return Shaded(rgb, laser, hits.key)
 
     def _laser(self, rays: np.ndarray, hits: Hits, out: np.ndarray) -> None:
         """Stripe intensity: Gaussian in the signed distance to the plane, fall-off, shadows."""
@@ -717,8 +721,8 @@ class Shader:
 
 @dataclass
 class RenderResult:
-    """A rendered frame before compositing: scene colour (H, W, 3) RGB in [0, 1], laser light
-    (H, W) and timings/statistics."""
+    """A rendered frame before compositing: scene colour (H, W, 3) RGB in [0, 1] (linear light
+    when the scene's tone curve is sRGB), laser light (H, W) and timings/statistics."""
 
     base: np.ndarray
     laser: np.ndarray

@@ -21,7 +21,7 @@ import numpy as np
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.fileio import atomic_write_bytes, atomic_write_json
-from sim_backend.degrade import DegradeParams, compose, degrade, to_bgr8
+from sim_backend.degrade import DegradeParams, compose, degrade, encode, to_bgr8
 from sim_backend.render import RenderResult, render_frame
 from sim_backend.scene import Scene, load_scene
 from sim_backend.truth import build_truth
@@ -78,11 +78,12 @@ def finish_image(
     base, laser = result.base, result.laser
     if brightness != 1.0:
         base, laser = base * np.float32(brightness), laser * np.float32(brightness)
+    tone = world.scene.render.tone_curve
     if not degraded:
-        return to_bgr8(compose(base, laser, spec)), None
+        return to_bgr8(encode(compose(base, laser, spec), tone)), None
     rng = np.random.default_rng(seed)
     params = DegradeParams.draw(world.scene.degrade, rng)
-    return degrade(base, laser, spec, params, rng), params.to_dict()
+    return degrade(base, laser, spec, params, rng, tone), params.to_dict()
 
 
 def render_world(
@@ -105,6 +106,7 @@ def render_world(
             "face_px": world.scene.render.face_px,
             "supersampling": world.scene.render.supersampling,
             "adaptive": world.scene.render.adaptive,
+            "tone_curve": world.scene.render.tone_curve,
             "seconds": {k: round(v, 4) for k, v in result.stats.items() if k.endswith("_s")},
         }
     return image, truth

@@ -85,6 +85,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         image, truth = render_scene(scene, seed=args.seed)
         img_path, _ = write_render(out, "two_sided", image, truth)
         from omnisort_hw.core.camera_model import OcamModel
+        from omnisort_hw.core.radiometry import ToneCurve
 
         model = OcamModel.from_dict(truth["camera"])
         calib = calibrate_system(
@@ -95,6 +96,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             separation_mm=truth["target"]["separation_mm"],
             source=str(img_path),
             log=log,
+            tone=ToneCurve.parse(truth["render"]["tone_curve"]),  # the simulated camera's curve
         )
         atomic_write_json(out / "system.json", calib.to_json())
         want = truth_parameters(truth)

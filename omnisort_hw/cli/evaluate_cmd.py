@@ -25,6 +25,17 @@ def register(sub: Any) -> None:
         default=None,
         help="dataset folder: read it if it holds this experiment, else render into it",
     )
+    t3.add_argument(
+        "--tone-curve",
+        default="srgb",
+        help="the simulated camera's tone curve when rendering: srgb (default) or linear",
+    )
+    t3.add_argument(
+        "--assume-tone-curve",
+        default=None,
+        help="the curve the extraction assumes (default: the dataset's own); 'linear' is what "
+        "the extraction assumed before it modelled tone curves",
+    )
     t3.add_argument("--json", action="store_true", help="print one JSON object")
     t3.set_defaults(func=cmd_table3)
     for extension in EXTENSIONS:
@@ -35,15 +46,17 @@ def register(sub: Any) -> None:
 EXTENSIONS: list[Any] = [robot_cmd.add_sorting_evaluation]
 
 
-def _matching(data: Path, n: int, seed: int, degraded: bool) -> bool:
+def _matching(data: Path, n: int, seed: int, degraded: bool, tone_curve: str) -> bool:
     index = data / "dataset.json"
     if not index.is_file():
         return False
     info = json.loads(index.read_text())
-    return (info.get("n"), info.get("seed"), bool(info.get("degraded"))) == (n, seed, degraded)
+    got = (info.get("n"), info.get("seed"), bool(info.get("degraded")))
+    return got == (n, seed, degraded) and info.get("tone_curve", "linear") == tone_curve
 
 
 def cmd_table3(args: argparse.Namespace) -> int:
+    from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.errors import InputError
     from omnisort_hw.evaluation.table3 import evaluate_dataset, format_table
 
@@ -53,8 +66,9 @@ def cmd_table3(args: argparse.Namespace) -> int:
         f"table3-n{args.n}-seed{args.seed}"
         + ("-degraded" if args.degraded else "")
         + (f"-w{args.width}" if args.width else "")
+        + ("" if args.tone_curve == "srgb" else f"-{args.tone_curve}")
     )
-    if not _matching(data, args.n, args.seed, args.degraded):
+    if not _matching(data, args.n, args.seed, args.degraded, args.tone_curve):
         from sim_backend.dataset import make_dataset
 
         print(f"rendering {args.n} configurations into {data}", file=sys.stderr)
@@ -66,8 +80,10 @@ def cmd_table3(args: argparse.Namespace) -> int:
             width=args.width,
             degraded=args.degraded,
             progress=sys.stderr.isatty() or not args.json,
+            tone_curve=args.tone_curve,
         )
-    result = evaluate_dataset(data, progress=sys.stderr.isatty())
+    assume = ToneCurve.parse(args.assume_tone_curve) if args.assume_tone_curve else None
+    result = evaluate_dataset(data, progress=sys.stderr.isatty(), tone=assume)
     if args.json:
         print(json.dumps(result))
     else:

@@ -33,6 +33,12 @@ def register(sub: Any) -> None:
         default=None,
         help="default: the best one for the target",
     )
+    cal.add_argument(
+        "--tone-curve",
+        default="srgb",
+        help="the camera's tone curve: srgb (default, 8-bit cameras), linear, gamma:G, or a "
+        "JSON table of 256 light values (measured)",
+    )
     cal.add_argument("--out", type=Path, required=True, help="system.json to write")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
     cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
@@ -42,6 +48,11 @@ def register(sub: Any) -> None:
     mp.add_argument("image", type=Path)
     mp.add_argument("--system", type=Path, required=True, help="system.json")
     mp.add_argument("--json", action="store_true")
+    mp.add_argument(
+        "--points",
+        action="store_true",
+        help="with --json: every laser point in S (mm) and its pixel (points_S, pixels)",
+    )
     mp.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
     mp.set_defaults(func=cmd_map)
 
@@ -61,6 +72,7 @@ def load_system(path: Path) -> Any:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.camera_io import load_camera_json
+    from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import (
         calibrate_system,
@@ -76,6 +88,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cols, rows = (int(v) for v in args.board.lower().split("x"))
     except ValueError as exc:
         raise InputError(f"--board must look like 9x6, got {args.board!r}") from exc
+    tone = ToneCurve.parse(args.tone_curve)
     model, _ = load_camera_json(args.camera)
     image = read_image(args.image)
     with RunLog(args.log) as log:
@@ -89,6 +102,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             square_mm=args.square,
             source=str(args.image),
             log=log,
+            tone=tone,
         )
     atomic_write_json(args.out, system_payload(calib, image_record(args.image)))
     if args.json:
@@ -122,7 +136,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     with RunLog(args.log) as log:
         laser_map = map_laser(image, calib, str(args.image), log)
     if args.json:
-        print(json.dumps(laser_map.summary()))
+        print(json.dumps(laser_map.summary(with_points=args.points)))
     else:
         segs = laser_map.segments
         print(f"{len(laser_map.pixels)} laser points, {len(segs)} segments")

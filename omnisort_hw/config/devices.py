@@ -183,13 +183,20 @@ def parse_device_section(
 
 
 def _resolve_camera_file(settings: dict[str, Any], base_dir: Path) -> dict[str, Any]:
-    """A recorded source (api ffmpeg/images) given relative to the config file's folder."""
+    """A recorded source (api ffmpeg/images) and a measured tone-curve table (a .json file)
+    given relative to the config file's folder."""
+    out = dict(settings)
     device = settings.get("device")
     if settings.get("api") in ("ffmpeg", "images") and isinstance(device, str):
         path = Path(device).expanduser()
         if not path.is_absolute():
-            return {**settings, "device": str(base_dir / path)}
-    return settings
+            out["device"] = str(base_dir / path)
+    tone = settings.get("tone_curve")
+    if isinstance(tone, str) and tone.lower().endswith(".json"):
+        path = Path(tone).expanduser()
+        if not path.is_absolute():
+            out["tone_curve"] = str(base_dir / path)
+    return out
 
 
 def parse_device_config(doc: Mapping[str, Any], base_dir: Path | None = None) -> CellDeviceConfig:

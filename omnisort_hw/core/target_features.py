@@ -62,6 +62,7 @@ from omnisort_hw.core.features import (
     WallFeatures,
 )
 from omnisort_hw.core.laser_stripe import check_bgr, laser_stripe_points
+from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.errors import FeatureNotFoundError, InputError
 
 KINDS = ("two-sided", "three-sided")
@@ -185,20 +186,28 @@ def _arc(a: np.ndarray, b: np.ndarray, normal: np.ndarray, t: np.ndarray) -> np.
 # ---- markers ---------------------------------------------------------------------------------
 
 
-def _blueness(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Blue saturation: (b - min(r, g)) where blue is the strongest channel (else 0), as float32,
-    and its ratio to the blue level (b + 8). The ratio separates saturated markers from the
-    grey-blue floor whatever the lighting; the difference mixes linearly at a marker's edge."""
+def _blueness(image: np.ndarray) -> np.ndarray:
+    """Blue saturation: (b - min(r, g)) where blue is the strongest channel (else 0), over the
+    blue level (b + 8), float32. The ratio separates saturated markers from the grey-blue
+    floor whatever the lighting (it finds markers; their coverage is `_linear_blueness`)."""
     b, g, r = (c.astype(np.float32) for c in cv2.split(image))
     blue = np.where(b > np.maximum(r, g) + 8.0, b - np.minimum(r, g), 0.0)
-    return blue, blue / (b + 8.0)
+    return blue / (b + 8.0)
 
 
-def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
-    """Blue marker blobs of the image, with sub-pixel centres (see the module docstring)."""
+def _linear_blueness(patch: np.ndarray, tone: ToneCurve) -> np.ndarray:
+    """b - min(r, g) in linear light (>= 0): proportional to a marker's coverage of a pixel,
+    which the encoded difference is not (the tone curve bends it)."""
+    lin = tone.linearise(patch)
+    return np.maximum(lin[..., 0] - np.minimum(lin[..., 1], lin[..., 2]), 0.0)
+
+
+def find_blue_markers(image_bgr: np.ndarray, tone: ToneCurve = SRGB) -> list[Blob]:
+    """Blue marker blobs of the image, with sub-pixel centres (see the module docstring);
+    `tone` is the camera's tone curve (coverage is measured in linear light)."""
     img = check_bgr(image_bgr)
     h, w = img.shape[:2]
-    blue, ratio = _blueness(img)
+    ratio = _blueness(img)
     background = float(np.percentile(ratio[::4, ::4], 99))
     above = ratio[ratio > background]
     if above.size < 8:
@@ -246,7 +255,7 @@ def find_blue_markers(image_bgr: np.ndarray) -> list[Blob]:
         own = np.isin(labels[ya:yb, xa:xb], labels_of).astype(np.uint8)
         zone = cv2.dilate(own, np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)).astype(bool)
         ring = zone & ~cv2.dilate(own, np.ones((3, 3), np.uint8)).astype(bool)
-        patch = blue[ya:yb, xa:xb]
+        patch = _linear_blueness(img[ya:yb, xa:xb], tone)
         level = float(np.percentile(patch[own.astype(bool)], 80))
         base = max(float(np.median(patch[ring])) if ring.any() else 0.0, 0.0)
         if level <= base:
@@ -380,6 +389,7 @@ def assign_markers(
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
+    """Encoded grey levels (for face brightness checks, not for locating edges)."""
     return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(np.float32)
 
 
@@ -665,18 +675,20 @@ def _check_far_end_open(
 
 
 def extract_target_features(
-    image_bgr: np.ndarray, model: OcamModel, kind: str = "two-sided"
+    image_bgr: np.ndarray, model: OcamModel, kind: str = "two-sided", tone: ToneCurve = SRGB
 ) -> TargetFeatures:
-    """Markers, borders, wall/floor lines and laser points of every wall of the target."""
+    """Markers, borders, wall/floor lines and laser points of every wall of the target.
+    `tone`: the camera's tone curve; edges and marker coverage are measured in linear light."""
     if kind not in KINDS:
         raise InputError(f"target kind must be one of {', '.join(KINDS)}, got {kind!r}")
     image = check_image(image_bgr, model)
-    walls_m, used = assign_markers(find_blue_markers(image), model, kind)
+    walls_m, used = assign_markers(find_blue_markers(image, tone), model, kind)
     gray = _gray(image)
+    light = tone.luminance(image)
     stripe = _stripe(image, model)
     walls: dict[str, WallFeatures] = {}
     for side in SIDES:
-        walls[side] = _wall(gray, model, side, walls_m[side], ("near", "far"), stripe, used)
+        walls[side] = _wall(light, model, side, walls_m[side], ("near", "far"), stripe, used)
     left, right = walls_m["left"], walls_m["right"]
     own = walls_m.get("far", {})
     corners = own or {
@@ -689,7 +701,7 @@ def extract_target_features(
         _check_far_end_open(gray, model, walls_m, corners, used)
     else:
         try:
-            far = _wall(gray, model, "far", corners, ("near", "far"), stripe, used)
+            far = _wall(light, model, "far", corners, ("near", "far"), stripe, used)
         except FeatureNotFoundError as exc:
             raise FeatureNotFoundError(f"{exc} (is this the two-sided target?)") from None
         if not own:

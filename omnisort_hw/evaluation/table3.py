@@ -26,6 +26,7 @@ import numpy as np
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS, SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane
+from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import InputError, OmnisortError
 
 # Row of the table -> (method, image it calibrates from). `joint_three_sided` is the joint
@@ -151,7 +152,12 @@ def mapping_errors(calib: SystemCalibration, truth_sys: SystemCalibration) -> np
 
 
 def _calibrate(
-    method: str, scene: str, image_path: Path, model: OcamModel, truth: dict[str, Any]
+    method: str,
+    scene: str,
+    image_path: Path,
+    model: OcamModel,
+    truth: dict[str, Any],
+    tone: ToneCurve,
 ) -> Any:
     from omnisort_hw.pipeline.extrinsics import calibrate_system, read_image
 
@@ -162,14 +168,27 @@ def _calibrate(
         board = tuple(boards[0]["inner_corners"]) if boards else (9, 6)
         square = float(boards[0]["square_mm"]) if boards else 97.0
         return calibrate_system(
-            image, model, target, method, board=board, square_mm=square, source=str(image_path)
+            image,
+            model,
+            target,
+            method,
+            board=board,
+            square_mm=square,
+            source=str(image_path),
+            tone=tone,
         )
     sep = float(truth["target"]["separation_mm"])
-    return calibrate_system(image, model, target, method, separation_mm=sep, source=str(image_path))
+    return calibrate_system(
+        image, model, target, method, separation_mm=sep, source=str(image_path), tone=tone
+    )
 
 
-def evaluate_dataset(data_dir: str | Path, progress: bool = True) -> dict[str, Any]:
-    """Run every method on every configuration of a rendered dataset; return the summary."""
+def evaluate_dataset(
+    data_dir: str | Path, progress: bool = True, tone: ToneCurve | None = None
+) -> dict[str, Any]:
+    """Run every method on every configuration of a rendered dataset; return the summary.
+    `tone`: the tone curve the extraction assumes; by default the simulated camera's, as the
+    dataset records it (datasets from before the record were rendered linear)."""
     from tqdm import tqdm
 
     root = Path(data_dir)
@@ -177,6 +196,7 @@ def evaluate_dataset(data_dir: str | Path, progress: bool = True) -> dict[str, A
     if not index_path.is_file():
         raise InputError(f"{index_path}: no dataset here (render one with omnisort sim dataset)")
     index = json.loads(index_path.read_text())
+    tone = tone or ToneCurve.parse(index.get("tone_curve", "linear"))
     stats = {m: MethodStats() for m in RUNS}
     mapping: list[np.ndarray] = []
     configs = index["configs"]
@@ -193,7 +213,7 @@ def evaluate_dataset(data_dir: str | Path, progress: bool = True) -> dict[str, A
             model = OcamModel.from_dict(truth["camera"], source=str(folder / scene))
             t0 = time.perf_counter()
             try:
-                calib = _calibrate(method, scene, folder / f"{scene}.png", model, truth)
+                calib = _calibrate(method, scene, folder / f"{scene}.png", model, truth, tone)
             except OmnisortError as exc:
                 stats[row].failures.append(f"{cfg['folder']}: {exc}")
                 bar.update(1)

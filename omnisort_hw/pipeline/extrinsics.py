@@ -17,6 +17,7 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.errors import InputError
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -63,8 +64,10 @@ def calibrate_system(
     square_mm: float = 97.0,
     source: str = "image",
     log: RunLog = NullLog,
+    tone: ToneCurve = SRGB,
 ) -> SystemCalibration:
-    """Extract the target's features from one image and run the chosen method on them."""
+    """Extract the target's features from one image and run the chosen method on them;
+    `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise)."""
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
     from omnisort_hw.core.extrinsics.method2 import calibrate_method2
@@ -90,7 +93,7 @@ def calibrate_system(
             log.points2d(f"extrinsics/image/{name}_laser", b.laser_px, color=(255, 0, 0), radius=1)
         calib = calibrate_method2(boards, model)
     else:
-        features = extract_target_features(image, model, kind=target)
+        features = extract_target_features(image, model, kind=target, tone=tone)
         for name, wall in features.walls.items():
             log.points2d(
                 f"extrinsics/image/{name}_border", wall.border_px, color=(255, 255, 0), radius=1

@@ -30,12 +30,19 @@ class LaserMap:
     def finite_points_S(self) -> np.ndarray:
         return self.points_S[np.all(np.isfinite(self.points_S), axis=1)]
 
-    def summary(self) -> dict[str, Any]:
-        return {
+    def summary(self, with_points: bool = False) -> dict[str, Any]:
+        """Counts and segments; `with_points` adds every point on the plane (S, 0.1 mm) and,
+        in the same order, its pixel (0.01 px)."""
+        finite = np.all(np.isfinite(self.points_S), axis=1)
+        out: dict[str, Any] = {
             "points": len(self.pixels),
-            "points_on_plane": len(self.finite_points_S),
+            "points_on_plane": int(finite.sum()),
             "segments": [seg.summary() for seg in self.segments],
         }
+        if with_points:
+            out["points_S"] = np.round(self.points_S[finite], 1).tolist()
+            out["pixels"] = np.round(self.pixels[finite], 2).tolist()
+        return out
 
 
 def map_laser(
@@ -45,7 +52,7 @@ def map_laser(
     check_image_size(image, calib.model, source)
     pixels = laser_stripe_points(image)
     points = pixels_to_plane(pixels, calib)
-    result = LaserMap(pixels, points, segments(points, calib))
+    result = LaserMap(pixels, points, segments(points, calib, pixels=pixels))
     log.image("map/image", image)
     log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
     log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))

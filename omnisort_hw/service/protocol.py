@@ -200,7 +200,10 @@ COMMANDS: dict[str, Command] = {
         Command(
             "map",
             "job",
-            (_IMAGE, Arg("points", "bool", default=False, help="include the points (S, mm)")),
+            (
+                _IMAGE,
+                Arg("points", "bool", default=False, help="include the points (S, mm), pixels"),
+            ),
             job_state="mapping",
             help="laser map of the scene",
         ),

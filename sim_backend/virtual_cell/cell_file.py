@@ -55,6 +55,7 @@ def cell_file_text(
         "read_timeout_s = 30.0  # a 960 px render of the simulated fisheye takes ~1.5 s",
         "open_timeout_s = 20.0",
         "reconnect_attempts = 3",
+        f'tone_curve = "{scene.render.tone_curve}"  # the curve the virtual cell renders with',
         "",
         "[laser]",
         'backend = "modbus"',

@@ -166,6 +166,7 @@ def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Pat
 def test_blue_cubes_and_bins_are_not_taken_for_markers() -> None:
     """The sorting cell has blue cubes and bins near the walls and the laser low over the
     floor: the calibration image of a real cell, not a bare target."""
+    from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.evaluation.table3 import truth_parameters
     from omnisort_hw.pipeline.extrinsics import calibrate_system
     from sim_backend.scene import load_scene, sized
@@ -174,7 +175,12 @@ def test_blue_cubes_and_bins_are_not_taken_for_markers() -> None:
     image, truth = render_scene(sized(load_scene("sorting"), 960), seed=1)
     model = OcamModel.from_dict(truth["camera"])
     calib = calibrate_system(
-        image, model, "two-sided", "joint", separation_mm=truth["target"]["separation_mm"]
+        image,
+        model,
+        "two-sided",
+        "joint",
+        separation_mm=truth["target"]["separation_mm"],
+        tone=ToneCurve.parse(truth["render"]["tone_curve"]),  # the simulated camera's curve
     )
     want = truth_parameters(truth)
     got = calib.parameters()

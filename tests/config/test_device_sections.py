@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 import sys
 import tomllib
@@ -102,6 +103,9 @@ def test_absent_sections_are_none() -> None:
         ('[arm]\nbackend = "ur_rtde"\nworkspace_max_mm = [1, "a", 3]', "[arm].workspace_max_mm[1]"),
         ('[arm]\nbackend = "ur_rtde"\ngripper_io = "wrist"', "[arm].gripper_io"),
         ("laser = 3", "[laser]"),
+        ('[camera]\nbackend = "v4l2"\ntone_curve = "rec709"', "[camera].tone_curve"),
+        ('[camera]\nbackend = "v4l2"\ntone_curve = "gamma:-1"', "[camera].tone_curve"),
+        ('[camera]\nbackend = "v4l2"\ntone_curve = 2.2', "[camera].tone_curve"),
     ],
 )
 def test_wrong_or_missing_settings_name_the_key(text: str, key: str) -> None:
@@ -118,6 +122,26 @@ def test_recorded_camera_paths_are_relative_to_the_config_file(tmp_path: Path) -
     cfg.write_text('[camera]\nbackend = "v4l2"\napi = "images"\ndevice = "rec/img_%03d.png"\n')
     cell = load_cell_config(cfg).devices
     assert cell.camera.settings.device == str(tmp_path / "rec" / "img_%03d.png")
+
+
+def test_the_camera_tone_curve_is_the_cameras_and_a_table_is_relative_to_the_file(
+    tmp_path: Path,
+) -> None:
+    """sRGB unless the section says otherwise; the camera reports its configured curve; a
+    measured table is read at load, relative to the cell file, and a bad one names the key."""
+    assert parse('[camera]\nbackend = "v4l2"').camera.settings.tone_curve == "srgb"
+    gamma = parse('[camera]\nbackend = "v4l2"\ntone_curve = "gamma:2.2"').camera.settings
+    assert V4L2Camera(gamma).tone_curve == "gamma:2.2"
+    (tmp_path / "curve.json").write_text(json.dumps([(i / 255) ** 2 for i in range(256)]))
+    cfg = tmp_path / "cell.toml"
+    cfg.write_text('[camera]\nbackend = "v4l2"\ntone_curve = "curve.json"\n')
+    assert load_cell_config(cfg).devices.camera.settings.tone_curve == str(tmp_path / "curve.json")
+    (tmp_path / "curve.json").write_text(json.dumps([0.5] * 256))  # not increasing
+    with pytest.raises(
+        ConfigError, match=r"cell\.toml: \[camera\]\.tone_curve: .*increase"
+    ) as info:
+        load_cell_config(cfg)
+    assert info.value.key == "[camera].tone_curve"  # type: ignore[attr-defined]
 
 
 def test_missing_and_malformed_files_are_config_errors(tmp_path: Path) -> None:

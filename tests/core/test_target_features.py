@@ -28,6 +28,7 @@ from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.features import MARKER_NAMES, BoardsFeatures, TargetFeatures
 from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points, laser_stripe_points_stats
+from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.core.target_features import (
     draw_target_features,
     extract_board_features,
@@ -458,7 +459,9 @@ def test_sim_target_features_match_the_truth(sim_renders, scene: str, degraded: 
     image, truth = sim_renders(scene, degraded)
     model = OcamModel.from_dict(truth["camera"])
     kind = scene.replace("_", "-")
-    f = extract_target_features(image, model, kind)
+    # the simulated camera's tone curve, as a real camera's would be configured
+    tone = ToneCurve.parse(truth["render"]["tone_curve"])
+    f = extract_target_features(image, model, kind, tone)
     walls = {"left", "right"} | ({"far"} if kind == "three-sided" else set())
     assert set(f.walls) == walls
     for m in truth["markers_px"]:
