@@ -104,6 +104,10 @@ class StreamReader:
                     return None
                 self._cond.wait(min(remaining, 0.1))
 
-    def stop(self) -> None:
-        """Ask the thread to end (it finishes its current read, then releases the capture)."""
+    def stop(self, wait_s: float = 2.0) -> bool:
+        """Ask the thread to end (it finishes its current read, then releases the capture) and
+        wait up to `wait_s` for it; False when it is still blocked in a read (a stream that
+        sends nothing until the scene changes)."""
         self._stop.set()
+        self._thread.join(wait_s)
+        return not self._thread.is_alive()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from typing import Any
 
@@ -34,4 +35,14 @@ def run(args: argparse.Namespace) -> int:
         stream=sys.stderr,
         format="%(levelname)s %(name)s: %(message)s",
     )
-    return serve(settings, host=args.host, port=args.port)
+    code = serve(settings, host=args.host, port=args.port)
+    if code == 0:
+        # A clean stop: devices closed, logs flushed. A device library may still own a native
+        # thread (an OpenCV stream read that waits for the next frame); the interpreter's
+        # finalization would unwind it through C++ and abort the process (SIGABRT, "exception
+        # not rethrown"), so a clean stop would look like a crash to systemd. Leave without it.
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
+    return code
