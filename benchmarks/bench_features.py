@@ -15,14 +15,10 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec
+from omnisort_hw.core.great_circles import fit_great_circle, great_circle_residuals_px
 from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points
-from omnisort_hw.core.target_features import (
-    extract_board_features,
-    extract_target_features,
-    fit_great_circle,
-    great_circle_residuals_px,
-)
+from omnisort_hw.core.target_features import extract_board_features, extract_target_features
 
 TRUTH_MARKERS = {
     "border.near": "border_near",

@@ -34,7 +34,8 @@ def _measure(frames: int = 5) -> dict[str, Any]:
     import numpy as np
 
     cv2.setNumThreads(1)
-    from sim_backend.render import geometry_for, render_frame
+    from sim_backend.fisheye_atlas import geometry_for
+    from sim_backend.render import render_frame
     from sim_backend.scene import load_scene
     from sim_backend.scene_images import camera_model_for, finish_image
     from sim_backend.truth import build_truth

@@ -16,7 +16,8 @@ from omnisort_hw.core.radiometry import (
     linear_to_srgb,
     srgb_to_linear,
 )
-from omnisort_hw.core.target_features import Blob, find_line_edge
+from omnisort_hw.core.target_edges import find_line_edge
+from omnisort_hw.core.target_markers import Blob
 from omnisort_hw.errors import InputError
 
 

@@ -26,6 +26,7 @@ import pytest
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.features import MARKER_NAMES, BoardsFeatures, TargetFeatures
+from omnisort_hw.core.great_circles import fit_great_circle, great_circle_residuals_px
 from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points, laser_stripe_points_stats
 from omnisort_hw.core.radiometry import ToneCurve
@@ -33,8 +34,6 @@ from omnisort_hw.core.target_features import (
     draw_target_features,
     extract_board_features,
     extract_target_features,
-    fit_great_circle,
-    great_circle_residuals_px,
 )
 from omnisort_hw.errors import FeatureNotFoundError, InputError
 

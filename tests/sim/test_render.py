@@ -15,9 +15,10 @@ import pytest
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import detect_corners
-from sim_backend.render import Shader, geometry_for, remap_flat, render_atlas
+from sim_backend.fisheye_atlas import geometry_for, remap_flat, render_atlas
 from sim_backend.scene import Color, CubeSpec, load_scene, sized
 from sim_backend.scene_images import camera_model_for, png_bytes, render_scene
+from sim_backend.shading import Shader
 from sim_backend.world import SimWorld
 from tests.sim.image_measures import corner_errors, only_board, redness, stripe_offsets
 
