@@ -3,7 +3,7 @@ signed errors against the simulator settings the authors published for those sce
 
 The settings (camera X = -3.5, Y = 1, Z = 2.5 deg; laser X = 0.5, Y = 2 deg; laser distance
 950 mm; walls 1292.4 mm apart; boards of 116 mm squares) are those of the authors' MATLAB
-tutorials, in system.json terms (see ../shared/reference/README.md). They measure bias; nothing
+tutorials, in system.json terms (the reference images' README says how). They measure bias; nothing
 is fitted to them. Used by the extrinsics benchmark and the reference-accuracy test.
 """
 
