@@ -56,9 +56,9 @@ class TestModbusLaserOnVirtualCell(LaserSwitchContract):
         return lambda: laser(vc.host)
 
 
-def _changed(a: np.ndarray, b: np.ndarray) -> int:
+def _changed(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pixels that differ by more than 10 levels in some channel."""
-    return int(np.count_nonzero(np.abs(a.astype(int) - b).max(axis=2) > 10))
+    return np.abs(a.astype(int) - b).max(axis=2) > 10
 
 
 def test_the_laser_switched_over_modbus_is_in_the_next_frame(vc) -> None:
@@ -70,10 +70,12 @@ def test_the_laser_switched_over_modbus_is_in_the_next_frame(vc) -> None:
         sw.off()
         dark_again = cam.grab().image
         assert vc.truth()["laser_on"] is False
-    # the same scene renders to the same JPEG; the faint stripe (1 px at this size) changes
-    # about 30 pixels (a stale frame would change none)
-    assert _changed(dark, dark_again) == 0
-    assert _changed(dark, lit) >= 15
+    # The faint stripe (1 px at this size) changes about 30 pixels. A stale lit frame would
+    # repeat all of them; cubes still settling may move a few pixels anywhere, stripe included,
+    # so at most a fifth of the stripe may differ from the first dark frame.
+    stripe = _changed(dark, lit)
+    assert np.count_nonzero(stripe) >= 15
+    assert np.count_nonzero(stripe & _changed(dark, dark_again)) <= np.count_nonzero(stripe) // 5
 
 
 def test_a_coil_outside_the_module_is_an_exception_reply(vc) -> None:
