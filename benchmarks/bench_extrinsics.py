@@ -12,10 +12,9 @@ import cv2
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.checkerboard import BoardSpec
-from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane, segments
+from omnisort_hw.evaluation.reference_accuracy import RUNS, intrinsics_model
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 
 
@@ -53,22 +52,12 @@ def _speed() -> dict[str, Any]:
 
 def _reference(shared: Path) -> dict[str, Any]:
     ref = shared / "reference" / "unity"
-    views = sorted((ref / "intrinsics").glob("a*.jpg"))
-    if not views:
+    if not sorted((ref / "intrinsics").glob("a*.jpg")):
         return {"reference": f"skipped: no reference images under {ref}"}
-    model = calibrate_images(
-        [(p.name, cv2.imread(str(p))) for p in views], BoardSpec(9, 6, 116.0)
-    ).model
-    runs = {
-        "joint": ("joint", "two_sided_target.png", "two-sided"),
-        "paper": ("paper", "two_sided_target.png", "two-sided"),
-        "method1": ("method1", "three_sided_target.png", "three-sided"),
-        "method2": ("method2", "checkerboard_b.jpg", "checkerboards"),
-        "joint_three_sided": ("joint", "three_sided_target.png", "three-sided"),
-    }
+    model = intrinsics_model(ref)
     params: dict[str, dict[str, float]] = {}
     out: dict[str, Any] = {}
-    for row, (method, name, target) in runs.items():
+    for row, (method, name, target) in RUNS.items():
         image = cv2.imread(str(ref / name))
         try:
             calib = calibrate_system(

@@ -121,23 +121,12 @@ def test_bad_input_fails_clearly_and_writes_nothing(
 
 @pytest.mark.reference
 def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Path) -> None:
-    from omnisort_hw.core.checkerboard import BoardSpec
-    from omnisort_hw.core.intrinsics import calibrate_images
+    from omnisort_hw.evaluation.reference_accuracy import RUNS, intrinsics_model
     from omnisort_hw.pipeline.extrinsics import calibrate_system
 
-    views = sorted((reference_dir / "intrinsics").glob("a*.jpg"))
-    model = calibrate_images(
-        [(p.name, cv2.imread(str(p))) for p in views], BoardSpec(9, 6, 116.0)
-    ).model
-    runs = {
-        "joint": ("joint", "two_sided_target.png", "two-sided"),
-        "paper": ("paper", "two_sided_target.png", "two-sided"),
-        "method1": ("method1", "three_sided_target.png", "three-sided"),
-        "method2": ("method2", "checkerboard_b.jpg", "checkerboards"),
-        "joint_three_sided": ("joint", "three_sided_target.png", "three-sided"),
-    }
+    model = intrinsics_model(reference_dir)
     params = {}
-    for row, (method, name, target) in runs.items():
+    for row, (method, name, target) in RUNS.items():
         calib = calibrate_system(
             cv2.imread(str(reference_dir / name)),
             model,
