@@ -22,6 +22,7 @@ class RunLog:
     def __init__(self, path: str | Path | None, application_id: str = "omnisort") -> None:
         self.path: Path | None = None
         self._application_id = application_id
+        self._stream: Any = None
         self._rec: Any = None
         self._rr: Any = None
         self._swap = threading.Lock()
@@ -30,24 +31,31 @@ class RunLog:
     def reopen(self, path: str | Path | None) -> None:
         """Close the current file and go on in `path` (None: stop writing), in place, so every
         holder of this RunLog follows. Raises OSError when `path`'s folder cannot be made; this
-        log is then off (no file)."""
+        log is then off (no file).
+
+        One rerun recording stream serves every file of this RunLog: only its file sink is
+        swapped. The rerun SDK keeps memory for each stream it ever created (about 0.5 MB plus
+        much of what was logged to it), so a stream per file grew a long-running service
+        without bound."""
         with self._swap:
             old, self._rec, self.path = self._rec, None, None
             if old is not None:
                 try:
                     old.flush()
                 finally:
-                    old.disconnect()
+                    if path is None:
+                        old.disconnect()
             if path is None:
                 return
-            import rerun as rr
-
             new_path = Path(path)
             new_path.parent.mkdir(parents=True, exist_ok=True)
-            self._rr = rr
-            rec = rr.RecordingStream(self._application_id, recording_id=uuid.uuid4())
-            rec.save(str(new_path))
-            self._rec, self.path = rec, new_path
+            if self._stream is None:
+                import rerun as rr
+
+                self._rr = rr
+                self._stream = rr.RecordingStream(self._application_id, recording_id=uuid.uuid4())
+            self._stream.save(str(new_path))
+            self._rec, self.path = self._stream, new_path
 
     @property
     def enabled(self) -> bool:
