@@ -12,6 +12,7 @@ import contextlib
 import logging
 import os
 import threading
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -94,6 +95,60 @@ def new_run_path(log_dir: str | Path, prefix: str = "omnisort") -> Path:
     return Path(log_dir) / f"{prefix}-{stamp}-{os.getpid()}.rrd"
 
 
+SEALING_SUFFIX = ".sealing"
+
+
+def seal_unfinished_rrd(path: str | Path) -> bool:
+    """Rewrite an `.rrd` that a killed process left without its footer (every chunk kept, same
+    recording), atomically and with its times kept; True when it was sealed. A finished file is
+    left alone. The file is read by rerun's own reader, which warns about a missing footer."""
+    from rerun.chunk import RrdReader
+
+    src = Path(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        reader = RrdReader(str(src))
+    if not any("footer" in str(w.message) for w in caught):
+        return False
+    stores = reader.recordings()
+    if not stores:
+        return False
+    import rerun as rr
+
+    tmp = src.with_name(src.name + SEALING_SUFFIX)
+    st = src.stat()
+    try:
+        rec = rr.RecordingStream(stores[0].application_id, recording_id=stores[0].recording_id)
+        rec.save(str(tmp))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec.send_chunks(reader.stream())
+        rec.flush()
+        rec.disconnect()
+        os.utime(tmp, ns=(st.st_atime_ns, st.st_mtime_ns))
+        os.replace(tmp, src)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return True
+
+
+def seal_unfinished_rrds(log_dir: str | Path) -> list[Path]:
+    """Seal every unfinished `.rrd` of `log_dir` (see `seal_unfinished_rrd`) and drop the
+    leftovers of a sealing that was itself cut off; never raises. The sealed files."""
+    folder = Path(log_dir)
+    for leftover in folder.glob(RRD_GLOB + SEALING_SUFFIX):
+        leftover.unlink(missing_ok=True)
+    sealed = []
+    for p in rrd_files(folder):
+        try:
+            if seal_unfinished_rrd(p):
+                sealed.append(p)
+                log.warning("run log %s was cut off (no footer); sealed it", p)
+        except Exception as exc:
+            log.warning("could not seal the cut-off run log %s: %s", p, exc)
+    return sealed
+
+
 @dataclass(frozen=True)
 class LogHealth:
     """What `status` says about the run log: ok, or the problem and since when."""
@@ -137,8 +192,10 @@ class RunLogRotator:
         self._dir_id: tuple[int, int] | None = None
         self._problem: str | None = None
         self._since: str | None = None
+        self.sealed: list[Path] = []
         if self.log_dir is not None:
             self.log_dir.mkdir(parents=True, exist_ok=True)
+            self.sealed = seal_unfinished_rrds(self.log_dir)
             self._open("started")
 
     @property

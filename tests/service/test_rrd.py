@@ -98,10 +98,78 @@ def test_rolling_the_run_log_keeps_memory_flat(tmp_path: Path) -> None:
     rolls = 80
     out = subprocess.run(
         [sys.executable, "-c", _ROLL_SCRIPT, str(tmp_path), str(rolls)],
-        capture_output=True, text=True, timeout=240, check=True,
+        capture_output=True,
+        text=True,
+        timeout=240,
+        check=True,
     )
     start, end = (float(v) for v in out.stdout.split())
     assert end - start < 40.0, f"RSS grew {end - start:.1f} MB over {rolls - 5} rolls"
     last = tmp_path / f"run-{rolls - 1:03d}.rrd"
     assert "/camera/image" in entity_paths(last)
     assert "/camera/image" in entity_paths(tmp_path / "run-000.rrd")
+
+
+_KILLED_SCRIPT = """
+import os, signal, sys
+import numpy as np
+from omnisort_hw.runlog import RunLog
+
+log = RunLog(sys.argv[1])
+for step in range(10):
+    log.set_step("frame", step)
+    log.image("camera/image", np.full((60, 80, 3), step, np.uint8))
+    log.scalar("progress", step)
+log._rec.flush()
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def _has_footer(path: Path) -> bool:
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        RrdReader(str(path))
+    return not any("footer" in str(w.message) for w in caught)
+
+
+def test_a_run_log_cut_off_by_sigkill_is_sealed_at_the_next_start(tmp_path: Path) -> None:
+    """A killed service cannot write its `.rrd` footer; the next start rewrites that file with
+    one, keeping every chunk and the file's time (rotation orders files by it)."""
+    import subprocess
+    import sys
+
+    killed = tmp_path / "omnisort-20260101T000000.000000Z-1.rrd"
+    proc = subprocess.run([sys.executable, "-c", _KILLED_SCRIPT, str(killed)], timeout=120)
+    assert proc.returncode == -9
+    assert not _has_footer(killed)
+    before = killed.stat().st_mtime_ns
+    rows_before = _rows(killed, "/camera/image")
+    rot = RunLogRotator(tmp_path, keep=10)
+    try:
+        assert rot.sealed == [killed]
+        assert _has_footer(killed)
+        assert killed.stat().st_mtime_ns == before
+        assert _rows(killed, "/camera/image") == rows_before == 10
+        assert not list(tmp_path.glob("*.sealing"))
+        assert rot.path != killed and rot.path is not None
+    finally:
+        rot.close()
+    again = RunLogRotator(tmp_path, keep=10)  # finished files are left alone
+    again.close()
+    assert again.sealed == []
+
+
+def _rows(path: Path, entity: str) -> int:
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return sum(
+            c.num_rows for c in RrdReader(str(path)).stream() if str(c.entity_path) == entity
+        )
