@@ -14,7 +14,13 @@ import numpy as np
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane, segments
-from omnisort_hw.evaluation.reference_accuracy import RUNS, intrinsics_model
+from omnisort_hw.evaluation.reference_accuracy import (
+    BOARD,
+    RUNS,
+    SEPARATION_MM,
+    SQUARE_MM,
+    intrinsics_model,
+)
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 
 
@@ -61,7 +67,13 @@ def _reference(shared: Path) -> dict[str, Any]:
         image = cv2.imread(str(ref / name))
         try:
             calib = calibrate_system(
-                image, model, target, method, separation_mm=1292.4, board=(9, 6), square_mm=97.0
+                image,
+                model,
+                target,
+                method,
+                separation_mm=SEPARATION_MM,
+                board=BOARD,
+                square_mm=SQUARE_MM,
             )
         except Exception as exc:
             out[f"reference_{row}"] = f"failed: {exc}"

@@ -121,7 +121,13 @@ def test_bad_input_fails_clearly_and_writes_nothing(
 
 @pytest.mark.reference
 def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Path) -> None:
-    from omnisort_hw.evaluation.reference_accuracy import RUNS, intrinsics_model
+    from omnisort_hw.evaluation.reference_accuracy import (
+        BOARD,
+        RUNS,
+        SEPARATION_MM,
+        SQUARE_MM,
+        intrinsics_model,
+    )
     from omnisort_hw.pipeline.extrinsics import calibrate_system
 
     model = intrinsics_model(reference_dir)
@@ -132,9 +138,9 @@ def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Pat
             model,
             target,
             method,
-            separation_mm=1292.4,
-            board=(9, 6),
-            square_mm=97.0,
+            separation_mm=SEPARATION_MM,
+            board=BOARD,
+            square_mm=SQUARE_MM,
         )
         params[row] = calib.parameters()
     for key in (
