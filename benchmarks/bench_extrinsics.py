@@ -14,13 +14,7 @@ import numpy as np
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane, segments
-from omnisort_hw.evaluation.reference_accuracy import (
-    BOARD,
-    RUNS,
-    SEPARATION_MM,
-    SQUARE_MM,
-    intrinsics_model,
-)
+from omnisort_hw.evaluation.reference_accuracy import intrinsics_model, run_reference
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 
 
@@ -60,30 +54,13 @@ def _reference(shared: Path) -> dict[str, Any]:
     ref = shared / "reference" / "unity"
     if not sorted((ref / "intrinsics").glob("a*.jpg")):
         return {"reference": f"skipped: no reference images under {ref}"}
-    model = intrinsics_model(ref)
-    params: dict[str, dict[str, float]] = {}
-    out: dict[str, Any] = {}
-    for row, (method, name, target) in RUNS.items():
-        image = cv2.imread(str(ref / name))
-        try:
-            calib = calibrate_system(
-                image,
-                model,
-                target,
-                method,
-                separation_mm=SEPARATION_MM,
-                board=BOARD,
-                square_mm=SQUARE_MM,
-            )
-        except Exception as exc:
-            out[f"reference_{row}"] = f"failed: {exc}"
-            continue
-        params[row] = calib.parameters()
-        out[f"reference_{row}"] = {k: round(v, 3) for k, v in params[row].items()}
-    if len(params) > 1:
-        keys = [k for k in next(iter(params.values())) if k.endswith("_deg")]
-        spread = {k: round(float(np.ptp([p[k] for p in params.values()])), 3) for k in keys}
-        out["reference_max_disagreement_deg"] = spread
+    params = {row: r.parameters for row, r in run_reference(ref, intrinsics_model(ref)).items()}
+    out: dict[str, Any] = {
+        f"reference_{row}": {k: round(v, 3) for k, v in p.items()} for row, p in params.items()
+    }
+    keys = [k for k in next(iter(params.values())) if k.endswith("_deg")]
+    spread = {k: round(float(np.ptp([p[k] for p in params.values()])), 3) for k in keys}
+    out["reference_max_disagreement_deg"] = spread
     return out
 
 

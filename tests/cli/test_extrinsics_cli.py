@@ -121,28 +121,10 @@ def test_bad_input_fails_clearly_and_writes_nothing(
 
 @pytest.mark.reference
 def test_every_method_on_the_reference_images(reference_dir: Path, tmp_path: Path) -> None:
-    from omnisort_hw.evaluation.reference_accuracy import (
-        BOARD,
-        RUNS,
-        SEPARATION_MM,
-        SQUARE_MM,
-        intrinsics_model,
-    )
-    from omnisort_hw.pipeline.extrinsics import calibrate_system
+    from omnisort_hw.evaluation.reference_accuracy import intrinsics_model, run_reference
 
-    model = intrinsics_model(reference_dir)
-    params = {}
-    for row, (method, name, target) in RUNS.items():
-        calib = calibrate_system(
-            cv2.imread(str(reference_dir / name)),
-            model,
-            target,
-            method,
-            separation_mm=SEPARATION_MM,
-            board=BOARD,
-            square_mm=SQUARE_MM,
-        )
-        params[row] = calib.parameters()
+    runs = run_reference(reference_dir, intrinsics_model(reference_dir))
+    params = {row: r.parameters for row, r in runs.items()}
     for key in (
         "cam_roll_deg",
         "cam_pitch_deg",
