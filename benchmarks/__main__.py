@@ -40,8 +40,7 @@ def main() -> int:
     if args.only:
         names = [n for n in names if n.removeprefix("bench_") in args.only]
     out_path = HERE / "results.json"
-    results: dict[str, Any] = json.loads(out_path.read_text()) if out_path.exists() else {}
-    results["machine"] = machine()
+    results: dict[str, Any] = {"machine": machine()}
     failed = 0
     for name in names:
         module = importlib.import_module(f"benchmarks.{name}")
@@ -58,7 +57,12 @@ def main() -> int:
         results[name.removeprefix("bench_")] = figures
         for key, value in figures.items():
             print(f"   {key:<44} {value}", flush=True)
-    out_path.write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
+    # Read again just before writing: another run may have saved its figures meanwhile.
+    saved: dict[str, Any] = json.loads(out_path.read_text()) if out_path.exists() else {}
+    saved.update(results)
+    tmp = out_path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(saved, indent=2, sort_keys=True) + "\n")
+    tmp.replace(out_path)
     print(f"figures saved to {out_path}")
     return 1 if failed else 0
 

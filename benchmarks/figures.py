@@ -362,6 +362,33 @@ def stream_stripe(r: dict[str, Any]) -> str:
     return _table(["stream", "stripe points", "median", "p95", "largest pixel difference"], rows)
 
 
+def soak(r: dict[str, Any]) -> str:
+    s = r["soak"]
+    rows = [
+        ["length", f"{s['soak_s'] / 60:.0f} min"],
+        [
+            "jobs / commands / `status` polls",
+            f"{s['jobs']:,} / {s['work_requests']:,} / {s['status_requests']:,}",
+        ],
+        ["abuse rounds", s["abuse_rounds"]],
+        ["errors (not ok, or no reply)", s["errors"]],
+        [
+            "RSS, second tenth -> last tenth",
+            f"{s['rss_early_mb']:.1f} -> {s['rss_late_mb']:.1f} MB ({s['rss_drift_pct']:+.2f} %)",
+        ],
+        ["open descriptors", "–".join(str(v) for v in s["fds_min_max"])],
+        [
+            "largest `.rrd` / log directory",
+            f"{s['rrd_largest_mb']:.2f} MB (limit "
+            f"{s['rrd_file_limit_mb']}) / {s['rrd_dir_max_mb']:.1f} MB (limit "
+            f"{s['rrd_total_limit_mb']})",
+        ],
+        ["`status` p99 / max", f"{s['status_p99_ms']:.0f} / {s['status_max_ms']:.0f} ms"],
+        ["exit code on SIGTERM", s["service_exit_code"]],
+    ]
+    return _table(["soak", "measured"], rows) + f"\nMachine: {_machine(r)}.\n"
+
+
 def summary(r: dict[str, Any]) -> str:
     t, e, i, s, k = r["table3"], r["extrinsics"], r["intrinsics"], r["sorting"], r["kinematics"]
     vc = r["virtual_cell"]
@@ -399,6 +426,13 @@ def summary(r: dict[str, Any]) -> str:
             "[sorting](docs/sorting.md)",
         ],
         [
+            f"`omnisort serve` soak, {r['soak']['soak_s'] / 60:.0f} min of jobs and abuse",
+            f"{r['soak']['errors']} errors, RSS {r['soak']['rss_drift_pct']:+.1f} %, "
+            f"descriptors {'–'.join(str(v) for v in r['soak']['fds_min_max'])}, largest `.rrd` "
+            f"{r['soak']['rrd_largest_mb']:.1f} MB (limit {r['soak']['rrd_file_limit_mb']})",
+            "[service](docs/service.md)",
+        ],
+        [
             "the real drivers on the virtual cell: `omnisort serve` sorts",
             f"{vc['sort_cubes_in_their_bin']}/{vc['sort_cubes']} in their bin, "
             f"{vc['sort_collisions']} collisions, {vc['sort_seconds_per_pick']:.1f} s per pick",
@@ -419,6 +453,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "sorting": sorting,
     "service": service,
     "virtual_cell": virtual_cell,
+    "soak": soak,
     "stream_stripe": stream_stripe,
 }
 
