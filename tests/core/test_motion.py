@@ -404,7 +404,8 @@ def test_broad_phase_gives_the_answer_of_testing_every_sphere() -> None:
     centres = rng.uniform([-700, -700, 0], [700, 700, 700], (12, 3))
     half = rng.uniform(20, 150, (12, 3))
     obstacles: list[Box | FloorPlane] = [
-        Box(tuple(c - h), tuple(c + h), f"box {i}") for i, (c, h) in enumerate(zip(centres, half))
+        Box(tuple(centres[i] - half[i]), tuple(centres[i] + half[i]), f"box {i}")
+        for i in range(len(centres))
     ]
     obstacles.insert(5, FloorPlane(np.eye(4), "floor"))
     tool = (Capsule(6, (0.0, -75.0, 60.0), (0.0, 75.0, 60.0), 38.0, "gripper"),)
