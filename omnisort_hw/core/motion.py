@@ -654,9 +654,8 @@ def _hits(
                 hit[si[t_i], sph[t_i, n_i], bi[t_i]] = True
             if low.size:
                 height = pts[low] @ normals.T - offsets
-                hit[low, :, len(boxes) :] = (height < r[None, :, None]) & ~sp.static[
-                    None, :, None
-                ]
+                above = ~sp.static[None, :, None]  # static capsules stand on floors
+                hit[low, :, len(boxes) :] = (height < r[None, :, None]) & above
         flat = hit.reshape(c, -1)
         first = np.argmax(flat, axis=1)
         sel = slice(start, start + c)
