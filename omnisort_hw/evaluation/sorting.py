@@ -101,6 +101,11 @@ SUMMARY_KEYS = (
     "max_registration_error_mm",
     "mean_registration_error_deg",
     "motion_s_per_pick",
+    "wait_s_per_pick",
+    "gripper_s_per_pick",
+    "lower_bound_s_per_pick",
+    "picks_per_minute",
+    "plan_ms_per_pick",
     "wall_s_per_pick",
 )
 
@@ -147,7 +152,16 @@ def evaluate_sorting(
                 calib = perturb_calibration(calib, rng)
             verifier = SimVerifier(arm)
             verifier.start()
-            sorter = Sorter(cam, arm, laser, MemoryCalibration(calib), cfg, reg_cfg, log)
+            sorter = Sorter(
+                cam,
+                arm,
+                laser,
+                MemoryCalibration(calib),
+                cfg,
+                reg_cfg,
+                log,
+                clock=lambda cell=cell: cell.world.sim_time,  # the arm's time, not the PC's
+            )
             t0 = time.perf_counter()
             report = sorter.run(
                 register=True, on_located=verifier.on_located, on_done=verifier.on_done
@@ -167,6 +181,7 @@ def evaluate_sorting(
                 registration_error_mm=reg_mm,
                 registration_error_deg=reg_deg,
                 motion_s_per_pick=tot["motion_s_per_pick"],
+                cycle=report.extra.get("cycle", {}),
                 wall_s_per_pick=wall / picks,
                 skipped=[
                     o.reason for o in report.outcomes if o.status in ("skipped", "missed", "failed")
@@ -214,7 +229,17 @@ def summarize_sorting(
     errs_b = [e for r in rows for e in r.get("position_errors_B_mm", [])]
     reg = [r["registration_error_mm"] for r in rows if "registration_error_mm" in r]
     reg_deg = [r["registration_error_deg"] for r in rows if "registration_error_deg" in r]
-    per_pick = [r["motion_s_per_pick"] for r in rows if r.get("motion_s_per_pick")]
+    cyc = [r["cycle"] for r in rows if r.get("cycle", {}).get("picks")]
+    picks = sum(c["picks"] for c in cyc)
+
+    def per_pick(key: str) -> float | None:
+        return round(sum(c[key] for c in cyc) / picks, 4) if picks else None
+
+    motion, wait, grip = per_pick("motion_s"), per_pick("wait_s"), per_pick("gripper_s")
+    parts = (motion, wait, grip)
+    cycle_s = sum(parts) if all(v is not None for v in parts) else None  # type: ignore[arg-type]
+    plan_ms = [c["plan_ms_mean"] * c["plans"] for c in cyc if c.get("plan_ms_mean") is not None]
+    n_plans = sum(c["plans"] for c in cyc if c.get("plan_ms_mean") is not None)
     wall_pick = [r["wall_s_per_pick"] for r in rows if "wall_s_per_pick" in r]
 
     def mean(v: Sequence[float]) -> float | None:
@@ -244,7 +269,15 @@ def summarize_sorting(
         "mean_registration_error_mm": mean(reg),
         "max_registration_error_mm": pmax(reg),
         "mean_registration_error_deg": mean(reg_deg),
-        "motion_s_per_pick": mean(per_pick),
+        "motion_s_per_pick": motion,
+        "wait_s_per_pick": wait,
+        "gripper_s_per_pick": grip,
+        "lower_bound_s_per_pick": per_pick("planned_s"),
+        "cycle_s_per_pick": round(cycle_s, 4) if cycle_s else None,
+        "picks_per_minute": round(60.0 / cycle_s, 2) if cycle_s else None,
+        "plan_ms_per_pick": round(sum(plan_ms) / n_plans, 1) if n_plans else None,
+        "plan_ms_max": max((c["plan_ms_max"] for c in cyc if c.get("plan_ms_max")), default=None),
+        "locate_s_per_pick": per_pick("locate_s"),
         "wall_s_per_pick": mean(wall_pick),
         "wall_s": round(wall_s, 1),
         "stage_wall_s_per_scene": timings,
