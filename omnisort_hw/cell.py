@@ -587,7 +587,9 @@ class Cell:
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "calibration")
         separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
-        calib = calibrate_system(
+        calib = self.compute.call_logged(
+            calibrate_system,
+            self.runlog,
             img,
             model,
             target,
@@ -596,8 +598,9 @@ class Cell:
             board=_board_size(board or "9x6"),
             square_mm=square_mm or 97.0,
             source=source,
-            log=self.runlog,
             tone=tone,
+            cancel=cancel,
+            what="calibration",
         )
         _raise_if_cancelled(cancel, "calibration")
         saved = self.store.save_system(system_payload(calib, record))

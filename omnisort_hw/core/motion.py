@@ -58,6 +58,8 @@ _MAX_PATH_SAMPLES = 200_000
 # Joint derivatives along a linear path are estimated on the path grid; planning against
 # 99 % of the joint limits absorbs the estimate's error (< 0.01 % at the default grid).
 _GRID_HEADROOM = 0.99
+# Samples per chunk when only the first collision is wanted (a path that hits early stops early).
+_FIRST_HIT_CHUNK = 64
 
 
 class CollisionError(MotionRefusedError):
@@ -599,8 +601,10 @@ def _hits(
     obstacles: Sequence[Box | FloorPlane],
     capsules: Sequence[Capsule],
     margin_mm: float,
+    first_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per sample (M,): any hit, and the first hit's capsule and obstacle index (-1 if none).
+    With `first_only`, samples after the chunk of the first hit are left unchecked (False).
 
     Boxes are tested in two stages: one bounding sphere per capsule first, then the covering
     spheres only at the samples where a bounding sphere reached a box (the same answer as
@@ -625,7 +629,11 @@ def _hits(
     b_r = b_radius + margin_mm
     moving = np.array([not k.static for k in capsules])  # static capsules stand on floors
     chunk = max(1, 2**20 // max(1, sp.radius.size * max(1, len(boxes))))
+    if first_only:
+        chunk = min(chunk, _FIRST_HIT_CHUNK)
     for start in range(0, m, chunk):
+        if first_only and any_hit[:start].any():
+            break
         frames = joint_frames(model, q[start : start + chunk])  # (c, 7, 4, 4)
         c = frames.shape[0]
         hit = np.zeros((c, sp.radius.size, order.size), dtype=bool)
@@ -704,7 +712,7 @@ def find_collision(
     dense = np.concatenate([q[:1], q[seg] + frac[:, None] * step[seg]])
     owner_sample = np.concatenate([[0], seg + 1])
     capsules = (*arm_capsules(model), *tool_capsules)
-    hit, who, what = _hits(model, dense, obstacles, capsules, margin_mm)
+    hit, who, what = _hits(model, dense, obstacles, capsules, margin_mm, first_only=True)
     if not hit.any():
         return None
     i = int(np.argmax(hit))

@@ -25,7 +25,12 @@ from omnisort_hw.runlog import NullLog, RunLog
 from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
 from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
 from sim_backend.scene import BinSpec as SceneBin
-from sim_backend.sort_harness import SimVerifier, sim_registration_config, sim_sort_config
+from sim_backend.sort_harness import (
+    SimVerifier,
+    scene_T_SB,
+    sim_registration_config,
+    sim_sort_config,
+)
 
 EVAL_COLORS = ("red", "green", "blue", "black")
 
@@ -199,6 +204,60 @@ def evaluate_sorting(
         if progress is not None:
             progress(k, row)
     return summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration)
+
+
+def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
+    """Pick planning alone, one thread, on random scenes (true cube poses, no rendering): the
+    picks chained as the sorter chains them (bin -> next cube), each plan's CPU time."""
+    from omnisort_hw.core.cube_location import Cube
+    from omnisort_hw.core.pick_planning import Planner
+
+    rng = np.random.default_rng(seed)
+    base = sized(load_scene("sorting"), 320)
+    cfg0 = SortConfig()
+    times: list[float] = []
+    planned = refused = 0
+    motion = 0.0
+    for _ in range(scenes):
+        scene = random_scene(base, rng, int(rng.integers(3, 7)), home_deg=cfg0.home_deg)
+        cfg = sim_sort_config(scene, cfg0)
+        yaw = scene.robot.base_yaw_deg
+        T_SB = scene_T_SB(scene)
+        T_BS = np.linalg.inv(T_SB)
+        cubes = []
+        for spec in scene.cubes:
+            p_S = np.array([*spec.position_mm, scene.floor_z + spec.size_mm / 2.0])
+            p_B = T_BS[:3, :3] @ p_S + T_BS[:3, 3]
+            y = spec.yaw_deg - yaw
+            cubes.append(
+                Cube(spec.color.name, p_S, p_B, y, y, (0, 0), 0.2, 0.3, 800, 100, 0, (0,) * 4)
+            )
+        planner = Planner(cfg, T_SB)
+        q = np.asarray(cfg.home_deg, float)
+        left = list(cubes)
+        for cube in cubes:
+            left.remove(cube)
+            t0 = time.thread_time()  # CPU time: one core's work, whatever the machine's load
+            plan = planner.plan_pick(cube, left, q, end_home=False)
+            times.append(time.thread_time() - t0)
+            if plan.refused is not None:
+                refused += 1
+                left.append(cube)
+                continue
+            planner.commit(plan)
+            planned += 1
+            motion += plan.duration_s
+            q = plan.end_q
+    ms = 1e3 * np.asarray(times)
+    return {
+        "plans": len(times),
+        "planned": planned,
+        "refused": refused,
+        "plan_ms_mean": round(float(ms.mean()), 1),
+        "plan_ms_p95": round(float(np.percentile(ms, 95)), 1),
+        "plan_ms_max": round(float(ms.max()), 1),
+        "planned_motion_s_per_pick": round(motion / max(1, planned), 3),
+    }
 
 
 def perturb_calibration(calib: SystemCalibration, rng: np.random.Generator) -> SystemCalibration:
