@@ -496,6 +496,25 @@ class Planner:
         plan.refused = f"{kind}: {errors[0]}" if errors else kind
         return plan
 
+    def path_to_any(
+        self,
+        q0: np.ndarray,
+        poses: Sequence[np.ndarray],
+        obstacles: Sequence[Box | FloorPlane],
+        what: str,
+        holding: bool = True,
+    ) -> list[Move]:
+        """A collision-free joint path (holding the cube by default) to any of `poses`, the
+        quickest inverse kinematics goal first (see `_ik_goals`)."""
+        last: MotionRefusedError | None = None
+        for q1 in self._ik_goals(q0, poses):
+            try:
+                return self.plan_joint_via(q0, q1, obstacles, what, holding=holding)
+            except MotionRefusedError as exc:
+                last = exc
+        assert last is not None
+        raise last
+
     def _ik_goals(self, q0: np.ndarray, poses: Sequence[np.ndarray]) -> list[np.ndarray]:
         """Distinct inverse kinematics of `poses` nearest the start, the folded start and
         home, quickest straight joint move from q0 first (a lower bound of any route's time)."""
@@ -552,18 +571,7 @@ class Planner:
         q_lift = plan.lift.q_target
         base = bin_yaw + 90.0 * round((yaw - bin_yaw) / 90.0)
         releases = [tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)]
-        last = None
-        for q_rel in self._ik_goals(q_lift, releases):
-            try:
-                plan.carry = self.plan_joint_via(
-                    q_lift, q_rel, free, "carry the cube to its bin", holding=True
-                )
-                break
-            except MotionRefusedError as exc:
-                last = exc
-        else:
-            assert last is not None
-            raise last
+        plan.carry = self.path_to_any(q_lift, releases, free, "carry the cube to its bin")
         if end_home:
             plan.back = self.plan_joint_via(plan.carry[-1].q_target, self.home, free, "return home")
 
