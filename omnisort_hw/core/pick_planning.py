@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import pairwise
 
 import numpy as np
@@ -213,7 +213,11 @@ class Planner:
         T_SB: np.ndarray,
         joint_limits_deg: np.ndarray | None = None,
         workspace_check: Callable[[np.ndarray], None] | None = None,
+        linear_joint_caps: tuple[float, float] | None = None,
     ) -> None:
+        """`linear_joint_caps`: the joints' speed (deg/s) and acceleration (deg/s^2) a linear
+        move may use, the arm's maxima (a UR's movel is limited by the tool's speed and
+        acceleration and the joints' hardware limits only); default: the joint moves' limits."""
         self.cfg = cfg
         self.T_SB = np.asarray(T_SB, float)
         self.T_BS = invert_pose(self.T_SB)
@@ -233,6 +237,13 @@ class Planner:
             linear_speed_mm_s=cfg.linear_speed_mm_s,
             linear_acc_mm_s2=cfg.linear_accel_mm_s2,
         )
+        self.linear_limits = self.limits
+        if linear_joint_caps is not None:
+            self.linear_limits = replace(
+                self.limits,
+                joint_speed_deg_s=float(linear_joint_caps[0]),
+                joint_acc_deg_s2=float(linear_joint_caps[1]),
+            )
         self.workspace_check = workspace_check
         self.home = np.asarray(cfg.home_deg, float)
         t = cfg.tcp_offset_mm
@@ -414,7 +425,7 @@ class Planner:
         held_on_floor: bool = False,
     ) -> Move:
         """One straight-line TCP move, collision-checked."""
-        traj = plan_linear_move(self.model, q0, T, self.limits, tool=self.tool)
+        traj = plan_linear_move(self.model, q0, T, self.linear_limits, tool=self.tool)
         self._check(traj, obstacles, what, holding, held_on_floor)
         return Move("linear", what, traj.q[-1].copy(), T, traj, self._tcp_path(traj))
 

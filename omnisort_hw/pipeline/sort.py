@@ -263,7 +263,8 @@ class Sorter:
         arm = self._require_arm()
         lim = arm.limits
         joint_lim = np.stack([np.asarray(lim.joint_min_deg), np.asarray(lim.joint_max_deg)], 1)
-        return Planner(self.cfg, T_SB, joint_lim, lim.check_position)
+        caps = (lim.max_joint_speed_deg_s, lim.max_joint_accel_deg_s2)
+        return Planner(self.cfg, T_SB, joint_lim, lim.check_position, linear_joint_caps=caps)
 
     def run(
         self,
