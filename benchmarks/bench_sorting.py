@@ -9,8 +9,14 @@ colour; any contact of the arm or of a held cube with anything else counts as a 
 benchmark fits in a few minutes (OMNISORT_BENCH_SORT_SCENES overrides it). Two calibrations:
 the truth, and the truth with the joint method's typical errors added ("perturbed").
 
-Times: `motion_s_per_pick` is the robot's planned motion time per pick (what a real cell
-would take, grasp and release not included); `wall_s_per_pick` the computer's time per pick
+Cycle (per pick, over all picks): `motion_s_per_pick` is the arm's motion time on the arm's
+clock (the simulator's), `gripper_s_per_pick` its grasps and releases, `wait_s_per_pick` the
+computation the arm waited for (wall time: the first plan of a scene and any plan not ready
+when the previous pick ended; the next pick is planned while the arm moves),
+`lower_bound_s_per_pick` the planned paths' time at the configured limits, `picks_per_minute`
+60 / (motion + gripper + wait). `plan_ms_per_pick` is each plan's CPU time in the run;
+`planning_*` the same planning alone on 8 scenes from the true cube poses (one thread, CPU
+time, so the machine's load does not count). `wall_s_per_pick` is the computer's time per pick
 in the simulator (rendering, registration, location, planning, physics), on this machine.
 """
 
@@ -20,7 +26,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.evaluation.sorting import SUMMARY_KEYS, evaluate_sorting
+from omnisort_hw.evaluation.sorting import SUMMARY_KEYS, evaluate_sorting, planning_only
 
 N_TRUTH = int(os.environ.get("OMNISORT_BENCH_SORT_SCENES", "10"))
 N_PERTURBED = max(1, N_TRUTH // 2)
@@ -38,4 +44,6 @@ def run(shared: Path) -> dict[str, Any]:
         for stage, secs in res["stage_wall_s_per_scene"].items():
             out[f"{name}_stage_s_{stage}"] = secs
         out[f"{name}_not_sorted"] = res["not_sorted"]
+    for key, value in planning_only(scenes=8, seed=7).items():
+        out[f"planning_{key}"] = value
     return out

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from omnisort_hw import fileio
+from omnisort_hw.compute_worker import ComputeWorker
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
@@ -115,6 +116,7 @@ class Cell:
         # The service sets it to its state rules (nothing actuates in `fault`).
         self.actuation_guard: Callable[[], None] | None = None
         self.journal = JobJournal(store.state_dir)
+        self.compute = ComputeWorker()  # CPU-bound jobs run here, not in the service's process
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -207,6 +209,7 @@ class Cell:
         self.runlog.event("service/devices", "closed", level="INFO")
         rl = self._runlog
         rl.close()
+        self.compute.close()
         self._connected = False
         return problems
 
@@ -512,16 +515,18 @@ class Cell:
         """
         from omnisort_hw.core.camera_io import camera_record
         from omnisort_hw.core.checkerboard import BoardSpec
-        from omnisort_hw.pipeline.intrinsics import calibrate_intrinsics, image_files, read_images
+        from omnisort_hw.pipeline.intrinsics import calibrate_folder, image_files
 
         try:
             spec = BoardSpec.parse(board, square_mm)
         except ValueError as exc:
             raise InputError(f"calibrate: board/square_mm: {exc}") from None
-        images = read_images(image_files(folder), cancel)
+        files = image_files(folder)
         rl = self.runlog
-        rl.event("calibration/intrinsics", f"{len(images)} images from {folder}, board {board}")
-        cal = calibrate_intrinsics(images, spec, degree=degree, log=rl)
+        rl.event("calibration/intrinsics", f"{len(files)} images from {folder}, board {board}")
+        cal = self.compute.call_logged(
+            calibrate_folder, rl, files, spec, degree, cancel=cancel, what="calibration"
+        )
         _raise_if_cancelled(cancel, "calibration")
         result, record = cal.result, {**cal.record, "images_folder": str(folder)}
         saved = self.store.save_camera(camera_record(result.model, **record))
@@ -582,7 +587,9 @@ class Cell:
         img, record, source = self._source_image(image)
         _raise_if_cancelled(cancel, "calibration")
         separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
-        calib = calibrate_system(
+        calib = self.compute.call_logged(
+            calibrate_system,
+            self.runlog,
             img,
             model,
             target,
@@ -591,8 +598,9 @@ class Cell:
             board=_board_size(board or "9x6"),
             square_mm=square_mm or 97.0,
             source=source,
-            log=self.runlog,
             tone=tone,
+            cancel=cancel,
+            what="calibration",
         )
         _raise_if_cancelled(cancel, "calibration")
         saved = self.store.save_system(system_payload(calib, record))

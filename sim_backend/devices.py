@@ -501,7 +501,9 @@ class SimArm(_Connectable, Arm):
         v = self._limits.check_rate("linear_speed_mm_s", speed_mm_s, self.linear_speed)
         a = self._limits.check_rate("linear_accel_mm_s2", accel_mm_s2, self.linear_accel)
         self.safety_status().raise_if_stopped(self.name)
-        limits = self._plan_limits(self.joint_speed, self.joint_accel, v, a)
+        # As a UR's movel: the tool's speed and acceleration, the joints' maxima only.
+        lim = self._limits
+        limits = self._plan_limits(lim.max_joint_speed_deg_s, lim.max_joint_accel_deg_s2, v, a)
         try:
             traj = plan_linear_move(self.model, self.joint_positions(), T, limits, tool=self.tool)
         except (MotionRefusedError, ValueError) as exc:

@@ -211,13 +211,9 @@ class SimVerifier:
         report.extra["collision_events"] = list(self.collisions)
 
 
-def sim_sort_config(scene: Any, base: SortConfig | None = None) -> SortConfig:
-    """Bins, obstacles (walls, boom), gripper and region of a simulated scene, on top of `base`
-    (simulated backend only: a real cell lists them in its `[sorting]` section)."""
+def scene_T_SB(scene: Any) -> np.ndarray:
+    """The robot base B in S as the scene places it (yaw about Z, on its pedestal)."""
     robot = scene.robot
-    if robot is None:
-        raise ConfigError(f"scene {scene.name!r} has no [robot]; cannot sort in it")
-    cfg = base or SortConfig()
     yaw = math.radians(robot.base_yaw_deg)
     T_SB = np.eye(4)
     T_SB[:3, :3] = [
@@ -226,7 +222,17 @@ def sim_sort_config(scene: Any, base: SortConfig | None = None) -> SortConfig:
         [0, 0, 1],
     ]
     T_SB[:3, 3] = (robot.base_mm[0], robot.base_mm[1], scene.floor_z + robot.pedestal_mm)
-    T_BS = invert_pose(T_SB)
+    return T_SB
+
+
+def sim_sort_config(scene: Any, base: SortConfig | None = None) -> SortConfig:
+    """Bins, obstacles (walls, boom), gripper and region of a simulated scene, on top of `base`
+    (simulated backend only: a real cell lists them in its `[sorting]` section)."""
+    robot = scene.robot
+    if robot is None:
+        raise ConfigError(f"scene {scene.name!r} has no [robot]; cannot sort in it")
+    cfg = base or SortConfig()
+    T_BS = invert_pose(scene_T_SB(scene))
     bins = []
     for b in scene.bins:
         c = T_BS[:3, :3] @ np.array([*b.position_mm, 0.0]) + T_BS[:3, 3]

@@ -12,6 +12,7 @@ axis-aligned boxes and floor planes.
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -57,6 +58,8 @@ _MAX_PATH_SAMPLES = 200_000
 # Joint derivatives along a linear path are estimated on the path grid; planning against
 # 99 % of the joint limits absorbs the estimate's error (< 0.01 % at the default grid).
 _GRID_HEADROOM = 0.99
+# Samples per chunk when only the first collision is wanted (a path that hits early stops early).
+_FIRST_HIT_CHUNK = 64
 
 
 class CollisionError(MotionRefusedError):
@@ -540,7 +543,8 @@ class _Spheres:
     static: np.ndarray
 
 
-def _cover(capsules: Sequence[Capsule]) -> _Spheres:
+@functools.lru_cache(maxsize=64)
+def _cover(capsules: tuple[Capsule, ...]) -> _Spheres:
     """Spheres spaced at most one radius apart, enlarged so that they contain each capsule."""
     frame, centre, radius, owner, static = [], [], [], [], []
     for k, c in enumerate(capsules):
@@ -563,14 +567,49 @@ def _cover(capsules: Sequence[Capsule]) -> _Spheres:
     )
 
 
+@functools.lru_cache(maxsize=64)
+def _bounds(
+    capsules: tuple[Capsule, ...],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One sphere per capsule that contains all of its covering spheres (frame, centre,
+    radius), and each capsule's covering spheres (C, n) padded with -1.
+
+    The broad phase: a covering sphere can only touch a box its capsule's sphere touches."""
+    sp = _cover(capsules)
+    frame = np.array([c.frame for c in capsules])
+    mid = np.array([0.5 * (np.add(c.start_mm, c.end_mm)) for c in capsules], dtype=float)
+    reach = np.linalg.norm(sp.centre - mid[sp.owner], axis=1) + sp.radius
+    radius = np.zeros(len(capsules))
+    np.maximum.at(radius, sp.owner, reach)
+    counts = np.bincount(sp.owner, minlength=len(capsules))
+    members = np.full((len(capsules), int(counts.max())), -1)
+    for k in range(len(capsules)):
+        idx = np.flatnonzero(sp.owner == k)
+        members[k, : idx.size] = idx
+    return frame, mid, radius, members
+
+
+def _box_contact(pts: np.ndarray, r: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(c, K, B) True where the sphere at pts (c, K, 3) with radius r (K,) reaches a box."""
+    gap = np.maximum(lo - pts[:, :, None, :], 0.0) + np.maximum(pts[:, :, None, :] - hi, 0.0)
+    return np.einsum("ckbi,ckbi->ckb", gap, gap) <= (r * r)[None, :, None]
+
+
 def _hits(
     model: URModel,
     q: np.ndarray,
     obstacles: Sequence[Box | FloorPlane],
     capsules: Sequence[Capsule],
     margin_mm: float,
+    first_only: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per sample (M,): any hit, and the first hit's capsule and obstacle index (-1 if none)."""
+    """Per sample (M,): any hit, and the first hit's capsule and obstacle index (-1 if none).
+    With `first_only`, samples after the chunk of the first hit are left unchecked (False).
+
+    Boxes are tested in two stages: one bounding sphere per capsule first, then the covering
+    spheres only at the samples where a bounding sphere reached a box (the same answer as
+    testing every covering sphere, at a fraction of the cost)."""
+    capsules = tuple(capsules)
     sp = _cover(capsules)
     m = q.shape[0]
     any_hit = np.zeros(m, dtype=bool)
@@ -586,22 +625,48 @@ def _hits(
     offsets = np.array([obstacles[i].T_BF[:3, 2] @ obstacles[i].T_BF[:3, 3] for i in planes])
     order = np.array(boxes + planes, dtype=int)
     r = sp.radius + margin_mm
+    b_frame, b_mid, b_radius, members = _bounds(capsules)
+    b_r = b_radius + margin_mm
+    moving = np.array([not k.static for k in capsules])  # static capsules stand on floors
     chunk = max(1, 2**20 // max(1, sp.radius.size * max(1, len(boxes))))
+    if first_only:
+        chunk = min(chunk, _FIRST_HIT_CHUNK)
     for start in range(0, m, chunk):
-        F = joint_frames(model, q[start : start + chunk])[:, sp.frame]  # (c, K, 4, 4)
-        pts = np.einsum("ckij,kj->cki", F[..., :3, :3], sp.centre) + F[..., :3, 3]
-        parts = []
+        if first_only and any_hit[:start].any():
+            break
+        frames = joint_frames(model, q[start : start + chunk])  # (c, 7, 4, 4)
+        c = frames.shape[0]
+        hit = np.zeros((c, sp.radius.size, order.size), dtype=bool)
+        Fb = frames[:, b_frame]
+        mids = (Fb[..., :3, :3] @ b_mid[..., None])[..., 0] + Fb[..., :3, 3]  # (c, C, 3)
+        si = ci = bi = np.empty(0, dtype=int)
         if boxes:
-            near = np.clip(pts[:, :, None, :], lo, hi)
-            d2 = np.sum((pts[:, :, None, :] - near) ** 2, axis=-1)
-            parts.append(d2 <= (r * r)[None, :, None])
+            si, ci, bi = np.nonzero(_box_contact(mids, b_r, lo, hi))
+        low = np.empty(0, dtype=int)
         if planes:
-            height = pts @ normals.T - offsets
-            parts.append((height < r[None, :, None]) & ~sp.static[None, :, None])
-        hit = np.concatenate(parts, axis=2)  # (c, K, obstacles in `order`)
-        flat = hit.reshape(hit.shape[0], -1)
+            near_floor = (mids @ normals.T - offsets < b_r[None, :, None]) & moving[None, :, None]
+            low = np.flatnonzero(near_floor.any(axis=(1, 2)))
+        rows = np.union1d(si, low)
+        if rows.size:
+            F = frames[rows][:, sp.frame]  # (R, K, 4, 4)
+            pts = np.zeros((c, sp.radius.size, 3))
+            pts[rows] = (F[..., :3, :3] @ sp.centre[..., None])[..., 0] + F[..., :3, 3]
+            if si.size:
+                # Covering spheres of the capsule only, against the box its bound reached.
+                sph = members[ci]  # (T, n), -1 padded
+                p = pts[si[:, None], np.maximum(sph, 0)]  # (T, n, 3)
+                gap = np.maximum(lo[bi][:, None] - p, 0.0) + np.maximum(p - hi[bi][:, None], 0.0)
+                rr = r[np.maximum(sph, 0)]
+                touch = (np.einsum("tni,tni->tn", gap, gap) <= rr * rr) & (sph >= 0)
+                t_i, n_i = np.nonzero(touch)
+                hit[si[t_i], sph[t_i, n_i], bi[t_i]] = True
+            if low.size:
+                height = pts[low] @ normals.T - offsets
+                above = ~sp.static[None, :, None]  # static capsules stand on floors
+                hit[low, :, len(boxes) :] = (height < r[None, :, None]) & above
+        flat = hit.reshape(c, -1)
         first = np.argmax(flat, axis=1)
-        sel = slice(start, start + hit.shape[0])
+        sel = slice(start, start + c)
         any_hit[sel] = flat.any(axis=1)
         who[sel] = np.where(any_hit[sel], sp.owner[first // hit.shape[2]], -1)
         what[sel] = np.where(any_hit[sel], order[first % hit.shape[2]], -1)
@@ -647,7 +712,7 @@ def find_collision(
     dense = np.concatenate([q[:1], q[seg] + frac[:, None] * step[seg]])
     owner_sample = np.concatenate([[0], seg + 1])
     capsules = (*arm_capsules(model), *tool_capsules)
-    hit, who, what = _hits(model, dense, obstacles, capsules, margin_mm)
+    hit, who, what = _hits(model, dense, obstacles, capsules, margin_mm, first_only=True)
     if not hit.any():
         return None
     i = int(np.argmax(hit))

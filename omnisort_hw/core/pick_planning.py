@@ -15,10 +15,10 @@ validated by `omnisort_hw.config.sorting`); frames and units are those of docs/f
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from itertools import pairwise
 
 import numpy as np
 
@@ -177,6 +177,12 @@ class PickPlan:
     def duration_s(self) -> float:
         return float(sum(m.traj.duration for m in self.moves))
 
+    @property
+    def end_q(self) -> np.ndarray | None:
+        """The joints the pick ends at (None when refused)."""
+        moves = self.moves
+        return moves[-1].q_target if moves else None
+
 
 def tool_pose(xyz: np.ndarray, yaw_deg: float) -> np.ndarray:
     """TCP pose in B pointing straight down, fingers closing along (cos a+90, sin a+90)."""
@@ -207,7 +213,11 @@ class Planner:
         T_SB: np.ndarray,
         joint_limits_deg: np.ndarray | None = None,
         workspace_check: Callable[[np.ndarray], None] | None = None,
+        linear_joint_caps: tuple[float, float] | None = None,
     ) -> None:
+        """`linear_joint_caps`: the joints' speed (deg/s) and acceleration (deg/s^2) a linear
+        move may use, the arm's maxima (a UR's movel is limited by the tool's speed and
+        acceleration and the joints' hardware limits only); default: the joint moves' limits."""
         self.cfg = cfg
         self.T_SB = np.asarray(T_SB, float)
         self.T_BS = invert_pose(self.T_SB)
@@ -227,6 +237,13 @@ class Planner:
             linear_speed_mm_s=cfg.linear_speed_mm_s,
             linear_acc_mm_s2=cfg.linear_accel_mm_s2,
         )
+        self.linear_limits = self.limits
+        if linear_joint_caps is not None:
+            self.linear_limits = replace(
+                self.limits,
+                joint_speed_deg_s=float(linear_joint_caps[0]),
+                joint_acc_deg_s2=float(linear_joint_caps[1]),
+            )
         self.workspace_check = workspace_check
         self.home = np.asarray(cfg.home_deg, float)
         t = cfg.tcp_offset_mm
@@ -366,23 +383,37 @@ class Planner:
         what: str,
         holding: bool = False,
     ) -> list[Move]:
-        """A joint move, or when the straight joint path hits something, fold into the compact
-        home posture, turn the base, and unfold (the arm sweeps a small circle meanwhile)."""
+        """A joint move, or when the straight joint path hits something, the quickest
+        collision-free way through the compact home posture (folded while the base turns, or
+        folded first, or turned folded and unfolded last: the arm sweeps a small circle)."""
         try:
             return [self.plan_joint(q0, q1, obstacles, what, holding)]
         except CollisionError as direct:
-            via = [self.fold(q0), self.fold(q1)]
-            pts = [q0, *via, q1]
-            moves = []
-            try:
-                for k, (a, b) in enumerate(itertools.pairwise(pts)):
-                    if np.max(np.abs(a - b)) < 1e-6:
-                        continue
-                    step = ("fold", "turn", "unfold")[k]
-                    moves.append(self.plan_joint(a, b, obstacles, f"{what} ({step})", holding))
-            except CollisionError:
-                raise direct from None
-            return moves
+            f0, f1 = self.fold(q0), self.fold(q1)
+            # Folded on the way, at a quarter, half or three quarters of the base's turn.
+            mid = [self.fold(q0 + k * (q1 - q0)) for k in (0.25, 0.5, 0.75)]
+            routes = [*([q0, m, q1] for m in mid), [q0, f1, q1], [q0, f0, q1], [q0, f0, f1, q1]]
+            routes.sort(key=lambda pts: sum(self._joint_time(a, b) for a, b in pairwise(pts)))
+            for pts in routes:
+                moves = []
+                try:
+                    for a, b in pairwise(pts):
+                        if np.max(np.abs(a - b)) < 1e-6:
+                            continue
+                        step = "unfold" if b is q1 else ("fold" if a is q0 else "turn")
+                        moves.append(self.plan_joint(a, b, obstacles, f"{what} ({step})", holding))
+                except CollisionError:
+                    continue
+                return moves
+            raise direct from None
+
+    def _joint_time(self, q0: np.ndarray, q1: np.ndarray) -> float:
+        """Duration of the trapezoidal joint move q0 -> q1 at the configured limits, s."""
+        span = float(np.max(np.abs(np.asarray(q1) - np.asarray(q0))))
+        v, a = self.cfg.joint_speed_deg_s, self.cfg.joint_accel_deg_s2
+        if span * a <= v * v:
+            return 2.0 * math.sqrt(span / a)
+        return span / v + v / a
 
     def plan_linear(
         self,
@@ -394,7 +425,7 @@ class Planner:
         held_on_floor: bool = False,
     ) -> Move:
         """One straight-line TCP move, collision-checked."""
-        traj = plan_linear_move(self.model, q0, T, self.limits, tool=self.tool)
+        traj = plan_linear_move(self.model, q0, T, self.linear_limits, tool=self.tool)
         self._check(traj, obstacles, what, holding, held_on_floor)
         return Move("linear", what, traj.q[-1].copy(), T, traj, self._tcp_path(traj))
 
@@ -408,8 +439,12 @@ class Planner:
             self.model, T, q_near, tool=self.tool, allow_singular=False, singular_tol=0.02
         )
 
-    def plan_pick(self, cube: Cube, others: Sequence[Cube], q_start: np.ndarray) -> PickPlan:
-        """All moves of one pick from q_start back to home; `refused` says why not."""
+    def plan_pick(
+        self, cube: Cube, others: Sequence[Cube], q_start: np.ndarray, end_home: bool = True
+    ) -> PickPlan:
+        """All moves of one pick from q_start back to home (or, with `end_home` False, ending
+        over the bin where the cube is released: the next pick starts there); `refused` says
+        why not."""
         cfg = self.cfg
         bin_ = cfg.bin_for(cube.color)
         plan = PickPlan(cube, bin_)
@@ -459,7 +494,7 @@ class Planner:
         for k in sorted(range(4), key=lambda k: abs(_wrap180(cube.yaw_B_deg + 90.0 * k - wrist))):
             yaw = cube.yaw_B_deg + 90.0 * k
             try:
-                self._pick_moves(plan, q_start, targets, yaw, bin_yaw, free, with_target)
+                self._pick_moves(plan, q_start, targets, yaw, bin_yaw, free, with_target, end_home)
             except MotionRefusedError as exc:
                 errors.append(str(exc))
                 continue
@@ -472,33 +507,43 @@ class Planner:
         plan.refused = f"{kind}: {errors[0]}" if errors else kind
         return plan
 
-    def _first_path(
+    def path_to_any(
         self,
         q0: np.ndarray,
         poses: Sequence[np.ndarray],
-        obstacles: list[Box | FloorPlane],
+        obstacles: Sequence[Box | FloorPlane],
         what: str,
+        holding: bool = True,
     ) -> list[Move]:
-        """The first collision-free joint path (holding the cube) to any of `poses`, trying
-        for each the inverse kinematics nearest the start, the folded start and home."""
+        """A collision-free joint path (holding the cube by default) to any of `poses`, the
+        quickest inverse kinematics goal first (see `_ik_goals`)."""
+        last: MotionRefusedError | None = None
+        for q1 in self._ik_goals(q0, poses):
+            try:
+                return self.plan_joint_via(q0, q1, obstacles, what, holding=holding)
+            except MotionRefusedError as exc:
+                last = exc
+        assert last is not None
+        raise last
+
+    def _ik_goals(self, q0: np.ndarray, poses: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """Distinct inverse kinematics of `poses` nearest the start, the folded start and
+        home, quickest straight joint move from q0 first (a lower bound of any route's time)."""
+        goals: list[np.ndarray] = []
         last: MotionRefusedError | None = None
         for T in poses:
-            tried: list[np.ndarray] = []
             for ref in (q0, self.fold(q0), self.home):
                 try:
                     q1 = self.ik(T, ref)
                 except MotionRefusedError as exc:
                     last = exc
                     continue
-                if any(np.allclose(q1, t, atol=1e-6) for t in tried):
-                    continue
-                tried.append(q1)
-                try:
-                    return self.plan_joint_via(q0, q1, obstacles, what, holding=True)
-                except MotionRefusedError as exc:
-                    last = exc
-        assert last is not None
-        raise last
+                if not any(np.allclose(q1, g, atol=1e-6) for g in goals):
+                    goals.append(q1)
+        if not goals:
+            assert last is not None
+            raise last
+        return sorted(goals, key=lambda g: self._joint_time(q0, g))
 
     def _wrist_yaw(self, q: np.ndarray) -> float:
         T = forward(self.model, np.asarray(q, float), self.tool)
@@ -513,26 +558,33 @@ class Planner:
         bin_yaw: float,
         free: list[Box | FloorPlane],
         with_target: list[Box | FloorPlane],
+        end_home: bool = True,
     ) -> None:
         T_app = tool_pose(targets["approach"], yaw)
         T_grasp = tool_pose(targets["grasp"], yaw)
         T_lift = tool_pose(targets["lift"], yaw)
-        q_app = self.ik(T_app, q_start)
-        plan.approach = self.plan_joint_via(q_start, q_app, with_target, "move above the cube")
-        plan.descend = self.plan_linear(q_app, T_grasp, free, "descend onto the cube")
+        last: MotionRefusedError | None = None
+        for q_app in self._ik_goals(q_start, [T_app]):
+            try:
+                plan.approach = self.plan_joint_via(
+                    q_start, q_app, with_target, "move above the cube"
+                )
+                plan.descend = self.plan_linear(q_app, T_grasp, free, "descend onto the cube")
+                break
+            except MotionRefusedError as exc:
+                last = exc
+        else:
+            assert last is not None
+            raise last
         plan.lift = self.plan_linear(
             plan.descend.q_target, T_lift, free, "lift the cube", holding=True, held_on_floor=True
         )
         q_lift = plan.lift.q_target
         base = bin_yaw + 90.0 * round((yaw - bin_yaw) / 90.0)
-        carry = self._first_path(
-            q_lift,
-            [tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)],
-            free,
-            "carry the cube to its bin",
-        )
-        plan.carry = carry
-        plan.back = self.plan_joint_via(plan.carry[-1].q_target, self.home, free, "return home")
+        releases = [tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)]
+        plan.carry = self.path_to_any(q_lift, releases, free, "carry the cube to its bin")
+        if end_home:
+            plan.back = self.plan_joint_via(plan.carry[-1].q_target, self.home, free, "return home")
 
 
 def _translation(x: float, y: float, z: float) -> np.ndarray:

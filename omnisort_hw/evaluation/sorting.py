@@ -25,7 +25,12 @@ from omnisort_hw.runlog import NullLog, RunLog
 from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
 from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
 from sim_backend.scene import BinSpec as SceneBin
-from sim_backend.sort_harness import SimVerifier, sim_registration_config, sim_sort_config
+from sim_backend.sort_harness import (
+    SimVerifier,
+    scene_T_SB,
+    sim_registration_config,
+    sim_sort_config,
+)
 
 EVAL_COLORS = ("red", "green", "blue", "black")
 
@@ -101,6 +106,11 @@ SUMMARY_KEYS = (
     "max_registration_error_mm",
     "mean_registration_error_deg",
     "motion_s_per_pick",
+    "wait_s_per_pick",
+    "gripper_s_per_pick",
+    "lower_bound_s_per_pick",
+    "picks_per_minute",
+    "plan_ms_per_pick",
     "wall_s_per_pick",
 )
 
@@ -147,7 +157,16 @@ def evaluate_sorting(
                 calib = perturb_calibration(calib, rng)
             verifier = SimVerifier(arm)
             verifier.start()
-            sorter = Sorter(cam, arm, laser, MemoryCalibration(calib), cfg, reg_cfg, log)
+            sorter = Sorter(
+                cam,
+                arm,
+                laser,
+                MemoryCalibration(calib),
+                cfg,
+                reg_cfg,
+                log,
+                clock=lambda cell=cell: cell.world.sim_time,  # the arm's time, not the PC's
+            )
             t0 = time.perf_counter()
             report = sorter.run(
                 register=True, on_located=verifier.on_located, on_done=verifier.on_done
@@ -167,6 +186,7 @@ def evaluate_sorting(
                 registration_error_mm=reg_mm,
                 registration_error_deg=reg_deg,
                 motion_s_per_pick=tot["motion_s_per_pick"],
+                cycle=report.extra.get("cycle", {}),
                 wall_s_per_pick=wall / picks,
                 skipped=[
                     o.reason for o in report.outcomes if o.status in ("skipped", "missed", "failed")
@@ -184,6 +204,60 @@ def evaluate_sorting(
         if progress is not None:
             progress(k, row)
     return summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration)
+
+
+def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
+    """Pick planning alone, one thread, on random scenes (true cube poses, no rendering): the
+    picks chained as the sorter chains them (bin -> next cube), each plan's CPU time."""
+    from omnisort_hw.core.cube_location import Cube
+    from omnisort_hw.core.pick_planning import Planner
+
+    rng = np.random.default_rng(seed)
+    base = sized(load_scene("sorting"), 320)
+    cfg0 = SortConfig()
+    times: list[float] = []
+    planned = refused = 0
+    motion = 0.0
+    for _ in range(scenes):
+        scene = random_scene(base, rng, int(rng.integers(3, 7)), home_deg=cfg0.home_deg)
+        cfg = sim_sort_config(scene, cfg0)
+        yaw = scene.robot.base_yaw_deg
+        T_SB = scene_T_SB(scene)
+        T_BS = np.linalg.inv(T_SB)
+        cubes = []
+        for spec in scene.cubes:
+            p_S = np.array([*spec.position_mm, scene.floor_z + spec.size_mm / 2.0])
+            p_B = T_BS[:3, :3] @ p_S + T_BS[:3, 3]
+            y = spec.yaw_deg - yaw
+            cubes.append(
+                Cube(spec.color.name, p_S, p_B, y, y, (0, 0), 0.2, 0.3, 800, 100, 0, (0,) * 4)
+            )
+        planner = Planner(cfg, T_SB)
+        q = np.asarray(cfg.home_deg, float)
+        left = list(cubes)
+        for cube in cubes:
+            left.remove(cube)
+            t0 = time.thread_time()  # CPU time: one core's work, whatever the machine's load
+            plan = planner.plan_pick(cube, left, q, end_home=False)
+            times.append(time.thread_time() - t0)
+            if plan.refused is not None:
+                refused += 1
+                left.append(cube)
+                continue
+            planner.commit(plan)
+            planned += 1
+            motion += plan.duration_s
+            q = plan.end_q
+    ms = 1e3 * np.asarray(times)
+    return {
+        "plans": len(times),
+        "planned": planned,
+        "refused": refused,
+        "plan_ms_mean": round(float(ms.mean()), 1),
+        "plan_ms_p95": round(float(np.percentile(ms, 95)), 1),
+        "plan_ms_max": round(float(ms.max()), 1),
+        "planned_motion_s_per_pick": round(motion / max(1, planned), 3),
+    }
 
 
 def perturb_calibration(calib: SystemCalibration, rng: np.random.Generator) -> SystemCalibration:
@@ -214,7 +288,17 @@ def summarize_sorting(
     errs_b = [e for r in rows for e in r.get("position_errors_B_mm", [])]
     reg = [r["registration_error_mm"] for r in rows if "registration_error_mm" in r]
     reg_deg = [r["registration_error_deg"] for r in rows if "registration_error_deg" in r]
-    per_pick = [r["motion_s_per_pick"] for r in rows if r.get("motion_s_per_pick")]
+    cyc = [r["cycle"] for r in rows if r.get("cycle", {}).get("picks")]
+    picks = sum(c["picks"] for c in cyc)
+
+    def per_pick(key: str) -> float | None:
+        return round(sum(c[key] for c in cyc) / picks, 4) if picks else None
+
+    motion, wait, grip = per_pick("motion_s"), per_pick("wait_s"), per_pick("gripper_s")
+    parts = (motion, wait, grip)
+    cycle_s = sum(parts) if all(v is not None for v in parts) else None  # type: ignore[arg-type]
+    plan_ms = [c["plan_ms_mean"] * c["plans"] for c in cyc if c.get("plan_ms_mean") is not None]
+    n_plans = sum(c["plans"] for c in cyc if c.get("plan_ms_mean") is not None)
     wall_pick = [r["wall_s_per_pick"] for r in rows if "wall_s_per_pick" in r]
 
     def mean(v: Sequence[float]) -> float | None:
@@ -244,7 +328,15 @@ def summarize_sorting(
         "mean_registration_error_mm": mean(reg),
         "max_registration_error_mm": pmax(reg),
         "mean_registration_error_deg": mean(reg_deg),
-        "motion_s_per_pick": mean(per_pick),
+        "motion_s_per_pick": motion,
+        "wait_s_per_pick": wait,
+        "gripper_s_per_pick": grip,
+        "lower_bound_s_per_pick": per_pick("planned_s"),
+        "cycle_s_per_pick": round(cycle_s, 4) if cycle_s else None,
+        "picks_per_minute": round(60.0 / cycle_s, 2) if cycle_s else None,
+        "plan_ms_per_pick": round(sum(plan_ms) / n_plans, 1) if n_plans else None,
+        "plan_ms_max": max((c["plan_ms_max"] for c in cyc if c.get("plan_ms_max")), default=None),
+        "locate_s_per_pick": per_pick("locate_s"),
         "wall_s_per_pick": mean(wall_pick),
         "wall_s": round(wall_s, 1),
         "stage_wall_s_per_scene": timings,

@@ -125,7 +125,7 @@ def resolve_before_sort(
     yaw = math.degrees(math.atan2(T[1, 0], T[0, 0]))
     base = bin_yaw + 90.0 * round((yaw - bin_yaw) / 90.0)
     poses = [tool_pose(release, base + d) for d in (0.0, 90.0, -90.0, 180.0)]
-    moves += planner._first_path(q, poses, planner.static, "carry the held cube to its bin")
+    moves += planner.path_to_any(q, poses, planner.static, "carry the held cube to its bin")
     log.warning("placing the held %s cube in its bin before sorting", cube["color"])
     sorter.log.event("sorting/held_cube", f"{cube} -> bin {bin_spec.color}", level="WARN")
     for move in moves:

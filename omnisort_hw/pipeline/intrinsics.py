@@ -89,6 +89,13 @@ def read_images(
     return images
 
 
+def calibrate_folder(
+    paths: Sequence[Path], board: BoardSpec, degree: int | None = None, log: RunLog = NullLog
+) -> IntrinsicCalibration:
+    """Read the images and calibrate (what the service's compute worker runs)."""
+    return calibrate_intrinsics(read_images(paths), board, degree=degree, log=log)
+
+
 def calibrate_intrinsics(
     images: list[tuple[str, np.ndarray]],
     board: BoardSpec,

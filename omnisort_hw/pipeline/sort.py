@@ -18,6 +18,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -25,10 +26,11 @@ import numpy as np
 
 from omnisort_hw.config.sorting import RegistrationConfig, SortSection
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.core.pick_planning import BLOCKED, Move, PickPlan, Planner, SortConfig
+from omnisort_hw.core.pick_planning import Move, PickPlan, Planner, SortConfig
 from omnisort_hw.errors import ConfigError, MotionRefusedError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
 from omnisort_hw.pipeline.locate import Located, locate_in_images
+from omnisort_hw.pipeline.pick_cycle import CycleTimes, PickQueue
 from omnisort_hw.pipeline.registration import register_from_image
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -178,6 +180,7 @@ class Sorter:
         cancel: threading.Event | None = None,
         progress: Callable[[dict[str, Any]], None] | None = None,
         on_pick: Callable[[str, CubeOutcome], None] | None = None,
+        clock: Callable[[], float] | None = None,
     ) -> None:
         self.camera = camera
         self.arm = arm
@@ -190,6 +193,9 @@ class Sorter:
         self.progress = progress
         self.on_pick = on_pick  # pick phases: grasping, holding, released, empty
         self._executed: list[np.ndarray] = []
+        self.clock = clock or time.monotonic
+        self.cycle: CycleTimes | None = None
+        self._ahead: Future[tuple[int, PickPlan] | None] | None = None
 
     # -- capture and location -------------------------------------------------------------
 
@@ -257,7 +263,8 @@ class Sorter:
         arm = self._require_arm()
         lim = arm.limits
         joint_lim = np.stack([np.asarray(lim.joint_min_deg), np.asarray(lim.joint_max_deg)], 1)
-        return Planner(self.cfg, T_SB, joint_lim, lim.check_position)
+        caps = (lim.max_joint_speed_deg_s, lim.max_joint_accel_deg_s2)
+        return Planner(self.cfg, T_SB, joint_lim, lim.check_position, linear_joint_caps=caps)
 
     def run(
         self,
@@ -289,81 +296,76 @@ class Sorter:
                 loc = self.locate(calib=calib, register=True)
         if on_located is not None:
             on_located(loc)
-        t_plan = time.perf_counter()
+        cycle = self.cycle = CycleTimes(locate_s=self._locate_s(loc))
         planner = self._planner(loc.T_SB)
-        outcomes: list[CubeOutcome] = []
-        plans: list[PickPlan] = []
-        for i, cube in enumerate(loc.cubes):
-            others = [c for c in loc.cubes if c is not cube]
-            if colors is not None and cube.color not in colors:
-                plan = PickPlan(cube, self.cfg.bin_for(cube.color))
-                plan.refused = f"colour {cube.color!r} not requested"
+        outcomes = [
+            CubeOutcome(
+                i,
+                cube.color,
+                cube.center_S.tolist(),
+                cube.center_B.tolist(),
+                cube.yaw_B_deg,
+                cube.sigma_mm,
+                "skipped",
+                "",
+                bin_color(self.cfg, cube.color),
+            )
+            for i, cube in enumerate(loc.cubes)
+        ]
+        todo = []
+        for out in outcomes:
+            if colors is not None and out.color not in colors:
+                out.reason = f"colour {out.color!r} not requested"
             else:
-                plan = planner.plan_pick(cube, others, home)
-            planner.commit(plan)
-            plans.append(plan)
-            outcomes.append(
-                CubeOutcome(
-                    i,
-                    cube.color,
-                    cube.center_S.tolist(),
-                    cube.center_B.tolist(),
-                    cube.yaw_B_deg,
-                    cube.sigma_mm,
-                    "skipped" if plan.refused else "planned",
-                    plan.refused or "",
-                    plan.bin.color if plan.bin else None,
-                )
-            )
-            self.log.event(
-                "sorting/plan",
-                f"cube {i} ({cube.color}): "
-                + (f"refused: {plan.refused}" if plan.refused else f"{plan.duration_s:.1f} s"),
-                level="WARN" if plan.refused else "INFO",
-            )
-        # Pick what can be picked; then re-plan the cubes that only another cube blocked
-        # (it may be gone now), until nothing changes. A re-plan is still a full plan made
-        # before the first move towards that cube.
+                todo.append(out.index)
+
+        def refused(i: int, reason: str) -> None:
+            outcomes[i].status, outcomes[i].reason = "skipped", reason
+            self.log.event("sorting/plan", f"cube {i} ({outcomes[i].color}): refused: {reason}")
+
+        queue = PickQueue(planner, loc.cubes, todo, refused, self.cancel.is_set)
         t_exec = time.perf_counter()
-        t_plan = t_exec - t_plan
-        picked: set[int] = set()
         done = 0
-        queue = [i for i, p in enumerate(plans) if p.refused is None]
-        while True:
-            for i in queue:
-                plan, out = plans[i], outcomes[i]
-                if max_objects is not None and done >= max_objects:
-                    out.status, out.reason = "skipped", "max_objects reached"
-                    continue
-                if self.cancel.is_set():
-                    out.status, out.reason = "skipped", "cancelled"
-                    continue
+        with ThreadPoolExecutor(1, thread_name_prefix="plan-ahead") as ahead:
+            job = self._plan_now(queue, np.asarray(arm.joint_positions(), float))
+            while job is not None:
+                i, plan = job
+                out = outcomes[i]
+                if (max_objects is not None and done >= max_objects) or self.cancel.is_set():
+                    queue.give_back(i, plan)
+                    break
+                out.status, out.reason = "planned", ""
+                self.log.event("sorting/plan", f"cube {i} ({out.color}): {plan.duration_s:.1f} s")
+                self._ahead = ahead.submit(queue.next_plan, plan.end_q)
                 self._execute(plan, out, planner)
                 done += 1
-                if out.status == "sorted":
-                    picked.add(i)
                 if self.progress is not None:
                     self.progress({"cube": out.index, "status": out.status, "color": out.color})
-            queue = []
-            if not picked or (max_objects is not None and done >= max_objects):
-                break
-            for i, plan in enumerate(plans):
-                if plan.refused is None or not plan.refused.startswith(BLOCKED):
-                    continue
-                if self.cancel.is_set():
-                    break
-                cube = loc.cubes[i]
-                others = [c for k, c in enumerate(loc.cubes) if k != i and k not in picked]
-                again = planner.plan_pick(cube, others, home)
-                if again.refused is None:
-                    planner.commit(again)
-                    plans[i] = again
-                    outcomes[i].status, outcomes[i].reason = "planned", ""
-                    queue.append(i)
-                    self.log.event("sorting/plan", f"cube {i} ({cube.color}): free now")
-                    break
-            if not queue:
-                break
+                t_wait = time.perf_counter()
+                nxt = self._join_ahead()
+                cycle.wait_s += time.perf_counter() - t_wait
+                if out.status == "sorted":
+                    cycle.picks += 1
+                    job = nxt
+                else:  # the arm went home: plan again from there, the cube an obstacle again
+                    if nxt is not None:
+                        queue.give_back(*nxt)
+                    queue.gone.discard(i)
+                    job = self._plan_now(queue, np.asarray(arm.joint_positions(), float))
+        for i, reason in queue.waiting().items():
+            out = outcomes[i]
+            out.status = "skipped"
+            out.reason = (
+                "cancelled"
+                if self.cancel.is_set()
+                else "max_objects reached"
+                if max_objects is not None and done >= max_objects
+                else reason
+            )
+        if not self.cancel.is_set() and not self._at(home):
+            self._go_home(planner)  # parked out of the camera's view for the next capture
+        cycle.plan_s = queue.plan_s
+        t_plan = float(sum(queue.plan_s))
         report = SortReport(
             outcomes,
             registration=loc.registration.record() if loc.registration else None,
@@ -374,13 +376,34 @@ class Sorter:
             "plan": round(t_plan, 3),
             "execute": round(time.perf_counter() - t_exec, 3),
         }
+        report.extra["cycle"] = cycle.summary()
         if on_done is not None:
             on_done(report, loc)
         report.wall_s = time.perf_counter() - t0
         return report
 
+    def _locate_s(self, loc: Located) -> float:
+        """Capture and locate time the parked arm waited for (registration excluded: it is a
+        commissioning step, not part of the cycle)."""
+        t = loc.diagnostics.get("timings_s", {})
+        return float(t.get("capture", 0.0) + t.get("locate", 0.0))
+
+    def _plan_now(self, queue: PickQueue, q: np.ndarray) -> tuple[int, PickPlan] | None:
+        """Plan the next pick while the arm waits (the first pick, or after a failed one)."""
+        t0 = time.perf_counter()
+        job = queue.next_plan(q)
+        if self.cycle is not None:
+            self.cycle.wait_s += time.perf_counter() - t0
+        return job
+
+    def _join_ahead(self) -> tuple[int, PickPlan] | None:
+        """The plan computed while the arm moved (waiting for it if it is not ready)."""
+        fut, self._ahead = self._ahead, None
+        return fut.result() if fut is not None else None
+
     def _go_home(self, planner: Planner) -> None:
         arm = self._require_arm()
+
         q = np.asarray(arm.joint_positions(), float)
         for move in planner.plan_joint_via(q, planner.home, planner.static, "move home"):
             self._send(move)
@@ -397,6 +420,7 @@ class Sorter:
                 f"{np.max(np.abs(cur - move.traj.q[0])):.2f} deg); nothing sent"
             )
         log_trajectory(self.log, "sorting/planned", move)
+        t0 = self.clock()
         if move.kind == "joint":
             arm.move_joints(
                 move.q_target,
@@ -410,10 +434,24 @@ class Sorter:
                 speed_mm_s=self.cfg.linear_speed_mm_s,
                 accel_mm_s2=self.cfg.linear_accel_mm_s2,
             )
+        if self.cycle is not None:
+            self.cycle.motion_s += self.clock() - t0
+            self.cycle.planned_s += move.traj.duration
         tcp = np.asarray(arm.tcp_pose(), float)
         self.log.pose("sorting/executed/tcp", tcp)
         self._executed.append(tcp[:3, 3])
         self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
+
+    def _grip(self, close: bool) -> None:
+        """Close or open the gripper, timed on the arm's clock (an open gripper is not
+        opened again)."""
+        grip = self._require_arm().gripper
+        if not close and not grip.is_closed:
+            return
+        t0 = self.clock()
+        grip.close() if close else grip.open()
+        if self.cycle is not None:
+            self.cycle.gripper_s += self.clock() - t0
 
     def _execute(self, plan: PickPlan, out: CubeOutcome, planner: Planner) -> None:
         """Run one planned pick; a grasp that holds nothing is reported and the arm goes home."""
@@ -423,14 +461,14 @@ class Sorter:
         self.log.event("sorting/pick", f"cube {out.index} ({out.color}) -> bin {out.bin}")
         phase = self.on_pick or (lambda _phase, _out: None)
         try:
-            grip.open()
+            self._grip(False)
             for move in [*plan.approach, plan.descend]:
                 self._send(move)
             phase("grasping", out)
-            grip.close()
+            self._grip(True)
             if grip.holding is False:
                 out.status, out.reason = "failed", "the gripper closed on nothing"
-                grip.open()
+                self._grip(False)
                 phase("empty", out)
                 self._send(plan.lift)
                 self._go_home(planner)
@@ -440,11 +478,11 @@ class Sorter:
                 self._send(move)
             if grip.holding is False:
                 out.status, out.reason = "failed", "the cube was lost on the way to its bin"
-                grip.open()
+                self._grip(False)
                 phase("empty", out)
                 self._go_home(planner)
                 return
-            grip.open()
+            self._grip(False)
             phase("released", out)
             for move in plan.back:
                 self._send(move)
@@ -453,6 +491,12 @@ class Sorter:
         except Exception as exc:
             out.status, out.reason = "failed", f"{type(exc).__name__}: {exc}"
             raise
+
+
+def bin_color(cfg: SortConfig, color: str) -> str | None:
+    """The colour of the bin a cube of `color` goes to (None: no bin for it)."""
+    b = cfg.bin_for(color)
+    return b.color if b is not None else None
 
 
 def log_trajectory(log: RunLog, prefix: str, move: Move) -> None:

@@ -393,3 +393,39 @@ def test_sphere_cover_contains_the_capsules_and_is_tight() -> None:
     hits = np.array([check_collisions(UR5E, q, [Box(tuple(p), tuple(p))]) == 0 for p in pts])
     assert hits[inside].all()
     assert not hits[outside].any()
+
+
+def test_broad_phase_gives_the_answer_of_testing_every_sphere() -> None:
+    """The two-stage box test reports, sample by sample, exactly what testing every covering
+    sphere against every box and the floor reports (random postures, boxes around the arm)."""
+    rng = np.random.default_rng(11)
+    lim = UR5E.limits
+    q = rng.uniform(lim[:, 0], lim[:, 1], (400, 6))
+    centres = rng.uniform([-700, -700, 0], [700, 700, 700], (12, 3))
+    half = rng.uniform(20, 150, (12, 3))
+    obstacles: list[Box | FloorPlane] = [
+        Box(tuple(centres[i] - half[i]), tuple(centres[i] + half[i]), f"box {i}")
+        for i in range(len(centres))
+    ]
+    obstacles.insert(5, FloorPlane(np.eye(4), "floor"))
+    tool = (Capsule(6, (0.0, -75.0, 60.0), (0.0, 75.0, 60.0), 38.0, "gripper"),)
+    capsules = (*arm_capsules(UR5E), *tool)
+    from omnisort_hw.core.motion import _cover, _hits
+
+    sp = _cover(capsules)
+    F = joint_frames(UR5E, q)[:, sp.frame]
+    pts = np.einsum("ckij,kj->cki", F[..., :3, :3], sp.centre) + F[..., :3, 3]
+    r = sp.radius + 10.0
+    brute = np.zeros((len(q), sp.radius.size, len(obstacles)), bool)
+    for j, o in enumerate(obstacles):
+        if isinstance(o, Box):
+            near = np.clip(pts, o.lo_mm, o.hi_mm)
+            brute[:, :, j] = np.sum((pts - near) ** 2, axis=-1) <= r * r
+        else:
+            brute[:, :, j] = (pts[..., 2] < r) & ~sp.static
+    hit, who, what = _hits(UR5E, q, obstacles, capsules, 10.0)
+    assert 50 < hit.sum() < len(q) - 50  # both outcomes are exercised
+    np.testing.assert_array_equal(hit, brute.any(axis=(1, 2)))
+    # Every reported pair is a real contact of that capsule with that obstacle.
+    for i in np.flatnonzero(hit):
+        assert brute[i, sp.owner == who[i], what[i]].any()

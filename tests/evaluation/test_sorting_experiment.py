@@ -21,6 +21,17 @@ def test_evaluation_totals_have_the_documented_keys() -> None:
             "registration_error_deg": 0.01,
             "motion_s_per_pick": 9.0,
             "wall_s_per_pick": 3.0,
+            "cycle": {
+                "picks": 3,
+                "motion_s": 18.0,
+                "gripper_s": 1.2,
+                "wait_s": 0.3,
+                "planned_s": 17.1,
+                "locate_s": 0.9,
+                "plans": 3,
+                "plan_ms_mean": 50.0,
+                "plan_ms_max": 80.0,
+            },
         },
         {
             "scene": 1,
@@ -33,6 +44,17 @@ def test_evaluation_totals_have_the_documented_keys() -> None:
             "motion_s_per_pick": 10.0,
             "wall_s_per_pick": 4.0,
             "skipped": ["unreachable"],
+            "cycle": {
+                "picks": 3,
+                "motion_s": 21.0,
+                "gripper_s": 1.2,
+                "wait_s": 0.0,
+                "planned_s": 20.1,
+                "locate_s": 0.9,
+                "plans": 4,
+                "plan_ms_mean": 100.0,
+                "plan_ms_max": 120.0,
+            },
         },
     ]
     out = summarize_sorting(rows, 12.0, 0, 960, "truth")
@@ -43,3 +65,11 @@ def test_evaluation_totals_have_the_documented_keys() -> None:
     assert out["success_rate"] == pytest.approx(6 / 7, abs=1e-4)
     assert out["mean_position_error_mm"] == pytest.approx(1.0)
     assert out["not_sorted"][0]["scene"] == 1
+    # Cycle figures are totals over all picks, not means of the scenes' means.
+    assert out["motion_s_per_pick"] == pytest.approx(39.0 / 6)
+    assert out["wait_s_per_pick"] == pytest.approx(0.05)
+    assert out["lower_bound_s_per_pick"] == pytest.approx(37.2 / 6)
+    cycle = (39.0 + 2.4 + 0.3) / 6
+    assert out["picks_per_minute"] == pytest.approx(60.0 / cycle, abs=0.01)
+    assert out["plan_ms_per_pick"] == pytest.approx((150.0 + 400.0) / 7, abs=0.1)
+    assert out["plan_ms_max"] == 120.0
