@@ -103,6 +103,7 @@ class Service:
         self.notifier = notifier or Notifier({})
         self.states = StateMachine(self._on_transition)
         cell.actuation_guard = self._check_may_actuate
+        cell.drift.busy = lambda: self._job is not None
         self._recover_interrupted_job()
         self._job: Job | None = None
         self._job_lock = threading.Lock()
