@@ -9,8 +9,9 @@ Two measurements, arrays in and out:
   bins, the floor board) measures it; moving things (arm, cubes) are outliers, down-weighted
   by a Huber loss. The fit is a coarse-to-fine Gauss-Newton on grey levels with a gain and an
   offset (exposure changes), and the covariance of the rotation comes from a delete-one-block
-  jackknife over 64 image regions (16 sectors x 4 rings): it contains the pixel noise, its spatial correlation (blur,
-  JPEG) and whatever the scene changes add, so the threshold needs no tuning per camera.
+  jackknife over 64 image regions (16 sectors x 4 rings): it contains the pixel noise, its
+  spatial correlation (blur, JPEG) and whatever the scene changes add, so the threshold needs
+  no tuning per camera.
 - `measure_board`: the floor board's inner corners, predicted from the stored calibration and
   T_SB (and the measured rotation), refined in the fresh capture; corners the arm hides fail a
   saddle test and are left out. It gives the pixel residuals against the stored prediction and
