@@ -329,6 +329,8 @@ class Sorter:
         picked: set[int] = set()
         done = 0
         queue = [i for i, p in enumerate(plans) if p.refused is None]
+        if self.progress is not None:
+            self.progress({"located": len(plans), "to_pick": len(queue)})
         while True:
             for i in queue:
                 plan, out = plans[i], outcomes[i]

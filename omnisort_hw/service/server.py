@@ -47,6 +47,7 @@ from omnisort_hw.service.connection import (
     peer_host,
 )
 from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.plc_face import start_plc_face
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
@@ -770,6 +771,7 @@ def serve(
         try:
             cell.connect()
             service = Service(cell, cfg, notifier)
+            plc = start_plc_face(service, settings.plc)
         except BaseException:
             cell.close()
             raise
@@ -777,6 +779,8 @@ def serve(
             code = asyncio.run(service.run())
         finally:
             notifier.close()
+            if plc is not None:
+                plc.close()
     if service.exit_problems:
         log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
     return code
