@@ -25,6 +25,9 @@ class RunLog:
         self._rec: Any = None
         self._rr: Any = None
         self._swap = threading.Lock()
+        # A second recording everything is also logged to (the live view's gRPC server); it
+        # outlives file changes (`reopen`).
+        self.mirror: Any = None
         self.reopen(path)
 
     def reopen(self, path: str | Path | None) -> None:
@@ -33,12 +36,16 @@ class RunLog:
         log is then off (no file)."""
         with self._swap:
             old, self._rec, self.path = self._rec, None, None
+            if isinstance(old, _Tee):
+                old = old.file
             if old is not None:
                 try:
                     old.flush()
                 finally:
                     old.disconnect()
             if path is None:
+                if self.mirror is not None:
+                    self._rec = _Tee(None, self.mirror)
                 return
             import rerun as rr
 
@@ -47,7 +54,21 @@ class RunLog:
             self._rr = rr
             rec = rr.RecordingStream(self._application_id, recording_id=uuid.uuid4())
             rec.save(str(new_path))
-            self._rec, self.path = rec, new_path
+            self._rec = rec if self.mirror is None else _Tee(rec, self.mirror)
+            self.path = new_path
+
+    def set_mirror(self, rec: Any) -> None:
+        """Log everything to `rec` as well from now on (None: stop); the file goes on."""
+        with self._swap:
+            self.mirror = rec
+            cur = self._rec.file if isinstance(self._rec, _Tee) else self._rec
+            if rec is None:
+                self._rec = cur
+            else:
+                import rerun as rr
+
+                self._rr = rr
+                self._rec = _Tee(cur, rec)
 
     @property
     def enabled(self) -> bool:
@@ -160,6 +181,27 @@ class RunLog:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _Tee:
+    """The file's recording and the mirror as one: every call goes to both (file first)."""
+
+    def __init__(self, file: Any, mirror: Any) -> None:
+        self.file, self.mirror = file, mirror
+
+    def log(self, *args: Any, **kwargs: Any) -> None:
+        if self.file is not None:
+            self.file.log(*args, **kwargs)
+        self.mirror.log(*args, **kwargs)
+
+    def set_time(self, *args: Any, **kwargs: Any) -> None:
+        if self.file is not None:
+            self.file.set_time(*args, **kwargs)
+        self.mirror.set_time(*args, **kwargs)
+
+    def flush(self) -> None:
+        if self.file is not None:
+            self.file.flush()
 
 
 NullLog = RunLog(None)

@@ -47,6 +47,7 @@ from omnisort_hw.service.connection import (
     peer_host,
 )
 from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.live_view import start_live_view
 from omnisort_hw.service.plc_face import start_plc_face
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
@@ -772,6 +773,7 @@ def serve(
             cell.connect()
             service = Service(cell, cfg, notifier)
             plc = start_plc_face(service, settings.plc)
+            live = start_live_view(settings.logging.live, cell.runlog)
         except BaseException:
             cell.close()
             raise
@@ -781,6 +783,8 @@ def serve(
             notifier.close()
             if plc is not None:
                 plc.close()
+            if live is not None:
+                live.close()
     if service.exit_problems:
         log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
     return code
