@@ -63,12 +63,11 @@ class PlcConfig:
     modbus_port: int | None = None
     host: str = "127.0.0.1"
     allow_commands: bool = False
-    unit_id: int = 1
 
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any]) -> PlcConfig:
         n = "plc"
-        _unknown(section, n, {"modbus_port", "host", "allow_commands", "unit_id"})
+        _unknown(section, n, {"modbus_port", "host", "allow_commands"})
         port = section.get("modbus_port")
         if port is not None and (
             isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535
@@ -77,10 +76,7 @@ class PlcConfig:
         host = section.get("host", "127.0.0.1")
         if not isinstance(host, str) or not host:
             raise ConfigError(f"[plc] host must be an address string, got {host!r}")
-        unit = section.get("unit_id", 1)
-        if isinstance(unit, bool) or not isinstance(unit, int) or not 0 <= unit <= 247:
-            raise ConfigError(f"[plc] unit_id must be an integer in [0, 247], got {unit!r}")
-        return cls(port, host, _bool(section, n, "allow_commands", False), unit)
+        return cls(port, host, _bool(section, n, "allow_commands", False))
 
     @property
     def on_loopback(self) -> bool:

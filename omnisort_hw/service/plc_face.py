@@ -80,7 +80,7 @@ class _Context(ModbusServerContext):
         self._devices = {}
 
     def device_ids(self) -> list[int]:
-        return [self.face.config.unit_id]
+        return [1]  # every unit id is answered (one cell per server)
 
     async def async_getValues(
         self, device_id: int, func_code: int, address: int, count: int = 1
