@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from omnisort_hw.cli.review_cmd import live_url, viewer_command
+from omnisort_hw.cli.review_cmd import save_live_command, viewer_command
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.demo import calibrate_from_truth, write_config
 from omnisort_hw.service.launch import start_service
@@ -60,16 +60,7 @@ def main() -> int:
             received = tmp / "live.rrd"
             rid = c.send("sort")
             viewer = subprocess.Popen(
-                [
-                    *viewer_command(),
-                    live_url(f"127.0.0.1:{port}"),
-                    "--bind",
-                    "127.0.0.1",
-                    "--port",
-                    "0",
-                    "--save",
-                    str(received),
-                ],
+                save_live_command(f"127.0.0.1:{port}", received),
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
             )

@@ -57,6 +57,21 @@ def live_url(address: str) -> str:
     return f"rerun+http://{host}:{int(port)}/proxy"
 
 
+def save_live_command(address: str, out: Path) -> list[str]:
+    """rerun's CLI saving what the live view at HOST:PORT sends into `out` (its own viewer
+    server on a free loopback port): a separate process that watches the stream."""
+    return [
+        *viewer_command(),
+        live_url(address),
+        "--bind",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--save",
+        str(out),
+    ]
+
+
 def run(args: argparse.Namespace) -> int:
     from omnisort_hw.errors import InputError
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from omnisort_hw.cli.review_cmd import live_url, viewer_command
+from omnisort_hw.cli.review_cmd import save_live_command
 from omnisort_hw.config.live_view import LiveViewConfig
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.runlog import entity_paths
@@ -57,16 +57,7 @@ def test_a_separate_process_receives_image_laser_points_and_state_during_a_job(
     running = start_in_thread(Service(cell, ServiceConfig(port=0, job_timeout_s=120)))
     out = tmp_path / "received.rrd"
     receiver = subprocess.Popen(
-        [
-            *viewer_command(),
-            live_url(f"{host}:{port}"),
-            "--bind",
-            "127.0.0.1",
-            "--port",
-            "0",
-            "--save",
-            str(out),
-        ],
+        save_live_command(f"{host}:{port}", out),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
