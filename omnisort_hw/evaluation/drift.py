@@ -22,7 +22,7 @@ from omnisort_hw.config.watchdog import WatchdogConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.kinematics import get_model, nearest_solution
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.errors import InputError
+from omnisort_hw.errors import InputError, OmnisortError
 from omnisort_hw.evaluation.sorting import random_scene
 from omnisort_hw.pipeline.drift_check import check_drift
 from omnisort_hw.pipeline.registration import register_from_image, robot_base_record
@@ -86,6 +86,7 @@ def evaluate_drift(
         "max_unmoved_angle_deg": 0.0,
         "thresholds_deg": [],
         "failures": [],
+        "registration_retries": [],
     }
     t0 = time.perf_counter()
     scene_cache: dict[int, Any] = {}
@@ -106,8 +107,16 @@ def evaluate_drift(
             calib = SystemCalibration.from_json(truth, source="truth")
             reg_cfg = sim_registration_config(cell.scene)
             reference = np.asarray(first.image)
-            reg = register_from_image(reference, calib, reg_cfg)
-            payload = {**truth, "robot_base": robot_base_record(reg, reg_cfg, "reference")}
+            payload = dict(truth)  # the true robot base, unless the registration succeeds
+            for _ in range(3):
+                try:
+                    reg = register_from_image(reference, calib, reg_cfg)
+                except OmnisortError as exc:
+                    out["registration_retries"].append(f"scene {k}: {exc}")
+                    reference = np.asarray(cam.grab().image)
+                    continue
+                payload["robot_base"] = robot_base_record(reg, reg_cfg, "reference")
+                break
             R0 = cell.world.R_SC.copy()
             T_board = reg_cfg.T_B_board
             board_B = T_board[:3, :3] @ reg_cfg.board.object_points().mean(axis=0) + T_board[:3, 3]
