@@ -443,8 +443,10 @@ def drift(r: dict[str, Any]) -> str:
         )
     return (
         _table(["case", "captures", "outcome", "implied angle error, max"], rows)
-        + f"\nThreshold (noise-derived, least precise direction): median "
-        f"{d['threshold_deg_median']}°, max {d['threshold_deg_max']}°; seed {d['seed']}, "
+        + f"\nThreshold = the larger of the noise-derived one (least precise direction) and "
+        f"`min_angle_deg` (0.02°): median {d['threshold_deg_median']}°, max "
+        f"{d['threshold_deg_max']}° (0.02° means the noise-derived part was below it); "
+        f"seed {d['seed']}, "
         f"{d['width_px']} px, {d['scenes']} scenes; {d['seconds_per_check_with_render']} s per "
         f"capture and check. PLC: one read of the 11 input registers {d['plc_read_ms_median']} ms "
         f"median, {d['plc_read_ms_p99']} ms p99.\n"
