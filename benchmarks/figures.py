@@ -455,7 +455,52 @@ def summary(r: dict[str, Any]) -> str:
             "[virtual cell](docs/virtual_cell.md)",
         ],
     ]
+    if "drift" in r:
+        d = r["drift"]
+        sizes = ("0.05", "0.1", "0.3", "1")
+        rows.append(
+            [
+                "drift watchdog: camera unmoved / knocked 0.05–1° (X, Y, Z)",
+                f"{d['false_alarms']} false alarms in {d['unmoved_captures']} captures / "
+                f"{sum(d[f'bump_{s}_detected'] for s in sizes)}/"
+                f"{sum(d[f'bump_{s}_captures'] for s in sizes)} detected, angle within "
+                f"{max(d[f'bump_{s}_max_angle_error_deg'] for s in sizes)}°",
+                "[drift](docs/drift.md)",
+            ]
+        )
     return _table(["what", "measured", "more"], rows) + f"\nMachine: {_machine(r)}.\n"
+
+
+def drift(r: dict[str, Any]) -> str:
+    d = r["drift"]
+    rows: list[list[Any]] = [
+        [
+            "camera unmoved (clean and degraded, arm in random poses)",
+            d["unmoved_captures"],
+            f"{d['false_alarms']} false alarms ({d['occluded_captures']} with board corners "
+            f"unseen: arm or noise); largest angle {d['max_unmoved_angle_deg']}°",
+            "",
+        ]
+    ]
+    for size in ("0.05", "0.1", "0.3", "1"):
+        rows.append(
+            [
+                f"bump {size}° (X, Y, Z of S, both signs)",
+                d[f"bump_{size}_captures"],
+                f"{d[f'bump_{size}_detected']} detected",
+                f"{d[f'bump_{size}_max_angle_error_deg']}°",
+            ]
+        )
+    return (
+        _table(["case", "captures", "outcome", "implied angle error, max"], rows)
+        + f"\nThreshold = the larger of the noise-derived one (least precise direction) and "
+        f"`min_angle_deg` (0.02°): median {d['threshold_deg_median']}°, max "
+        f"{d['threshold_deg_max']}° (0.02° means the noise-derived part was below it); "
+        f"seed {d['seed']}, "
+        f"{d['width_px']} px, {d['scenes']} scenes; {d['seconds_per_check_with_render']} s per "
+        f"capture and check. PLC: one read of the 11 input registers {d['plc_read_ms_median']} ms "
+        f"median, {d['plc_read_ms_p99']} ms p99.\n"
+    )
 
 
 GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
@@ -471,6 +516,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "virtual_cell": virtual_cell,
     "soak": soak,
     "stream_stripe": stream_stripe,
+    "drift": drift,
 }
 
 

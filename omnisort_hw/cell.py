@@ -35,6 +35,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.device_status import Cached, Caches, arm_summary, camera_summary, error_text
 from omnisort_hw.devices import Devices, open_devices
+from omnisort_hw.drift_watchdog import DriftWatchdog
 from omnisort_hw.errors import InputError, MotionRefusedError, OmnisortError
 from omnisort_hw.job_journal import JobJournal
 from omnisort_hw.pipeline.arm_motion import ArmMover
@@ -117,6 +118,7 @@ class Cell:
         self.actuation_guard: Callable[[], None] | None = None
         self.journal = JobJournal(store.state_dir)
         self.compute = ComputeWorker()  # CPU-bound jobs run here, not in the service's process
+        self.drift = DriftWatchdog(self, self.config.watchdog)
 
     # -- construction and life cycle -------------------------------------------------------
 
@@ -180,6 +182,7 @@ class Cell:
         self._poller_stop.clear()
         self._poller = threading.Thread(target=self._poll_status, name="status-poll", daemon=True)
         self._poller.start()
+        self.drift.start()
         self.runlog.event("service/devices", f"connected: {self.device_names()}")
 
     def device_names(self) -> dict[str, str | None]:
@@ -191,6 +194,7 @@ class Cell:
         Returns the problems met (also logged), so the caller can report them.
         """
         self._poller_stop.set()
+        self.drift.stop()
         if self._poller is not None:
             self._poller.join(timeout=2.0)
             self._poller = None
@@ -335,6 +339,7 @@ class Cell:
             "rrd": str(self.runlog_path) if self.runlog_path else None,
             "logging": self.log_health(),
             "gripper": assess(self.devices.arm, self.journal.in_flight()).to_dict(),
+            "drift": self.drift.status(),
         }
 
     def status(self) -> dict[str, Any]:
@@ -442,6 +447,7 @@ class Cell:
     def check_motion_allowed(self) -> None:
         """Raise MotionRefusedError unless camera.json and system.json are usable."""
         self.store.check_motion_allowed()
+        self.drift.check_motion_allowed()
 
     def move(
         self,
@@ -689,6 +695,7 @@ class Cell:
         reg = register_from_image(img, calib, rc, self.runlog)
         payload["robot_base"] = robot_base_record(reg, rc, image or "capture")
         path = self.store.save_system(payload)
+        self.drift.save_reference(img)
         return {"robot_base": payload["robot_base"], "path": str(path)}
 
     def locate(
@@ -742,6 +749,7 @@ class Cell:
             on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
         )
         sorter.calibration.check_motion_allowed()
+        self.drift.before_sort()
         T_SB = robot_base_T(sorter.calibration.system())
         held = resolve_before_sort(sorter, self.journal, T_SB)
         report = sorter.run(max_objects, colors)

@@ -51,3 +51,10 @@ class MotionRefusedError(OmnisortError):
     """A motion was refused before anything was sent to the arm."""
 
     code = "motion_refused"
+
+
+class CalibrationDriftError(MotionRefusedError):
+    """Motion refused: the camera turned on its mount since the calibration (the message names
+    the measured angle); cleared by a recalibration or `acknowledge_drift`."""
+
+    code = "calibration_drift"

@@ -26,6 +26,9 @@ class RunLog:
         self._rec: Any = None
         self._rr: Any = None
         self._swap = threading.Lock()
+        # A second recording everything is also logged to (the live view's gRPC server); it
+        # outlives file changes (`reopen`).
+        self.mirror: Any = None
         self.reopen(path)
 
     def reopen(self, path: str | Path | None) -> None:
@@ -39,6 +42,8 @@ class RunLog:
         without bound."""
         with self._swap:
             old, self._rec, self.path = self._rec, None, None
+            if isinstance(old, _Tee):
+                old = old.file
             if old is not None:
                 try:
                     old.flush()
@@ -46,6 +51,8 @@ class RunLog:
                     if path is None:
                         old.disconnect()
             if path is None:
+                if self.mirror is not None:
+                    self._rec = _Tee(None, self.mirror)
                 return
             new_path = Path(path)
             new_path.parent.mkdir(parents=True, exist_ok=True)
@@ -55,7 +62,21 @@ class RunLog:
                 self._rr = rr
                 self._stream = rr.RecordingStream(self._application_id, recording_id=uuid.uuid4())
             self._stream.save(str(new_path))
-            self._rec, self.path = self._stream, new_path
+            self._rec = self._stream if self.mirror is None else _Tee(self._stream, self.mirror)
+            self.path = new_path
+
+    def set_mirror(self, rec: Any) -> None:
+        """Log everything to `rec` as well from now on (None: stop); the file goes on."""
+        with self._swap:
+            self.mirror = rec
+            cur = self._rec.file if isinstance(self._rec, _Tee) else self._rec
+            if rec is None:
+                self._rec = cur
+            else:
+                import rerun as rr
+
+                self._rr = rr
+                self._rec = _Tee(cur, rec)
 
     @property
     def enabled(self) -> bool:
@@ -168,6 +189,27 @@ class RunLog:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _Tee:
+    """The file's recording and the mirror as one: every call goes to both (file first)."""
+
+    def __init__(self, file: Any, mirror: Any) -> None:
+        self.file, self.mirror = file, mirror
+
+    def log(self, *args: Any, **kwargs: Any) -> None:
+        if self.file is not None:
+            self.file.log(*args, **kwargs)
+        self.mirror.log(*args, **kwargs)
+
+    def set_time(self, *args: Any, **kwargs: Any) -> None:
+        if self.file is not None:
+            self.file.set_time(*args, **kwargs)
+        self.mirror.set_time(*args, **kwargs)
+
+    def flush(self) -> None:
+        if self.file is not None:
+            self.file.flush()
 
 
 NullLog = RunLog(None)

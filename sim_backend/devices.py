@@ -20,6 +20,7 @@ from __future__ import annotations
 import threading
 import time
 import weakref
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import replace
@@ -115,6 +116,19 @@ class SimCell:
                 brightness=brightness,
             )
 
+    def bump_camera(self, angle_deg: float, axis: str | Sequence[float] = "x") -> np.ndarray:
+        """Turn the camera on its mount by `angle_deg` about `axis` of S ("x", "y", "z" or a
+        vector) from where it is now, as a knock would; returns the new R_SC. The drift
+        watchdog's test subject: renders and truth follow the turned camera."""
+        named = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+        ax = np.asarray(named[axis] if isinstance(axis, str) and axis in named else axis, float)
+        if ax.shape != (3,) or not np.linalg.norm(ax) > 0 or not np.isfinite(angle_deg):
+            raise ValueError(f"camera bump: axis must be x, y, z or a 3-vector, got {axis!r}")
+        turn = Rotation.from_rotvec(np.radians(angle_deg) * ax / np.linalg.norm(ax)).as_matrix()
+        with self.lock:
+            self.world.R_SC = turn @ self.world.R_SC
+            return self.world.R_SC.copy()
+
     def release_stops(self) -> None:
         """Clear protective and emergency stops (the pendant's job on a real cell)."""
         self.protective_stop = False
@@ -172,8 +186,11 @@ class SimCamera(_Connectable, Camera):
         exposure_ms: float = NOMINAL_EXPOSURE_MS,
         gain: float = 1.0,
         grab_timeout_s: float = DEFAULT_SIM_GRAB_TIMEOUT_S,
+        bump: tuple[float, str, int] | None = None,
     ) -> None:
         super().__init__(cell)
+        # (angle deg, axis, after this many grabs): the mount is knocked once, between grabs.
+        self.bump = bump
         self.degraded = degraded
         self._exposure_ms = float(exposure_ms)
         self._gain = float(gain)
@@ -240,6 +257,9 @@ class SimCamera(_Connectable, Camera):
         timeout = self.grab_timeout_s if timeout_s is None else float(timeout_s)
         self._sequence += 1
         seq = self._sequence
+        if self.bump is not None and seq > self.bump[2]:
+            self.cell.bump_camera(self.bump[0], self.bump[1])
+            self.bump = None
         future = self._pool.submit(self._render, seq, with_truth)
         try:
             image, truth = future.result(timeout=timeout)
@@ -549,6 +569,9 @@ _KEYS: dict[str, dict[str, type]] = {
         "exposure_ms": float,
         "gain": float,
         "grab_timeout_s": float,
+        "bump_deg": float,
+        "bump_axis": str,
+        "bump_after_grabs": int,
     },
     "laser": {"scene": str, "seed": int},
     "arm": {
@@ -596,8 +619,10 @@ def open_devices(
     `sections` maps "camera" / "laser" / "arm" to their settings. Keys: `scene` (a scene file,
     relative to `base_dir`, or a shipped scene name; default "sorting"), `seed`; camera:
     `degraded`, `width`, `height`, `model_file` (camera.json), `exposure_ms`, `gain`,
-    `grab_timeout_s`; arm: `joint_speed_deg_s`, `joint_accel_deg_s2`, `linear_speed_mm_s`,
-    `linear_accel_mm_s2`, their caps `max_joint_speed_deg_s`, `max_joint_accel_deg_s2`,
+    `grab_timeout_s`, `bump_deg`/`bump_axis`/`bump_after_grabs` (the mount is knocked once
+    by that angle about that axis of S after that many grabs); arm: `joint_speed_deg_s`,
+    `joint_accel_deg_s2`, `linear_speed_mm_s`, `linear_accel_mm_s2`, their caps
+    `max_joint_speed_deg_s`, `max_joint_accel_deg_s2`,
     `max_linear_speed_mm_s`, `max_linear_accel_mm_s2` (as the UR driver's), `realtime`.
     """
     checked = {kind: _check_settings(kind, dict(s)) for kind, s in sections.items()}
@@ -631,6 +656,11 @@ def open_devices(
             exposure_ms=cam.get("exposure_ms", NOMINAL_EXPOSURE_MS),
             gain=cam.get("gain", 1.0),
             grab_timeout_s=cam.get("grab_timeout_s", DEFAULT_SIM_GRAB_TIMEOUT_S),
+            bump=(
+                (cam["bump_deg"], cam.get("bump_axis", "x"), cam.get("bump_after_grabs", 0))
+                if "bump_deg" in cam
+                else None
+            ),
         )
     if "laser" in checked:
         made["laser"] = SimLaserSwitch(cell)

@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.review_cmd",
     "omnisort_hw.cli.devices_cmd",
     "omnisort_hw.cli.sim_cmd",
+    "omnisort_hw.cli.drift_cmd",
 )
 
 

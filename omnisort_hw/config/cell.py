@@ -29,6 +29,7 @@ from omnisort_hw.config.sorting import (
     parse_registration_config,
     parse_sort_section,
 )
+from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
 from omnisort_hw.errors import ConfigError
 from omnisort_hw.pipeline.extrinsics import TARGETS
 from omnisort_hw.storage import StorageConfig
@@ -43,6 +44,8 @@ SECTIONS = (
     "target",
     "sorting",
     "registration",
+    "watchdog",
+    "plc",
 )
 
 
@@ -82,6 +85,8 @@ class CellConfig:
     target: TargetConfig = field(default_factory=TargetConfig)
     sorting: SortSection | None = None
     registration: RegistrationConfig | None = None
+    watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
+    plc: PlcConfig = field(default_factory=PlcConfig)
 
     @property
     def base_dir(self) -> Path | None:
@@ -112,6 +117,8 @@ class CellConfig:
             registration=(
                 parse_registration_config(doc["registration"]) if "registration" in doc else None
             ),
+            watchdog=WatchdogConfig.from_mapping(tables["watchdog"]),
+            plc=PlcConfig.from_mapping(tables["plc"]),
         )
 
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import ipaddress
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.config.live_view import LIVE_KEYS, LiveViewConfig
 from omnisort_hw.errors import ConfigError
 
 DEFAULT_PORT = 29100
@@ -165,6 +166,7 @@ class LoggingConfig:
     rrd_max_total_mb: float = 2048.0
     rrd_max_file_mb: float = 512.0
     level: str = "INFO"
+    live: LiveViewConfig = field(default_factory=LiveViewConfig)
 
     @classmethod
     def from_mapping(
@@ -175,7 +177,8 @@ class LoggingConfig:
         _check_keys(
             section,
             name,
-            {"log_dir", "rerun", "rrd_keep", "rrd_max_total_mb", "rrd_max_file_mb", "level"},
+            {"log_dir", "rerun", "rrd_keep", "rrd_max_total_mb", "rrd_max_file_mb", "level"}
+            | LIVE_KEYS,
         )
         rerun = section.get("rerun", True)
         if not isinstance(rerun, bool):
@@ -190,4 +193,5 @@ class LoggingConfig:
             rrd_max_total_mb=_number(section, name, "rrd_max_total_mb", 2048.0, 1.0),
             rrd_max_file_mb=_number(section, name, "rrd_max_file_mb", 512.0, 1.0),
             level=level,
+            live=LiveViewConfig.from_mapping(section),
         )

@@ -324,6 +324,8 @@ class Sorter:
             self.log.event("sorting/plan", f"cube {i} ({outcomes[i].color}): refused: {reason}")
 
         queue = PickQueue(planner, loc.cubes, todo, refused, self.cancel.is_set)
+        if self.progress is not None:
+            self.progress({"located": len(loc.cubes), "to_pick": len(todo)})
         t_exec = time.perf_counter()
         done = 0
         with ThreadPoolExecutor(1, thread_name_prefix="plan-ahead") as ahead:

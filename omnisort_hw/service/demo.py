@@ -101,9 +101,7 @@ def _brief(cmd: str, reply: dict[str, Any]) -> str:
     return json.dumps(res)[:160]
 
 
-def run(
-    out: Path, width: int = 960, views: int = 10, config: Path | None = None
-) -> dict[str, Any]:
+def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None) -> dict[str, Any]:
     """Run the demo into `out`; returns the summary (steps, replies, .rrd path, exit code).
     `config` is a cell file to serve instead of the simulated cell's (the virtual cell's)."""
     from omnisort_hw.service.client import Client

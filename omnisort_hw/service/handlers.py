@@ -92,6 +92,14 @@ def sort(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
     return ctx.cell.sort(args["max_objects"], args["colors"], ctx.cancel, ctx.progress)
 
 
+def check(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.drift.check(args["image"])
+
+
+def acknowledge_drift(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.drift.acknowledge()
+
+
 HANDLERS: dict[str, Handler] = {
     "status": status,
     "capture": capture,
@@ -102,4 +110,6 @@ HANDLERS: dict[str, Handler] = {
     "locate": locate,
     "move": move,
     "sort": sort,
+    "check": check,
+    "acknowledge_drift": acknowledge_drift,
 }

@@ -51,6 +51,7 @@ ERROR_CODES: tuple[str, ...] = (
     "storage_error",
     "gripper_loaded",
     "instance_locked",
+    "calibration_drift",
 )
 
 MAX_ID_CHARS = 128
@@ -244,6 +245,18 @@ COMMANDS: dict[str, Command] = {
             ),
             job_state="sorting",
             help="locate, pick and place every object by colour",
+        ),
+        Command(
+            "check",
+            "job",
+            (_IMAGE,),
+            job_state="mapping",
+            help="drift check: a laser-off capture against the stored calibration",
+        ),
+        Command(
+            "acknowledge_drift",
+            "quick",
+            help="accept a detected calibration drift: motion allowed again",
         ),
         Command("stop", "safety", needs_token=False, help="stop the running job and the arm"),
         Command(

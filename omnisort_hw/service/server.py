@@ -47,6 +47,8 @@ from omnisort_hw.service.connection import (
     peer_host,
 )
 from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.live_view import start_live_view
+from omnisort_hw.service.plc_face import start_plc_face
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
@@ -103,6 +105,7 @@ class Service:
         self.notifier = notifier or Notifier({})
         self.states = StateMachine(self._on_transition)
         cell.actuation_guard = self._check_may_actuate
+        cell.drift.busy = lambda: self._job is not None
         self._recover_interrupted_job()
         self._job: Job | None = None
         self._job_lock = threading.Lock()
@@ -769,6 +772,8 @@ def serve(
         try:
             cell.connect()
             service = Service(cell, cfg, notifier)
+            plc = start_plc_face(service, settings.plc)
+            live = start_live_view(settings.logging.live, cell.runlog)
         except BaseException:
             cell.close()
             raise
@@ -776,6 +781,10 @@ def serve(
             code = asyncio.run(service.run())
         finally:
             notifier.close()
+            if plc is not None:
+                plc.close()
+            if live is not None:
+                live.close()
     if service.exit_problems:
         log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
     return code

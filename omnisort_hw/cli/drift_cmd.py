@@ -1,0 +1,149 @@
+"""`omnisort check IMAGE` (the drift check on an image) and `omnisort evaluate drift`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "check", help="drift check: an image against the stored calibration and robot base"
+    )
+    p.add_argument("image", type=Path, help="a laser-off image of the cell")
+    p.add_argument("--system", type=Path, required=True, help="system.json with robot_base")
+    p.add_argument(
+        "--reference",
+        type=Path,
+        default=None,
+        help="the image the robot was registered with (default: drift_reference.png beside "
+        "system.json when it belongs to it; otherwise the board alone)",
+    )
+    p.add_argument(
+        "--config", type=Path, default=None, help="cell file: [registration], [watchdog]"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--log", type=Path, default=None, help="write a rerun .rrd")
+    p.set_defaults(func=cmd_check)
+
+
+def add_drift_evaluation(esub: Any) -> None:
+    """`omnisort evaluate drift` (called by the `evaluate` command group)."""
+    ev = esub.add_parser("drift", help="drift watchdog on simulated scenes: alarms and bumps")
+    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument("--scenes", type=int, default=2, help="random scenes (default 2)")
+    ev.add_argument("--unmoved", type=int, default=200, help="captures with the camera unmoved")
+    ev.add_argument("--width", type=int, default=960, help="render size (default 960)")
+    ev.add_argument("--out", type=Path, default=None, help="also write the result JSON here")
+    ev.add_argument("--json", action="store_true", help="print one JSON object")
+    ev.set_defaults(func=cmd_evaluate_drift)
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    import cv2
+
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.config.watchdog import WatchdogConfig
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+    from omnisort_hw.errors import CalibrationFileError, InputError
+    from omnisort_hw.pipeline.drift_check import calibration_key, check_drift, load_reference
+    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.runlog import RunLog
+
+    try:
+        payload = json.loads(args.system.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise CalibrationFileError(f"{args.system}: not a readable system.json ({exc})") from None
+    calib = SystemCalibration.from_json(payload, source=str(args.system))
+    cfg = load_cell_config(args.config) if args.config else None
+    registration = cfg.registration if cfg is not None else None
+    if registration is None and isinstance(payload.get("robot_base"), dict):
+        registration = _registration_from_record(payload["robot_base"])
+    if args.reference is not None:
+        reference = cv2.imread(str(args.reference), cv2.IMREAD_COLOR)
+        if reference is None:
+            raise InputError(f"{args.reference}: not a readable image")
+    else:
+        reference = load_reference(args.system.parent, calibration_key(payload))
+    image = read_image(args.image)
+    with RunLog(args.log) as log:
+        res = check_drift(
+            image,
+            calib,
+            payload,
+            registration,
+            reference,
+            cfg.watchdog if cfg is not None else WatchdogConfig(),
+            str(args.image),
+            log,
+        )
+    s = res.summary()
+    if args.json:
+        print(json.dumps(s))
+    else:
+        b = s["board"] or {}
+        print(
+            f"{'DRIFT' if s['drift'] else 'ok'}: camera turned {s['angle_deg']:.4f} deg "
+            f"(rotation vector {s['rotvec_deg']} deg in S, threshold {s['threshold_deg']:.4f} "
+            f"deg, from the {s['source']})"
+        )
+        if b:
+            print(
+                f"  board: {b['visible']}/{b['corners']} corners visible, residual median "
+                f"{b['residual_px_median']} px, max {b['residual_px_max']} px; base shift "
+                f"{b['base_shift_mm']} mm"
+            )
+    return 1 if res.drift else 0
+
+
+def _registration_from_record(record: dict[str, Any]) -> Any:
+    """[registration] from system.json's robot_base record (board and offset are stored)."""
+    from omnisort_hw.config.sorting import RegistrationConfig
+    from omnisort_hw.core.checkerboard import BoardSpec
+
+    board, offset = record.get("board"), record.get("offset")
+    if not isinstance(board, dict) or not isinstance(offset, list):
+        return None
+    try:
+        cols, rows = board["inner_corners"]
+        spec = BoardSpec(int(cols), int(rows), float(board["square_mm"]))
+    except (KeyError, TypeError, ValueError):
+        return None
+    return RegistrationConfig(spec, tuple(float(v) for v in offset))  # type: ignore[arg-type]
+
+
+def cmd_evaluate_drift(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from omnisort_hw import fileio
+    from omnisort_hw.evaluation.drift import AXES, BUMPS_DEG, evaluate_drift
+
+    total = args.unmoved + args.scenes * 2 * len(BUMPS_DEG) * len(AXES) * 2
+    with tqdm(total=total, desc="drift checks", file=sys.stderr, disable=None) as bar:
+        result = evaluate_drift(
+            seed=args.seed,
+            scenes=args.scenes,
+            unmoved=args.unmoved,
+            width=args.width,
+            progress=lambda _s: bar.update(1),
+        )
+    if args.out is not None:
+        fileio.atomic_write_json(args.out, result, keep_history=False)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(
+        f"unmoved: {result['unmoved_captures']} captures ({result['occluded_captures']} with the "
+        f"board partly hidden), {result['false_alarms']} false alarms, largest angle "
+        f"{result['max_unmoved_angle_deg']} deg; threshold median {result['threshold_deg_median']}"
+        f" deg"
+    )
+    for size, row in result["bumps"].items():
+        print(
+            f"bump {size:>4} deg: {row['detected']}/{row['captures']} detected, angle error "
+            f"<= {row['max_angle_error_deg']} deg"
+        )
+    return 0

@@ -1,0 +1,216 @@
+"""The cell's drift watchdog: runs the drift check, keeps its last result and refuses motion
+after a detected drift until the calibration changes or an operator acknowledges it.
+
+The state lives in `STATE_DIR/drift.json` (atomic writes), so a restart does not forget a
+detected drift. A drift belongs to the calibration it was measured against (its key): a new
+extrinsic calibration or robot registration clears it by itself.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from omnisort_hw import fileio
+from omnisort_hw.config.watchdog import WatchdogConfig
+from omnisort_hw.errors import CalibrationDriftError, FeatureNotFoundError, InputError
+from omnisort_hw.pipeline.drift_check import (
+    calibration_key,
+    check_drift,
+    load_reference,
+    save_reference,
+)
+
+if TYPE_CHECKING:
+    from omnisort_hw.cell import Cell
+
+log = logging.getLogger(__name__)
+
+STATE_NAME = "drift.json"
+
+
+class DriftWatchdog:
+    """Drift checks of one cell: on request, before each sort, every `period_s` when idle."""
+
+    def __init__(self, cell: Cell, config: WatchdogConfig | None = None) -> None:
+        self.cell = cell
+        self.config = config or WatchdogConfig()
+        self._lock = threading.Lock()
+        self._path = Path(cell.store.state_dir) / STATE_NAME
+        self._state: dict[str, Any] = self._load()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        # Set by the service: True while a job runs (the periodic check then waits).
+        self.busy: Callable[[], bool] = lambda: False
+
+    # -- state -------------------------------------------------------------------------------
+
+    def _load(self) -> dict[str, Any]:
+        try:
+            data = json.loads(self._path.read_text(encoding="utf-8"))
+            return data if isinstance(data, dict) else {}
+        except (OSError, ValueError):
+            return {}
+
+    def _save(self) -> None:
+        try:
+            fileio.atomic_write_json(self._path, self._state, keep_history=False)
+        except OSError as exc:
+            log.error("drift watchdog: cannot write %s: %s", self._path, exc)
+
+    def _current_key(self) -> str | None:
+        try:
+            return calibration_key(self.cell.store.read("system").payload)
+        except Exception:
+            return None
+
+    def refusal(self) -> str | None:
+        """Why motion is refused now (a drift of the current calibration not acknowledged)."""
+        with self._lock:
+            st = dict(self._state)
+        drift = st.get("drift_detected")
+        if (
+            not drift
+            or st.get("acknowledged")
+            or drift.get("calibration_key") != self._current_key()
+        ):
+            return None
+        return (
+            f"calibration drift: the camera turned {drift['angle_deg']:.3f} deg since the "
+            f"calibration (threshold {drift['threshold_deg']:.3f} deg, checked "
+            f"{drift['checked_at']}); recalibrate (calibrate what=extrinsics, register_robot) or "
+            "send acknowledge_drift"
+        )
+
+    def check_motion_allowed(self) -> None:
+        why = self.refusal()
+        if why is not None:
+            raise CalibrationDriftError(why)
+
+    def status(self) -> dict[str, Any]:
+        """`status.drift`: the last check, the drift that refuses motion (if any)."""
+        with self._lock:
+            st = dict(self._state)
+        why = self.refusal()
+        return {
+            "last": st.get("last"),
+            "motion_refused": why is not None,
+            "reason": why,
+            "acknowledged": st.get("acknowledged"),
+            "period_s": self.config.period_s,
+            "last_error": st.get("last_error"),
+        }
+
+    def acknowledge(self) -> dict[str, Any]:
+        """An operator accepts the drift (e.g. checked the picks by hand): motion allowed again
+        until the next check finds drift."""
+        with self._lock:
+            drift = self._state.get("drift_detected")
+            self._state["acknowledged"] = (
+                {
+                    "at": datetime.now(UTC).isoformat(timespec="seconds"),
+                    "angle_deg": drift["angle_deg"],
+                }
+                if drift
+                else None
+            )
+            self._save()
+        self.cell.runlog.event("drift/check", "drift acknowledged by an operator", level="WARN")
+        return {"acknowledged": drift is not None, "drift": drift}
+
+    # -- checks ------------------------------------------------------------------------------
+
+    def save_reference(self, image: np.ndarray) -> None:
+        """The registration's capture becomes the reference of the calibration just saved."""
+        try:
+            key = calibration_key(self.cell.store.read("system").payload)
+            save_reference(self.cell.store.state_dir, image, key)
+        except Exception as exc:
+            log.error("drift watchdog: cannot save the reference image: %s", exc)
+
+    def check(self, image: str | None = None) -> dict[str, Any]:
+        """Capture (laser off) or read `image`, compare with the calibration, record the result."""
+        from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+        from omnisort_hw.pipeline.extrinsics import read_image
+
+        cell = self.cell
+        rec = cell.store.read("system")
+        payload = rec.payload
+        calib = SystemCalibration.from_json(payload, source=str(rec.path))
+        key = calibration_key(payload)
+        img = read_image(image) if image is not None else cell._image(None, laser=False)
+        reference = load_reference(cell.store.state_dir, key)
+        result = check_drift(
+            img,
+            calib,
+            payload,
+            cell.registration_config,
+            reference,
+            self.config,
+            image or "capture",
+            cell.runlog,
+        )
+        summary = result.summary()
+        if reference is None and not result.drift and image is None:
+            # No reference for this calibration yet (registered elsewhere): the board found
+            # no drift, so this capture becomes the reference of the finer image check.
+            save_reference(cell.store.state_dir, img, key)
+            summary["reference_adopted"] = True
+        with self._lock:
+            self._state["last"] = summary
+            if result.drift:
+                self._state["drift_detected"] = summary
+                self._state["acknowledged"] = None
+            self._save()
+        if result.drift:
+            log.warning("drift: %s", self.refusal())
+        return summary
+
+    def before_sort(self) -> None:
+        """The check `sort` runs first (when configured); raises on drift."""
+        if self.config.before_sort:
+            try:
+                self.check()
+            except (FeatureNotFoundError, InputError) as exc:
+                # Nothing to measure with (board hidden and no reference): not a drift; the
+                # sort's own registration and location checks still apply.
+                log.warning("drift check before sort could not measure: %s", exc)
+                with self._lock:
+                    self._state["last_error"] = f"{type(exc).__name__}: {exc}"
+        self.check_motion_allowed()
+
+    # -- periodic ----------------------------------------------------------------------------
+
+    def start(self) -> None:
+        if self.config.period_s <= 0 or self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="drift-watchdog", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+
+    def _run(self) -> None:
+        next_at = time.monotonic() + self.config.period_s
+        while not self._stop.wait(min(1.0, max(0.0, next_at - time.monotonic()))):
+            if time.monotonic() < next_at or self.busy():
+                continue
+            next_at = time.monotonic() + self.config.period_s
+            try:
+                self.check()
+            except Exception as exc:
+                log.warning("periodic drift check failed: %s", exc)
+                with self._lock:
+                    self._state["last_error"] = f"{type(exc).__name__}: {exc}"

@@ -1,0 +1,173 @@
+"""The drift check: one fresh capture against the stored calibration (use case).
+
+Shared by `omnisort check IMAGE`, the service's `check` command, its periodic watchdog and
+the check before each `sort`. The reference image is the laser-off capture the robot was
+registered with (saved beside system.json as `drift_reference.png` with the key of the
+calibration it belongs to); without it (e.g. a system.json registered elsewhere) the board's
+corners alone give the rotation, less precisely. See `core.drift` and docs/drift.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from omnisort_hw import fileio
+from omnisort_hw.config.sorting import RegistrationConfig
+from omnisort_hw.config.watchdog import WatchdogConfig
+from omnisort_hw.core.drift import (
+    BoardCheck,
+    DriftDecision,
+    RotationEstimate,
+    decide,
+    estimate_rotation,
+    measure_board,
+)
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
+from omnisort_hw.runlog import NullLog, RunLog
+
+REFERENCE_NAME = "drift_reference.png"
+REFERENCE_META = "drift_reference.json"
+# Bias of refined board corners against the calibration's prediction (px), what the
+# board-only fallback cannot resolve (docs/drift.md).
+BOARD_BIAS_PX = 0.3
+
+
+def calibration_key(system_payload: Mapping[str, Any]) -> str:
+    """What a drift result belongs to: the camera rotation, the model and the robot base."""
+    keys = ("camera", "camera_rotation", "robot_base")
+    body = {k: system_payload.get(k) for k in keys}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def save_reference(state_dir: Path, image: np.ndarray, key: str) -> Path:
+    """Keep `image` (the registration's capture) as the drift reference of calibration `key`."""
+    ok, buf = cv2.imencode(".png", np.asarray(image))
+    if not ok:
+        raise OmnisortError("drift reference: PNG encoding failed")
+    path = fileio.atomic_write_bytes(Path(state_dir) / REFERENCE_NAME, buf.tobytes(), False)
+    meta = {"key": key, "saved": datetime.now(UTC).isoformat(timespec="seconds")}
+    fileio.atomic_write_json(Path(state_dir) / REFERENCE_META, meta, keep_history=False)
+    return path
+
+
+def load_reference(state_dir: Path, key: str) -> np.ndarray | None:
+    """The reference image of calibration `key`, or None (missing, unreadable, another key)."""
+    try:
+        meta = json.loads((Path(state_dir) / REFERENCE_META).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(meta, dict) or meta.get("key") != key:
+        return None
+    img = cv2.imread(str(Path(state_dir) / REFERENCE_NAME), cv2.IMREAD_COLOR)
+    return img
+
+
+@dataclass
+class DriftResult:
+    """One check: the decision, the board against its prediction, and when."""
+
+    decision: DriftDecision
+    board: BoardCheck | None
+    key: str
+    source: str
+    checked_at: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
+    board_problem: str | None = None
+
+    @property
+    def drift(self) -> bool:
+        return self.decision.drift
+
+    def summary(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            **self.decision.summary(),
+            "checked_at": self.checked_at,
+            "image": self.source,
+            "calibration_key": self.key,
+            "board": self.board.summary() if self.board is not None else None,
+        }
+        if self.board_problem:
+            out["board_problem"] = self.board_problem
+        return out
+
+
+def check_drift(
+    image: np.ndarray,
+    calib: SystemCalibration,
+    system_payload: Mapping[str, Any],
+    registration: RegistrationConfig | None,
+    reference: np.ndarray | None,
+    config: WatchdogConfig | None = None,
+    source: str = "capture",
+    log: RunLog = NullLog,
+) -> DriftResult:
+    """Compare a laser-off capture with the stored calibration (and its reference image)."""
+    cfg = config or WatchdogConfig()
+    est: RotationEstimate | None = None
+    if reference is not None:
+        est = estimate_rotation(reference, image, calib.model, calib.R_SC)
+    board: BoardCheck | None = None
+    problem = None
+    base = system_payload.get("robot_base")
+    if registration is not None and isinstance(base, Mapping) and "matrix" in base:
+        T_SB = np.asarray(base["matrix"], float)
+        board = measure_board(
+            image,
+            calib.model,
+            calib.R_SC,
+            T_SB,
+            registration.T_B_board,
+            registration.board,
+            None if est is None else est.rotvec_S,
+        )
+        if board.n_visible < 4:
+            problem = f"only {board.n_visible} board corners visible"
+    else:
+        problem = "no registered robot base or no [registration]: the board is not checked"
+    if est is None:
+        if board is None or board.rotation is None:
+            raise FeatureNotFoundError(
+                "drift check: no reference image for this calibration and too few floor-board "
+                f"corners visible ({problem or 'fewer than 6'}); register the robot again"
+            )
+        est = board.rotation
+    min_angle = cfg.min_angle_deg
+    if est.source == "board":
+        # Corner positions carry a bias the residual scatter does not show (detector against
+        # the calibration's own fit): never call less than that bias's angle drift.
+        px0 = calib.model.ray_to_pixel(np.array([[0.0, 0.0, 1.0]]))
+        tilt = np.radians(1.0)
+        px1 = calib.model.ray_to_pixel(np.array([[np.sin(tilt), 0.0, np.cos(tilt)]]))
+        density = float(np.linalg.norm(px1 - px0))
+        min_angle = max(min_angle, BOARD_BIAS_PX / density)
+    decision = decide(est, cfg.false_alarm_rate, min_angle)
+    result = DriftResult(
+        decision, board, calibration_key(system_payload), source, board_problem=problem
+    )
+    _log(log, image, result)
+    return result
+
+
+def _log(log: RunLog, image: np.ndarray, result: DriftResult) -> None:
+    log.image("drift/image", image)
+    b = result.board
+    if b is not None and b.visible.any():
+        log.points2d("drift/image/predicted", b.predicted_px, color=(255, 200, 0), radius=2)
+        log.points2d("drift/image/measured", b.measured_px[b.visible], color=(0, 200, 0), radius=2)
+    log.scalar("drift/angle_deg", result.decision.angle_deg)
+    log.scalar("drift/threshold_deg", result.decision.threshold_deg)
+    log.event(
+        "drift/check",
+        f"{'DRIFT' if result.drift else 'ok'}: {result.decision.angle_deg:.4f} deg "
+        f"(threshold {result.decision.threshold_deg:.4f} deg, {result.decision.source})",
+        level="WARN" if result.drift else "INFO",
+    )
