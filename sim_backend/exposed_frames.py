@@ -31,9 +31,7 @@ class ExposedFrames:
     """One camera's sensor on one world: fixed sensor parameters (from `seed`), a cached
     render per world state, and a fresh random draw per frame."""
 
-    def __init__(
-        self, world: SimWorld, model: OcamModel, seed: int, lighting: Lighting
-    ) -> None:
+    def __init__(self, world: SimWorld, model: OcamModel, seed: int, lighting: Lighting) -> None:
         self.world = world
         self.model = model
         self.seed = int(seed)
@@ -41,6 +39,7 @@ class ExposedFrames:
         self.params = SensorParams.draw(world.scene.degrade, np.random.default_rng(self.seed))
         self._key: bytes | None = None
         self._optical: OpticalImage | None = None
+        self.direct_laser: np.ndarray | None = None  # (H, W) the renderer's laser intensity
         self.renders = 0
 
     def optical(self) -> OpticalImage:
@@ -64,6 +63,7 @@ class ExposedFrames:
                 base, result.laser, scene.laser, self.params, rng, steady, extra
             )
             self._key = key
+            self.direct_laser = result.laser
             self.renders += 1
         return self._optical
 

@@ -134,8 +134,12 @@ def _mirror_laser(
     u0 = np.floor(px[:, 0]).astype(np.int64)
     v0 = np.floor(px[:, 1]).astype(np.int64)
     fu, fv = px[:, 0] - u0, px[:, 1] - v0
-    for du, dv, wt in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)),
-                       (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+    for du, dv, wt in (
+        (0, 0, (1 - fu) * (1 - fv)),
+        (1, 0, fu * (1 - fv)),
+        (0, 1, (1 - fu) * fv),
+        (1, 1, fu * fv),
+    ):
         uu, vv = u0 + du, v0 + dv
         ok = (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
         np.add.at(out, (vv[ok], uu[ok]), (val[ok] * wt[ok]).astype(np.float32))
@@ -164,9 +168,7 @@ def extra_light(
         base = np.where(mask[..., None], _RED * shade, base).astype(np.float32)
     if light.sun > 0:
         warm = srgb_to_linear(np.array([1.0, 0.96, 0.88], np.float32))
-        steady = (base * _sun_mask(points, light)[..., None] * warm * light.sun).astype(
-            np.float32
-        )
+        steady = (base * _sun_mask(points, light)[..., None] * warm * light.sun).astype(np.float32)
     if light.mirror > 0:
         colour = np.asarray(scene.laser.color.rgb, np.float32)
         mirrored = _mirror_laser(laser, points, scene.floor_z, model, R_SC, light.mirror)

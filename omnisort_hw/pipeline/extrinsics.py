@@ -65,9 +65,11 @@ def calibrate_system(
     source: str = "image",
     log: RunLog = NullLog,
     tone: ToneCurve = SRGB,
+    stripe_px: np.ndarray | None = None,
 ) -> SystemCalibration:
     """Extract the target's features from one image and run the chosen method on them;
-    `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise)."""
+    `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise);
+    `stripe_px` the laser points of a measurement capture (else found in the image)."""
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
     from omnisort_hw.core.extrinsics.method2 import calibrate_method2
@@ -93,7 +95,9 @@ def calibrate_system(
             log.points2d(f"extrinsics/image/{name}_laser", b.laser_px, color=(255, 0, 0), radius=1)
         calib = calibrate_method2(boards, model)
     else:
-        features = extract_target_features(image, model, kind=target, tone=tone)
+        features = extract_target_features(
+            image, model, kind=target, tone=tone, stripe_px=stripe_px
+        )
         for name, wall in features.walls.items():
             log.points2d(
                 f"extrinsics/image/{name}_border", wall.border_px, color=(255, 255, 0), radius=1
