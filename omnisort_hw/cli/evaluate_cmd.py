@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.cli import robot_cmd
+from omnisort_hw.cli import lighting_cmd, robot_cmd
 
 
 def register(sub: Any) -> None:
@@ -43,7 +43,7 @@ def register(sub: Any) -> None:
 
 
 # Other experiments register here: each adds its own parser to the `evaluate` group.
-EXTENSIONS: list[Any] = [robot_cmd.add_sorting_evaluation]
+EXTENSIONS: list[Any] = [robot_cmd.add_sorting_evaluation, lighting_cmd.add_lighting_evaluation]
 
 
 def _matching(data: Path, n: int, seed: int, degraded: bool, tone_curve: str) -> bool:
