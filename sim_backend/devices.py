@@ -53,7 +53,7 @@ from omnisort_hw.core.frames import homogeneous, invert_pose
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import Trajectory, plan_joint_move, plan_linear_move
 from omnisort_hw.errors import ConfigError, MotionRefusedError
-from sim_backend.exposed_frames import ExposedFrames
+from sim_backend.exposed_frames import ExposedFrames, world_state_key
 from sim_backend.hostile_light import Lighting, apply_to_scene, lighting
 from sim_backend.robot import tcp_pose, tcp_tool
 from sim_backend.scene import Scene, load_scene, sized
@@ -190,6 +190,7 @@ class SimCamera(_Connectable, Camera):
         if self._format not in PIXEL_FORMATS:
             raise _sim_device_error("[camera].pixel_format", f"one of {PIXEL_FORMATS}")
         self._frames: ExposedFrames | None = None
+        self._clean: tuple[Any, np.ndarray, dict | None] | None = None
         self._draws = 0
         self._exposure_ms = float(exposure_ms)
         self._gain = float(gain)
@@ -272,9 +273,20 @@ class SimCamera(_Connectable, Camera):
                 self._draws += 1
                 return self._frames.frame(settings, self._draws, with_truth)
         brightness = self._exposure_ms / NOMINAL_EXPOSURE_MS * self._gain
-        return self.cell.render(
-            self.cell.seed + sequence, self.degraded, brightness, with_truth=with_truth
-        )
+        with self.cell.lock:
+            # A clean frame depends only on the state: the same state renders the same bytes.
+            key = (world_state_key(self.cell.world), self.cell.world.laser_on, brightness)
+            if (
+                self._clean is not None
+                and self._clean[0] == key
+                and (self._clean[2] or not with_truth)
+            ):
+                return self._clean[1], self._clean[2]
+            image, truth = self.cell.render(
+                self.cell.seed + sequence, self.degraded, brightness, with_truth=with_truth
+            )
+            self._clean = (key, image, truth)
+            return image, truth
 
     def grab(self, timeout_s: float | None = None, with_truth: bool = False) -> Frame:
         """Render a fresh frame; `with_truth` also keeps its ground truth in `last_truth`."""

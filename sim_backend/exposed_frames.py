@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pybullet as p
 
 from omnisort_hw.core.camera_model import OcamModel
 from sim_backend.hostile_light import Lighting, extra_light
@@ -18,10 +19,14 @@ from sim_backend.world import SimWorld
 
 
 def world_state_key(world: SimWorld) -> bytes:
-    """What a render depends on that can change: the arm's joints and the cubes' poses."""
+    """What a render depends on that can change: the arm's and fingers' joints, the cubes'
+    poses."""
     parts = [np.zeros(0)]
     if world.arm is not None:
-        parts.append(np.asarray(world.joints(), float))
+        arm = world.arm
+        moving = [*arm.joints, *arm.fingers]
+        states = p.getJointStates(arm.body, moving, physicsClientId=world.client)
+        parts.append(np.array([s[0] for s in states], float))
     for _, body in world.info.cubes:
         parts.append(world.body_pose(body)[:3].ravel())
     return np.round(np.concatenate(parts), 4).tobytes()

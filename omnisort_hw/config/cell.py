@@ -31,6 +31,7 @@ from omnisort_hw.config.sorting import (
 )
 from omnisort_hw.errors import ConfigError
 from omnisort_hw.pipeline.extrinsics import TARGETS
+from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_settings
 from omnisort_hw.storage import StorageConfig
 
 SECTIONS = (
@@ -43,6 +44,7 @@ SECTIONS = (
     "target",
     "sorting",
     "registration",
+    "capture",
 )
 
 
@@ -82,6 +84,7 @@ class CellConfig:
     target: TargetConfig = field(default_factory=TargetConfig)
     sorting: SortSection | None = None
     registration: RegistrationConfig | None = None
+    capture: CaptureSettings = field(default_factory=CaptureSettings)
 
     @property
     def base_dir(self) -> Path | None:
@@ -112,6 +115,7 @@ class CellConfig:
             registration=(
                 parse_registration_config(doc["registration"]) if "registration" in doc else None
             ),
+            capture=capture_settings(tables["capture"]),
         )
 
 

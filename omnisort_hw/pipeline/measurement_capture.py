@@ -98,6 +98,29 @@ class CaptureSettings:
                 raise InputError(f"[capture].{key} = {getattr(self, key)!r} is out of range")
 
 
+def capture_settings(section: Any) -> CaptureSettings:
+    """`[capture]` of the cell file; ConfigError names an unknown key or a bad value."""
+    from dataclasses import fields
+
+    from omnisort_hw.errors import ConfigError
+
+    known = {f.name: f.type for f in fields(CaptureSettings)}
+    values: dict[str, Any] = {}
+    for key, value in dict(section).items():
+        if key not in known:
+            raise ConfigError(f"[capture].{key}: unknown key (known: {', '.join(known)})")
+        want = {"int": int, "float": float, "bool": bool}[str(known[key])]
+        if want is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not isinstance(value, want) or (want is int and isinstance(value, bool)):
+            raise ConfigError(f"[capture].{key}: expected {want.__name__}, got {value!r}")
+        values[key] = value
+    try:
+        return CaptureSettings(**values)
+    except InputError as exc:
+        raise ConfigError(str(exc)) from None
+
+
 @dataclass
 class MeasurementCapture:
     """What one capture gives: the laser-light image and its stripe points, the laser-off
