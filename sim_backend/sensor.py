@@ -20,6 +20,7 @@ halves the chroma horizontally (4:2:2), BGR3 keeps every sample.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -170,8 +171,8 @@ def expose(
     v = e * np.float32(settings.gain / params.full_well_e)
     np.clip(v, 0.0, 1.0, out=v)
     clipped = float(np.mean(v >= 1.0))
-    img = encode(v ** np.float32(params.gamma), tone_curve)
-    bgr = to_bgr8(img)
+    idx = (v * np.float32(_LUT_MAX) + np.float32(0.5)).astype(np.uint16)
+    bgr = np.ascontiguousarray(_code_lut(params.gamma, tone_curve)[idx][..., ::-1])
     if settings.pixel_format == "MJPG":
         ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, params.jpeg_quality])
         if not ok:
@@ -180,6 +181,18 @@ def expose(
     elif settings.pixel_format == "YUYV":
         bgr = _chroma_422(bgr)
     return bgr, {"flicker": f, "clipped_fraction": clipped}
+
+
+_LUT_MAX = 65535
+
+
+@lru_cache(maxsize=16)
+def _code_lut(gamma: float, tone_curve: str) -> np.ndarray:
+    """8-bit code of every 16-bit ADC value: the gamma deviation, then the tone curve."""
+    x = np.arange(_LUT_MAX + 1, dtype=np.float32) / np.float32(_LUT_MAX)
+    return to_bgr8(encode(x ** np.float32(gamma), tone_curve)[:, None, None].repeat(3, 2))[
+        :, 0, 0
+    ].copy()
 
 
 def _chroma_422(bgr: np.ndarray) -> np.ndarray:

@@ -110,6 +110,28 @@ def laser_difference(on: FrameStack, off: FrameStack) -> LaserDifference:
     )
 
 
+def response_gamma(short: FrameStack, long: FrameStack, ratio: float, tone: ToneCurve) -> float:
+    """The camera's deviation from its nominal tone curve, from two exposures of one scene.
+
+    Means linearised with the nominal curve are L' = (k L)^g; exposures in the ratio `ratio`
+    give L'_long / L'_short = ratio^g on every pixel that clips in neither (the median over
+    them ignores the few that moved or flickered). g = 1 when the curve is right."""
+    lum_s = short.mean.mean(axis=2)
+    lum_l = long.mean.mean(axis=2)
+    ok = ~(short.clipped | long.clipped) & (lum_s > 0.03) & (lum_l < 0.9)
+    if ok.sum() < 1000 or ratio <= 1.0:
+        return 1.0
+    r = lum_l[ok] / lum_s[ok]
+    return float(np.log(np.median(r)) / np.log(ratio))
+
+
+def corrected_tone(tone: ToneCurve, gamma: float) -> ToneCurve:
+    """The nominal curve with the measured deviation undone (light = nominal^(1/g))."""
+    if abs(gamma - 1.0) < 1e-6:
+        return tone
+    return ToneCurve(f"{tone.name}^(1/{gamma:.4f})", tone.light.astype(np.float64) ** (1 / gamma))
+
+
 def encode_mean(stack: FrameStack, tone: ToneCurve) -> np.ndarray:
     """The mean frame back in the camera's 8-bit code values (for target and colour features,
     which expect what the camera writes)."""

@@ -317,8 +317,10 @@ def extract_board_features(
     model: OcamModel,
     inner_corners: tuple[int, int] = (9, 6),
     square_mm: float = 97.0,
+    stripe_px: np.ndarray | None = None,
 ) -> BoardsFeatures:
-    """Corners of the two perpendicular boards ("left", "far") and the laser on each."""
+    """Corners of the two perpendicular boards ("left", "far") and the laser on each
+    (`stripe_px`: the stripe measured apart, else found in the image)."""
     image = check_image(image_bgr, model)
     cols, rows = inner_corners
     h, w = image.shape[:2]
@@ -339,7 +341,7 @@ def extract_board_features(
     S = _nominal_S(model.pixel_to_ray(np.stack([b.mean(axis=0) for b in boards])))
     azimuth = np.arctan2(S[:, 1], S[:, 0])
     left_i = int(np.argmax(azimuth))
-    stripe = laser_stripe_points(image)
+    stripe = laser_stripe_points(image) if stripe_px is None else np.asarray(stripe_px, float)
     if stripe.shape[0] == 0:
         raise FeatureNotFoundError(
             "no laser stripe anywhere in the image: is the laser on (and not too faint)?"

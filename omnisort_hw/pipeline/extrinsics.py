@@ -89,7 +89,7 @@ def calibrate_system(
     check_image_size(image, model, source)
     log.image("extrinsics/image", image)
     if target == "checkerboards":
-        boards = extract_board_features(image, model, board, square_mm)
+        boards = extract_board_features(image, model, board, square_mm, stripe_px)
         for name, b in boards.boards.items():
             log.points2d(f"extrinsics/image/{name}_corners", b.corners_px, color=(0, 200, 0))
             log.points2d(f"extrinsics/image/{name}_laser", b.laser_px, color=(255, 0, 0), radius=1)

@@ -36,15 +36,29 @@ import numpy as np
 from drivers.base import UNCOMPRESSED_FORMATS, Camera, LaserSwitch
 from drivers.errors import DeviceError, UnsupportedError
 from omnisort_hw.core.laser_difference import (
+    FrameStack,
     LaserDifference,
+    corrected_tone,
     encode_mean,
     laser_difference,
+    response_gamma,
     stack_frames,
 )
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import InputError
 from omnisort_hw.runlog import NullLog, RunLog
+
+RESPONSE_RATIO = 2.0  # the board's second exposure, for the camera's response (both whole
+# mains periods when the first is)
+
+
+def _relinearise(stack: FrameStack, gamma: float) -> FrameStack:
+    """A stack linearised with the nominal curve, taken to light with the measured one."""
+    if abs(gamma - 1.0) < 1e-6:
+        return stack
+    return FrameStack(stack.mean ** np.float32(1.0 / gamma), stack.clipped, stack.frames)
+
 
 # Pixels of laser light a real difference has at least: noise alone passes the 6-sigma test
 # in ~1e-9 of the pixels (a few in a 4 Mpx image), a stripe in thousands.
@@ -130,6 +144,7 @@ class MeasurementCapture:
     stripe_px: np.ndarray
     board_image: np.ndarray | None
     record: dict[str, Any] = field(default_factory=dict)
+    tone: ToneCurve | None = None  # the camera's curve as measured (None: not measured)
 
 
 class _Timer:
@@ -168,12 +183,17 @@ def _grab(camera: Camera, timer: _Timer, exposure_ms: float) -> np.ndarray:
     return np.asarray(frame.image)
 
 
-def _expose(camera: Camera, exposure_ms: float, gain: float) -> float:
-    """Set exposure and gain where the camera can; returns the exposure in effect (ms)."""
-    _try(camera.set_exposure_ms, exposure_ms)
+def _expose(camera: Camera, exposure_ms: float, gain: float) -> tuple[float, bool]:
+    """Set exposure and gain where the camera can: (exposure in effect in ms, whether the
+    camera took it; a file or stream keeps what it was recorded with)."""
+    try:
+        camera.set_exposure_ms(exposure_ms)
+        took = True
+    except UnsupportedError:
+        took = False
     _try(camera.set_gain, gain)
-    got = _try(camera.get_exposure_ms)
-    return float(got) if got else exposure_ms
+    got = _try(camera.get_exposure_ms) if took else None
+    return (float(got) if got else exposure_ms), took
 
 
 def _pick_format(camera: Camera, prefer_uncompressed: bool) -> str:
@@ -228,10 +248,31 @@ def capture_measurement(
     tried: list[dict[str, Any]] = []
     try:
         fourcc = _pick_format(camera, cfg.prefer_uncompressed)
+        board_image, gamma = None, 1.0
+        if board:
+            _switch(laser, False, timer)
+            stacks = []
+            for k, scale in enumerate((1.0, RESPONSE_RATIO)):
+                used_b, took = _expose(camera, cfg.board_exposure_ms * scale, cfg.board_gain)
+                frames = []
+                for i in range(cfg.frames):
+                    frames.append(_grab(camera, timer, used_b))
+                    log.set_step("capture_frame", i)
+                    log.image(f"capture/board/off_{k}", frames[-1])
+                stacks.append((stack_frames(frames, tone, "board"), used_b))
+                if not took:
+                    break  # no exposure control: no second exposure, the nominal curve
+            if len(stacks) == 2:
+                (short, t_s), (long, t_l) = stacks
+                gamma = response_gamma(short, long, t_l / t_s, tone)
+                tone = corrected_tone(tone, gamma)
+            frames_b = stacks[0][0]
+            board_image = encode_mean(_relinearise(frames_b, gamma), tone)
+            log.image("capture/board/mean", board_image)
         exposure = cfg.stripe_exposure_ms
         diff: LaserDifference | None = None
         for attempt in range(cfg.max_retries + 1):
-            used = _expose(camera, exposure, cfg.stripe_gain)
+            used, _ = _expose(camera, exposure, cfg.stripe_gain)
             on: list[np.ndarray] = []
             off: list[np.ndarray] = []
             for i in range(cfg.frames):
@@ -275,16 +316,6 @@ def capture_measurement(
         log.image("capture/stripe/difference", diff.image)
         pixels = laser_stripe_points(diff.image)
         log.points2d("capture/stripe/difference/laser", pixels, color=(255, 0, 0), radius=1)
-        board_image = None
-        if board:
-            used_b = _expose(camera, cfg.board_exposure_ms, cfg.board_gain)
-            frames = []
-            for i in range(cfg.frames):
-                frames.append(_grab(camera, timer, used_b))
-                log.set_step("capture_frame", i)
-                log.image("capture/board/off", frames[-1])
-            board_image = encode_mean(stack_frames(frames, tone, "board"), tone)
-            log.image("capture/board/mean", board_image)
     finally:
         _restore(camera, laser, old_exposure, old_gain, old_format, old_laser)
     record = {
@@ -294,6 +325,8 @@ def capture_measurement(
         "stripe_exposures": tried,
         "retries": len(tried) - 1,
         "flicker_gain": round(diff.flicker_gain, 4),
+        "response_gamma": round(gamma, 4),
+        "tone_curve": tone.name,
         "board_exposure_ms": cfg.board_exposure_ms if board else None,
         "frames_grabbed": timer.frames,
         "exposure_s": round(timer.exposure_ms / 1000.0, 4),
@@ -303,7 +336,7 @@ def capture_measurement(
         "stripe_points": int(pixels.shape[0]),
     }
     log.text("capture/record", str(record))
-    return MeasurementCapture(diff.image, pixels, board_image, record)
+    return MeasurementCapture(diff.image, pixels, board_image, record, tone)
 
 
 def _restore(

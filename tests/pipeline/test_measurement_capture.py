@@ -48,13 +48,12 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         cam.grab(with_truth=True)
         truth = cam.last_truth
         direct = cam._frames.direct_laser if cam._frames is not None else None
-        seq = []
+        laser.off()
+        seq = [cam.grab().image for _ in range(FRAMES)]  # board frames come first
         for _ in range(FRAMES):
             for on in (True, False):
                 laser.set(on)
                 seq.append(cam.grab().image)
-        laser.off()
-        seq += [cam.grab().image for _ in range(FRAMES)]
         dark = [cam.grab().image for _ in range(3 * FRAMES)]
     cell.close()
     for name, frames in (("lit", seq), ("dark", dark)):
@@ -95,8 +94,8 @@ def test_capture_through_modbus_and_a_file_camera_finds_only_the_true_stripe(
     assert "source cannot tell" in rec["pixel_format"]  # a file cannot switch formats
     assert cap.board_image is not None and cap.board_image.shape == (WIDTH, WIDTH, 3)
     # the board image is the mean of the laser-off frames: less noise than one of them
-    one = cv2.imread(str(recorded["dir"] / "lit" / f"f_{2 * FRAMES:03d}.png")).astype(float)
-    nxt = cv2.imread(str(recorded["dir"] / "lit" / f"f_{2 * FRAMES + 1:03d}.png")).astype(float)
+    one = cv2.imread(str(recorded["dir"] / "lit" / "f_000.png")).astype(float)
+    nxt = cv2.imread(str(recorded["dir"] / "lit" / "f_001.png")).astype(float)
     single_noise = np.std(one - nxt) / np.sqrt(2)
     mean_noise = np.std(cap.board_image.astype(float) - one)  # ~ single noise * sqrt(1 + 1/N)
     assert mean_noise < single_noise * np.sqrt(1 + 1 / FRAMES) * 1.1 + 0.5
@@ -108,7 +107,7 @@ def test_serial_laser_is_switched_on_and_off_for_every_pair(recorded) -> None:
         with file_camera(recorded["dir"] / "lit") as cam, laser:
             capture_measurement(cam, laser, CaptureSettings(frames=FRAMES))
         switches = [c for c in emu.received if c in ("LASER ON", "LASER OFF")]
-    pairs = switches[: 2 * FRAMES]
+    pairs = switches[1 : 1 + 2 * FRAMES]  # after the board frames' "off"
     assert pairs == ["LASER ON", "LASER OFF"] * FRAMES
 
 
