@@ -38,13 +38,18 @@ from sim_backend.dataset import TABLE3_SCENES, table3_configs
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
 from sim_backend.scene import Scene, load_scene, sized
 
+EVAL_GRAB_TIMEOUT_S = 900.0  # a first 1920 px render on a loaded machine takes minutes
+
 
 def _measure(
     scene: Scene, seed: int, settings: CaptureSettings
 ) -> tuple[MeasurementCapture, dict[str, Any]]:
     cell = SimCell(scene, seed)
     try:
-        with SimCamera(cell, degraded=True) as cam, SimLaserSwitch(cell) as laser:
+        with (
+            SimCamera(cell, degraded=True, grab_timeout_s=EVAL_GRAB_TIMEOUT_S) as cam,
+            SimLaserSwitch(cell) as laser,
+        ):
             laser.on()
             cam.grab(with_truth=True)
             truth = cam.last_truth
