@@ -36,6 +36,13 @@ def register(sub: Any) -> None:
         help="the curve the extraction assumes (default: the dataset's own); 'linear' is what "
         "the extraction assumed before it modelled tone curves",
     )
+    t3.add_argument(
+        "--frames",
+        type=int,
+        default=1,
+        help="with --degraded: N > 1 measures every target with captures of N laser-on and N "
+        "laser-off frames, uncompressed (default 1: one rendered frame, as before)",
+    )
     t3.add_argument("--json", action="store_true", help="print one JSON object")
     t3.set_defaults(func=cmd_table3)
     for extension in EXTENSIONS:
@@ -62,6 +69,8 @@ def cmd_table3(args: argparse.Namespace) -> int:
 
     if args.n < 1:
         raise InputError(f"--n must be at least 1, got {args.n}")
+    if args.frames > 1:
+        return lighting_cmd.table3_with_captures(args)
     data = args.data or Path("build") / (
         f"table3-n{args.n}-seed{args.seed}"
         + ("-degraded" if args.degraded else "")

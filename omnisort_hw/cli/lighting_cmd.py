@@ -43,3 +43,20 @@ def cmd_lighting(args: argparse.Namespace) -> int:
     )
     print(json.dumps(result) if args.json else format_lighting(result))
     return 0
+
+
+def table3_with_captures(args: argparse.Namespace) -> int:
+    """`evaluate table3 --degraded --frames N` (N > 1): Table 3 measured with captures."""
+    from omnisort_hw.errors import InputError
+    from omnisort_hw.evaluation.table3 import format_table
+    from omnisort_hw.evaluation.table3_capture import evaluate_captures
+
+    if not args.degraded:
+        raise InputError("--frames N > 1 measures the degraded camera: add --degraded")
+    if args.frames > 64:
+        raise InputError(f"--frames must be 1..64, got {args.frames}")
+    result = evaluate_captures(
+        args.n, args.seed, args.frames, args.width, progress=sys.stderr.isatty()
+    )
+    print(json.dumps(result) if args.json else format_table(result))
+    return 0
