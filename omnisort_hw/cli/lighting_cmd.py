@@ -27,8 +27,7 @@ def add_lighting_evaluation(esub: Any) -> None:
 
 def cmd_lighting(args: argparse.Namespace) -> int:
     from omnisort_hw.errors import InputError
-    from omnisort_hw.evaluation.lighting import evaluate_lighting, format_lighting
-    from sim_backend.hostile_light import SCENARIOS
+    from omnisort_hw.evaluation.lighting import SCENARIOS, evaluate_lighting, format_lighting
 
     chosen = tuple(args.scenario or SCENARIOS)
     unknown = [s for s in chosen if s not in SCENARIOS]
