@@ -227,6 +227,12 @@ class SimCamera(_Connectable, Camera):
         return f"SIM-{self.cell.scene.name}-{cam.width}x{cam.height}-{model}"
 
     @property
+    def direct_laser(self) -> np.ndarray | None:
+        """(H, W) the renderer's laser light of the last degraded render (truth: where the
+        laser lights the scene directly), None before one."""
+        return self._frames.direct_laser if self._frames is not None else None
+
+    @property
     def pixel_formats(self) -> tuple[str, ...]:
         return PIXEL_FORMATS if self.degraded else ()
 

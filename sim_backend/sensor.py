@@ -25,7 +25,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from sim_backend.degrade import _smooth_field, encode, to_bgr8
+from sim_backend.degrade import encode, smooth_field, to_bgr8
 from sim_backend.scene import DegradeSpec, LaserSpec
 
 NOMINAL_EXPOSURE_MS = 10.0
@@ -112,7 +112,7 @@ class OpticalImage:
         light = laser.astype(np.float32).copy()
         on = light > 1e-4
         if on.any():
-            uneven = 1.0 + params.laser_uneven * _smooth_field(rng, (h, w), 24)
+            uneven = 1.0 + params.laser_uneven * smooth_field(rng, (h, w), 24)
             light *= np.maximum(uneven, 0.0)
             if params.laser_speckle > 0:
                 k = 1.0 / params.laser_speckle**2
@@ -120,7 +120,7 @@ class OpticalImage:
         las = light[..., None] * np.asarray(spec.color.rgb, np.float32)
         if laser_extra is not None:
             las = las + laser_extra.astype(np.float32)
-        amb = params.ambient * (1.0 + 0.5 * _smooth_field(rng, (h, w), 4))
+        amb = params.ambient * (1.0 + 0.5 * smooth_field(rng, (h, w), 4))
         st = amb[..., None] * np.asarray(params.ambient_tint, np.float32)
         if steady is not None:
             st = st + steady.astype(np.float32)

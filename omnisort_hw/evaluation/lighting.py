@@ -163,8 +163,7 @@ def run_scenario(
             truth = cam.last_truth
             assert truth is not None
             true_calib = SystemCalibration.from_json(truth)
-            frames_src = cam._frames
-            direct = frames_src.direct_laser if frames_src is not None else None
+            direct = cam.direct_laser
             for key, run in (
                 ("single", lambda: single_frame(cam, laser)),
                 ("capture", lambda: capture_measurement(cam, laser, CaptureSettings(frames))),

@@ -52,3 +52,14 @@ def test_unknown_scenario_is_refused_by_name() -> None:
     )
     assert proc.returncode != 0
     assert "fog" in proc.stderr
+
+
+def test_table3_frames_needs_the_degraded_camera() -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", "evaluate", "table3", "--frames", "4"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode != 0
+    assert "--degraded" in proc.stderr

@@ -47,7 +47,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         laser.on()
         cam.grab(with_truth=True)
         truth = cam.last_truth
-        direct = cam._frames.direct_laser if cam._frames is not None else None
+        direct = cam.direct_laser
         laser.off()
         seq = [cam.grab().image for _ in range(FRAMES)]  # board frames come first
         for _ in range(FRAMES):
