@@ -5,7 +5,9 @@ Environment: OMNISORT_BENCH_N (configurations, default 35), OMNISORT_BENCH_SEED 
 OMNISORT_BENCH_FRAMES (default 8), OMNISORT_BENCH_CAPTURE_WIDTH (default 1280: a capture
 exposes 4 N frames per target, which at 1920 px takes this 2-core machine over an hour).
 The capture run's raw result and the clean dataset are kept in build/bench/ and reused, as
-the rendered Table 3 datasets are.
+the rendered Table 3 datasets are; OMNISORT_BENCH_CAPTURE_PARTIAL=1 records an unfinished
+run as it stands (`configurations_done` says how far it got; the clean reference is then
+restricted to the same configurations).
 """
 
 from __future__ import annotations
@@ -30,14 +32,17 @@ def run(shared: Path) -> dict[str, Any]:
     width = int(os.environ.get("OMNISORT_BENCH_CAPTURE_WIDTH", "1280"))
     raw = BUILD / f"table3-capture-n{n}-seed{seed}-f{frames}-w{width}.json"
     result = json.loads(raw.read_text()) if raw.is_file() else None
-    if result is None or result.get("done") != n:
+    partial_ok = os.environ.get("OMNISORT_BENCH_CAPTURE_PARTIAL") == "1"
+    if result is None or (result.get("done") != n and not partial_ok):
         result = evaluate_captures(n, seed, frames, width, progress=True, partial=raw)
+    done = int(result.get("done", n))
     clean_dir = BUILD / f"table3-n{n}-seed{seed}-srgb-w{width}"
     if not (clean_dir / "dataset.json").is_file():
         make_dataset(clean_dir, "table3", n, seed, width=width, progress=True)
-    clean = evaluate_dataset(clean_dir, progress=True)
+    clean = evaluate_dataset(clean_dir, progress=True, first=done)
     out: dict[str, Any] = {
         "configurations": n,
+        "configurations_done": done,
         "seed": seed,
         "frames": frames,
         "width": width,

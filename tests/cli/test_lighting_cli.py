@@ -63,3 +63,31 @@ def test_table3_frames_needs_the_degraded_camera() -> None:
     )
     assert proc.returncode != 0
     assert "--degraded" in proc.stderr
+
+
+def test_map_without_an_image_measures_with_the_configured_cell(tmp_path) -> None:
+    """`omnisort map --config`: a capture with the cell file's camera and laser (sim)."""
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
+
+    _, truth = render_scene(sized(load_scene("sorting"), 960), seed=0, degraded=False)
+    system = tmp_path / "system.json"
+    system.write_text(json.dumps(truth))
+    cell = tmp_path / "cell.toml"
+    cell.write_text(
+        '[camera]\nbackend = "sim"\nscene = "sorting"\nwidth = 960\nheight = 960\n'
+        'degraded = true\n[laser]\nbackend = "sim"\nscene = "sorting"\n'
+        "[capture]\nframes = 2\n"
+    )
+    args = ["map", "--system", str(system), "--config", str(cell), "--json"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout)
+    assert out["capture"]["frames"] == 2
+    assert out["capture"]["pixel_format"] == "BGR3"
+    assert out["points"] > 20 and out["segments"]
