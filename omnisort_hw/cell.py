@@ -567,7 +567,7 @@ class Cell:
         model = self.store.camera_model()
         tone = self.camera_tone_curve()
         acq = self.measure(image)
-        img, record, source = acq.board, acq.record, acq.source
+        img, record, source, tone = acq.board, acq.record, acq.source, acq.tone or tone
         _raise_if_cancelled(cancel, "calibration")
         separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
         calib = calibrate_system(

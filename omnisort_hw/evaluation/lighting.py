@@ -132,7 +132,7 @@ def _calibration_error(
             "two-sided",
             "joint",
             separation_mm=sep,
-            tone=tone,
+            tone=(acq.tone or tone) if differenced else tone,
             stripe_px=acq.stripe_px if differenced else None,
         )
     except OmnisortError as exc:

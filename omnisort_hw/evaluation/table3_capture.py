@@ -106,7 +106,7 @@ def evaluate_captures(
         for name in TABLE3_SCENES
     ]
     settings = CaptureSettings(frames=frames)
-    tone = ToneCurve.srgb()
+    tone = ToneCurve.srgb()  # the simulated camera's nominal curve; a capture measures its own
     stats = {m: MethodStats() for m in RUNS}
     mapping: list[np.ndarray] = []
     capture_s: list[float] = []
@@ -134,7 +134,7 @@ def evaluate_captures(
                     continue
                 t0 = time.perf_counter()
                 try:
-                    calib = _calibrate(method, scene, cap, truth, tone)
+                    calib = _calibrate(method, scene, cap, truth, cap.tone or tone)
                 except OmnisortError as exc:
                     stats[row].failures.append(f"{cfg.folder}: {exc}")
                     continue

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from omnisort_hw import fileio
+from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import OmnisortError
 from omnisort_hw.pipeline.extrinsics import image_record, read_image
 from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_measurement
@@ -34,6 +35,7 @@ class Acquired:
     stripe_px: np.ndarray | None
     record: dict[str, Any]
     source: str
+    tone: ToneCurve | None = None  # the camera's curve as the capture measured it
 
 
 def _save(folder: Path, name: str, image: np.ndarray) -> dict[str, Any]:
@@ -71,4 +73,4 @@ def acquire(cell: Any, image: str | None, board: bool = True) -> Acquired:
         record.update(stripe)
     cell._prune_captures()
     board_img = cap.board_image if cap.board_image is not None else cap.stripe_image
-    return Acquired(board_img, cap.stripe_image, cap.stripe_px, record, record["path"])
+    return Acquired(board_img, cap.stripe_image, cap.stripe_px, record, record["path"], cap.tone)
