@@ -5,8 +5,10 @@ first surface it meets. Two stripe points mapped to the same bearing about the e
 at clearly different ranges cannot both be lit directly: one is light that came some other
 way, typically the stripe mirrored by a glossy floor (it maps nearer than the wall it comes
 from) or by a shiny object. The direct hit is the brighter one (a reflection loses light);
-the weaker one is dropped when it is less than `ECHO_RATIO` of the brightest point at that
-bearing and its range differs by more than `RANGE_GAP` of it.
+the weaker one is dropped when its surface's strength there (the median over its points at
+that bearing and range: speckle makes single points vary by tens of percent) is less than
+`ECHO_RATIO` of the brightest surface's at that bearing and its range differs by more than
+`RANGE_GAP`.
 """
 
 from __future__ import annotations
@@ -32,10 +34,17 @@ def direct_hits(points_S: np.ndarray, strength: np.ndarray) -> np.ndarray:
     b, r, a = bearing[order], rng[order], amp[ok][order]
     lo = np.searchsorted(b, b - BEARING_WINDOW_DEG, side="left")
     hi = np.searchsorted(b, b + BEARING_WINDOW_DEG, side="right")
-    drop = np.zeros(len(b), bool)
+    # A point's strength is the median over its own surface nearby (same bearing window,
+    # same range): speckle makes single points flicker by tens of percent, surfaces do not.
+    level = np.empty(len(b))
     for i in range(len(b)):  # one pass over points (hundreds), not pixels
-        j = lo[i] + int(np.argmax(a[lo[i] : hi[i]]))
-        weak = a[i] < ECHO_RATIO * a[j]
+        w = slice(lo[i], hi[i])
+        same = np.abs(r[w] - r[i]) <= RANGE_GAP * r[i]
+        level[i] = np.median(a[w][same])
+    drop = np.zeros(len(b), bool)
+    for i in range(len(b)):
+        j = lo[i] + int(np.argmax(level[lo[i] : hi[i]]))
+        weak = level[i] < ECHO_RATIO * level[j]
         drop[i] = weak and abs(r[i] - r[j]) > RANGE_GAP * r[j]
     keep[ok[order[drop]]] = False
     return keep
