@@ -225,6 +225,11 @@ class Device(ABC):
         self.close()
 
 
+# Pixel formats without lossy compression, best first: full-resolution colour, then YUYV
+# (uncompressed, but its chroma is shared by two horizontal pixels), then grey.
+UNCOMPRESSED_FORMATS = ("BGR3", "RGB3", "YUYV", "UYVY", "GREY")
+
+
 class Camera(Device):
     """A colour camera. `grab()` always returns a frame captured after the call started."""
 
@@ -268,6 +273,23 @@ class Camera(Device):
     def set_gain(self, gain: float) -> None:
         """Set the analogue gain (device units); raises `UnsupportedError` if not possible."""
         raise UnsupportedError(f"camera {self.name} has no gain control", device=self.name)
+
+    @property
+    def pixel_formats(self) -> tuple[str, ...]:
+        """The FOURCCs this camera can deliver (e.g. "MJPG", "YUYV"); empty when it cannot
+        tell (files and streams deliver what they hold)."""
+        return ()
+
+    @property
+    def pixel_format(self) -> str:
+        """The FOURCC of the frames `grab()` returns now ("" when unknown)."""
+        return ""
+
+    def set_pixel_format(self, fourcc: str) -> None:
+        """Switch the delivered pixel format; raises `UnsupportedError` if not possible."""
+        raise UnsupportedError(
+            f"camera {self.name} cannot switch its pixel format to {fourcc}", device=self.name
+        )
 
     @property
     def exposure_ms(self) -> float:
@@ -409,6 +431,7 @@ __all__ = [
     "DEFAULT_MOVE_TIMEOUT_S",
     "DEFAULT_SWITCH_TIMEOUT_S",
     "RATES",
+    "UNCOMPRESSED_FORMATS",
     "Arm",
     "ArmState",
     "Camera",

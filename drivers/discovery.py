@@ -127,6 +127,20 @@ def _query_v4l2(fd: int) -> tuple[str, str, bool, dict[str, list[tuple[int, int]
     return driver, bus, is_capture, formats
 
 
+def node_formats(node: str | Path) -> tuple[str, ...]:
+    """The FOURCCs a V4L2 node offers (VIDIOC_ENUM_FMT), empty when it cannot be queried."""
+    try:
+        fd = os.open(node, os.O_RDWR | os.O_NONBLOCK)
+    except OSError:
+        return ()
+    try:
+        return tuple(_query_v4l2(fd)[3])
+    except OSError:
+        return ()
+    finally:
+        os.close(fd)
+
+
 def list_cameras(
     dev_dir: str | Path = "/dev", sys_dir: str | Path = "/sys/class/video4linux"
 ) -> list[CameraInfo]:

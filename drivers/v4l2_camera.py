@@ -168,6 +168,7 @@ class V4L2Camera(Camera):
         self._resolution = (0, 0)
         self._exposure_ms = config.exposure_ms
         self._gain = config.gain
+        self._pixel_format: str = config.pixel_format
         self._discard = 0
         self._backoff = Backoff(
             config.reconnect_backoff_s, config.reconnect_backoff_max_s, config.reconnect_attempts
@@ -192,6 +193,46 @@ class V4L2Camera(Camera):
     @property
     def tone_curve(self) -> str:
         return self.config.tone_curve
+
+    @property
+    def pixel_formats(self) -> tuple[str, ...]:
+        """What the V4L2 node offers (VIDIOC_ENUM_FMT); files and streams cannot tell."""
+        if self.config.api != "v4l2":
+            return ()
+        from drivers.discovery import node_formats
+
+        node = _resolve_v4l2(self.config.device)
+        return node_formats(f"/dev/video{node}" if isinstance(node, int) else node)
+
+    @property
+    def pixel_format(self) -> str:
+        """The configured FOURCC on a V4L2 device; "" for files and streams (they deliver
+        whatever they were written with)."""
+        return self._pixel_format if self.config.api == "v4l2" else ""
+
+    def set_pixel_format(self, fourcc: str) -> None:
+        """Switch a V4L2 device's pixel format (OpenCV's CAP_PROP_FOURCC restarts the stream);
+        the delivered format is read back. Files and streams raise `UnsupportedError`."""
+        if self.config.api != "v4l2":
+            raise UnsupportedError(
+                f"{self.name}: a {self.config.api} source delivers the format it holds; it "
+                f"cannot switch to {fourcc}",
+                device=self.config.device,
+            )
+        with self._lock:
+            cap = self._connected_cap()
+            if fourcc == self._pixel_format:
+                return
+            cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fourcc))
+            code = int(cap.get(cv2.CAP_PROP_FOURCC))
+            got = "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4))
+            if got != fourcc:
+                raise UnsupportedError(
+                    f"{self.name} does not deliver {fourcc} (it gives {got!r})",
+                    device=self.config.device,
+                )
+            self._pixel_format = fourcc
+            self._discard = self.config.settle_frames
 
     @property
     def sequence(self) -> int:
@@ -303,16 +344,16 @@ class V4L2Camera(Camera):
 
     def _configure_v4l2(self, cap: Any) -> None:
         cfg = self.config
-        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*cfg.pixel_format))
+        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*self._pixel_format))
         cap.set(cv2.CAP_PROP_FRAME_WIDTH, cfg.width)
         cap.set(cv2.CAP_PROP_FRAME_HEIGHT, cfg.height)
         cap.set(cv2.CAP_PROP_FPS, cfg.fps)
         cap.set(cv2.CAP_PROP_BUFFERSIZE, cfg.buffer_size)
         fourcc = int(cap.get(cv2.CAP_PROP_FOURCC))
         got = "".join(chr((fourcc >> (8 * i)) & 0xFF) for i in range(4))
-        if got != cfg.pixel_format:
+        if got != self._pixel_format:
             raise DeviceConfigError(
-                f"{self.name} does not deliver {cfg.pixel_format} (it gives {got!r}); pick a "
+                f"{self.name} does not deliver {self._pixel_format} (it gives {got!r}); pick a "
                 "format shown by `omnisort devices list` for [camera].pixel_format",
                 key="[camera].pixel_format",
                 device=cfg.device,

@@ -550,19 +550,6 @@ class Cell:
             "camera_serial": self.store.expected_serial,
         }
 
-    def _source_image(
-        self, image: str | None, laser: bool = True
-    ) -> tuple[np.ndarray, dict[str, Any], str]:
-        """The image to work on: the file `image`, or a fresh capture (laser switched to
-        `laser` first) saved under `capture_dir`. Returns (image, image record, source)."""
-        from omnisort_hw.pipeline.extrinsics import image_record, read_image
-
-        if image is not None:
-            return read_image(image), image_record(image), str(image)
-        captured = self.capture(encoding="path", fmt="png", laser=laser)
-        path = captured["path"]
-        return read_image(path), image_record(path), path
-
     def calibrate_extrinsics(
         self,
         image: str | None = None,
@@ -590,7 +577,8 @@ class Cell:
             )
         model = self.store.camera_model()
         tone = self.camera_tone_curve()
-        img, record, source = self._source_image(image)
+        acq = self.measure(image)
+        img, record, source, tone = acq.board, acq.record, acq.source, acq.tone or tone
         _raise_if_cancelled(cancel, "calibration")
         separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
         calib = self.compute.call_logged(
@@ -607,6 +595,7 @@ class Cell:
             tone=tone,
             cancel=cancel,
             what="calibration",
+            stripe_px=acq.stripe_px,
         )
         _raise_if_cancelled(cancel, "calibration")
         saved = self.store.save_system(system_payload(calib, record))
@@ -647,10 +636,16 @@ class Cell:
         from omnisort_hw.pipeline.laser_map import map_laser
 
         calib = self.system_calibration()
-        img, record, source = self._source_image(image)
+        acq = self.measure(image, board=False)
         _raise_if_cancelled(cancel, "mapping")
-        laser_map = map_laser(img, calib, source, self.runlog)
-        return {"image": record, **laser_map.summary(with_points)}
+        laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog)
+        return {"image": acq.record, **laser_map.summary(with_points)}
+
+    def measure(self, image: str | None, board: bool = True) -> Any:
+        """The file `image`, or a measurement capture (`pipeline.cell_acquisition`)."""
+        from omnisort_hw.pipeline.cell_acquisition import acquire
+
+        return acquire(self, image, board)
 
     def _image(self, image: str | None, laser: bool) -> np.ndarray:
         """The file `image`, or a capture with the laser switched to `laser` (off after)."""
@@ -708,10 +703,10 @@ class Cell:
         cfg = self._sorting("the colour-blob location")
         calib = self.system_calibration()
         T_SB = robot_base_T(calib, str(self.store.path("system")))
-        colour = self._image(image, laser=False)
-        laser_img = None
-        if image is None and cfg.use_laser and self.devices.laser is not None:
-            laser_img = self._image(None, laser=True)
+        with_laser = image is None and cfg.use_laser and self.devices.laser is not None
+        acq = self.measure(image) if with_laser else None
+        colour = acq.board if acq is not None else self._image(image, laser=False)
+        laser_img = acq.stripe if acq is not None else None
         _raise_if_cancelled(cancel, "locate")
         cubes, _ = locate_in_images(
             colour, laser_img, calib, cfg, T_SB, calib.robot_base, self.runlog

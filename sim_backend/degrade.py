@@ -84,7 +84,7 @@ def to_bgr8(rgb: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out[..., ::-1])
 
 
-def _smooth_field(rng: np.random.Generator, shape: tuple[int, int], cells: int) -> np.ndarray:
+def smooth_field(rng: np.random.Generator, shape: tuple[int, int], cells: int) -> np.ndarray:
     """A smooth random field in [-1, 1] (bicubic upsampling of a coarse grid)."""
     grid = rng.uniform(-1.0, 1.0, (cells, cells)).astype(np.float32)
     field = cv2.resize(grid, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC)
@@ -105,13 +105,13 @@ def degrade(
     light = laser.copy()
     on = light > 1e-4
     if on.any():
-        uneven = 1.0 + params.laser_uneven * _smooth_field(rng, (h, w), 24)
+        uneven = 1.0 + params.laser_uneven * smooth_field(rng, (h, w), 24)
         light *= np.maximum(uneven, 0.0)
         if params.laser_speckle > 0:
             k = 1.0 / params.laser_speckle**2
             light[on] *= rng.gamma(k, 1.0 / k, int(on.sum())).astype(np.float32)
     img = compose(base, light, spec)
-    ambient = params.ambient * (1.0 + 0.5 * _smooth_field(rng, (h, w), 4))
+    ambient = params.ambient * (1.0 + 0.5 * smooth_field(rng, (h, w), 4))
     img += ambient[..., None] * np.asarray(params.ambient_tint, np.float32)
     img *= np.float32(2.0**params.exposure_ev)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)

@@ -54,12 +54,14 @@ from omnisort_hw.core.frames import homogeneous, invert_pose
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import Trajectory, plan_joint_move, plan_linear_move
 from omnisort_hw.errors import ConfigError, MotionRefusedError
+from sim_backend.exposed_frames import ExposedFrames, world_state_key
+from sim_backend.hostile_light import Lighting, apply_to_scene, lighting
 from sim_backend.robot import tcp_pose, tcp_tool
 from sim_backend.scene import Scene, load_scene, sized
 from sim_backend.scene_images import camera_model_for, render_world
+from sim_backend.sensor import NOMINAL_EXPOSURE_MS, PIXEL_FORMATS, Exposure
 from sim_backend.world import MM, SimWorld
 
-NOMINAL_EXPOSURE_MS = 10.0
 DEFAULT_SIM_GRAB_TIMEOUT_S = 60.0
 
 
@@ -70,7 +72,9 @@ class SimCell:
     (`close()` or garbage collection disconnects pybullet).
     """
 
-    def __init__(self, scene: Scene, seed: int = 0) -> None:
+    def __init__(self, scene: Scene, seed: int = 0, light: Lighting | None = None) -> None:
+        self.lighting = light or Lighting()
+        scene = apply_to_scene(scene, self.lighting)
         self.scene = scene
         self.seed = int(seed)
         self.world = SimWorld(scene)
@@ -81,15 +85,18 @@ class SimCell:
         self._finalizer = weakref.finalize(self, self.world.close)
 
     @classmethod
-    def from_scene(cls, scene: Scene | str | Path, seed: int = 0, **camera: Any) -> SimCell:
-        """A cell from a scene (object, file or shipped name); `camera` overrides [camera] keys
-        (e.g. width=640, height=640: the cube-map face size scales along)."""
+    def from_scene(
+        cls, scene: Scene | str | Path, seed: int = 0, light: str = "normal", **camera: Any
+    ) -> SimCell:
+        """A cell from a scene (object, file or shipped name) under the named lighting
+        (`sim_backend.hostile_light`); `camera` overrides [camera] keys (e.g. width=640,
+        height=640: the cube-map face size scales along)."""
         sc = scene if isinstance(scene, Scene) else load_scene(scene)
         width, height = camera.pop("width", None), camera.pop("height", None)
         sc = sized(sc, width, height)
         if camera:
             sc = sc.replace(camera=camera)
-        return cls(sc, seed)
+        return cls(sc, seed, lighting(light))
 
     @property
     def name(self) -> str:
@@ -171,10 +178,13 @@ class _Connectable:
 
 
 class SimCamera(_Connectable, Camera):
-    """The fisheye on the boom: each grab renders the world as it is (laser as switched).
+    """The fisheye on the boom: each grab shows the world as it is (laser as switched).
 
-    Exposure and gain scale the image brightness (10 ms and gain 1 are nominal). With
-    `degraded`, frames go through the seeded "real camera" mode, a new noise draw per frame.
+    Clean mode: each grab renders; exposure and gain scale the brightness (10 ms and gain 1
+    are nominal). With `degraded`, the sensor of `sim_backend.sensor` exposes every frame
+    from a render cached per world state: exposure and gain change signal and noise, the
+    well and the ADC clip, the lamps flicker, noise is drawn anew per frame, and the pixel
+    format decides the chroma (MJPG 4:2:0, YUYV 4:2:2, BGR3 full).
     """
 
     _kind = "camera"
@@ -187,11 +197,18 @@ class SimCamera(_Connectable, Camera):
         gain: float = 1.0,
         grab_timeout_s: float = DEFAULT_SIM_GRAB_TIMEOUT_S,
         bump: tuple[float, str, int] | None = None,
+        pixel_format: str = "MJPG",
     ) -> None:
         super().__init__(cell)
         # (angle deg, axis, after this many grabs): the mount is knocked once, between grabs.
         self.bump = bump
         self.degraded = degraded
+        self._format = str(pixel_format)
+        if self._format not in PIXEL_FORMATS:
+            raise _sim_device_error("[camera].pixel_format", f"one of {PIXEL_FORMATS}")
+        self._frames: ExposedFrames | None = None
+        self._clean: tuple[Any, np.ndarray, dict | None] | None = None
+        self._draws = 0
         self._exposure_ms = float(exposure_ms)
         self._gain = float(gain)
         self.grab_timeout_s = float(grab_timeout_s)
@@ -226,6 +243,25 @@ class SimCamera(_Connectable, Camera):
         model = cam.model_file or f"equidistant{cam.fov_deg:g}"
         return f"SIM-{self.cell.scene.name}-{cam.width}x{cam.height}-{model}"
 
+    @property
+    def direct_laser(self) -> np.ndarray | None:
+        """(H, W) the renderer's laser light of the last degraded render (truth: where the
+        laser lights the scene directly), None before one."""
+        return self._frames.direct_laser if self._frames is not None else None
+
+    @property
+    def pixel_formats(self) -> tuple[str, ...]:
+        return PIXEL_FORMATS if self.degraded else ()
+
+    @property
+    def pixel_format(self) -> str:
+        return self._format if self.degraded else ""
+
+    def set_pixel_format(self, fourcc: str) -> None:
+        if fourcc not in self.pixel_formats:
+            super().set_pixel_format(fourcc)
+        self._format = fourcc
+
     def get_exposure_ms(self) -> float:
         return self._exposure_ms
 
@@ -245,10 +281,35 @@ class SimCamera(_Connectable, Camera):
         self._gain = float(gain)
 
     def _render(self, sequence: int, with_truth: bool) -> tuple[np.ndarray, dict | None]:
+        if self.degraded:
+            with self.cell.lock:
+                if self._frames is None:
+                    cell = self.cell
+                    self._frames = ExposedFrames(cell.world, cell.model, cell.seed, cell.lighting)
+                settings = Exposure(
+                    self._exposure_ms,
+                    self._gain,
+                    bool(self.cell.world.laser_on),
+                    self.cell.lighting.flicker_depth,
+                    self._format,
+                )
+                self._draws += 1
+                return self._frames.frame(settings, self._draws, with_truth)
         brightness = self._exposure_ms / NOMINAL_EXPOSURE_MS * self._gain
-        return self.cell.render(
-            self.cell.seed + sequence, self.degraded, brightness, with_truth=with_truth
-        )
+        with self.cell.lock:
+            # A clean frame depends only on the state: the same state renders the same bytes.
+            key = (world_state_key(self.cell.world), self.cell.world.laser_on, brightness)
+            if (
+                self._clean is not None
+                and self._clean[0] == key
+                and (self._clean[2] or not with_truth)
+            ):
+                return self._clean[1], self._clean[2]
+            image, truth = self.cell.render(
+                self.cell.seed + sequence, self.degraded, brightness, with_truth=with_truth
+            )
+            self._clean = (key, image, truth)
+            return image, truth
 
     def grab(self, timeout_s: float | None = None, with_truth: bool = False) -> Frame:
         """Render a fresh frame; `with_truth` also keeps its ground truth in `last_truth`."""
@@ -572,6 +633,8 @@ _KEYS: dict[str, dict[str, type]] = {
         "bump_deg": float,
         "bump_axis": str,
         "bump_after_grabs": int,
+        "pixel_format": str,
+        "lighting": str,
     },
     "laser": {"scene": str, "seed": int},
     "arm": {
@@ -619,10 +682,11 @@ def open_devices(
     `sections` maps "camera" / "laser" / "arm" to their settings. Keys: `scene` (a scene file,
     relative to `base_dir`, or a shipped scene name; default "sorting"), `seed`; camera:
     `degraded`, `width`, `height`, `model_file` (camera.json), `exposure_ms`, `gain`,
-    `grab_timeout_s`, `bump_deg`/`bump_axis`/`bump_after_grabs` (the mount is knocked once
-    by that angle about that axis of S after that many grabs); arm: `joint_speed_deg_s`,
-    `joint_accel_deg_s2`, `linear_speed_mm_s`, `linear_accel_mm_s2`, their caps
-    `max_joint_speed_deg_s`, `max_joint_accel_deg_s2`,
+    `grab_timeout_s`, `pixel_format` (MJPG, YUYV, BGR3), `lighting` (a hostile-light
+    scenario of `sim_backend.hostile_light`, for the whole cell), `bump_deg`/`bump_axis`/
+    `bump_after_grabs` (the mount is knocked once by that angle about that axis of S after that
+    many grabs); arm: `joint_speed_deg_s`, `joint_accel_deg_s2`, `linear_speed_mm_s`,
+    `linear_accel_mm_s2`, their caps `max_joint_speed_deg_s`, `max_joint_accel_deg_s2`,
     `max_linear_speed_mm_s`, `max_linear_accel_mm_s2` (as the UR driver's), `realtime`.
     """
     checked = {kind: _check_settings(kind, dict(s)) for kind, s in sections.items()}
@@ -644,7 +708,11 @@ def open_devices(
         mf = Path(cam["model_file"])
         overrides["model_file"] = str(base_dir / mf if base_dir and not mf.is_absolute() else mf)
     try:
-        cell = SimCell.from_scene(path, seed=min(seeds) if seeds else 0, **overrides)
+        cell = SimCell.from_scene(
+            path, seed=min(seeds) if seeds else 0, light=cam.get("lighting", "normal"), **overrides
+        )
+    except ValueError as exc:
+        raise _sim_device_error("[camera].lighting", str(exc)) from None
     except ConfigError as exc:
         key = next((f"[{k}].scene" for k, s in checked.items() if "scene" in s), "[camera].scene")
         raise _sim_device_error(key, str(exc)) from None
@@ -661,6 +729,7 @@ def open_devices(
                 if "bump_deg" in cam
                 else None
             ),
+            pixel_format=cam.get("pixel_format", "MJPG"),
         )
     if "laser" in checked:
         made["laser"] = SimLaserSwitch(cell)

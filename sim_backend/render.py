@@ -38,6 +38,7 @@ class RenderResult:
     base: np.ndarray
     laser: np.ndarray
     stats: dict[str, float] = field(default_factory=dict)
+    points_S: np.ndarray | None = None  # (H, W, 3) float32 surface point of each pixel centre
 
 
 def _flag_pixels(
@@ -97,6 +98,7 @@ def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None
     key = np.full(npx, -32, np.int32)
     rgb = np.zeros((npx, 3), np.float32)
     laser = np.zeros(npx, np.float32)
+    points = np.full((npx, 3), np.nan, np.float32)
     for start in range(0, geo.pixel_index.size, _CHUNK):
         sl = slice(start, start + _CHUNK)
         out = shader.shade(geo.rays_S[sl], geo.atlas_xy[sl], static=static.take(sl))
@@ -105,6 +107,9 @@ def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None
         rgb[pix] = out.rgb * inside[:, None]
         laser[pix] = out.laser * inside
         key[pix] = np.where(inside, out.key, -32)
+        if out.t is not None:
+            hit = inside & np.isfinite(out.t)
+            points[pix[hit]] = geo.rays_S[sl][hit] * out.t[hit, None]
     t4 = time.perf_counter()
     k = scene.render.supersampling
     rgb_img = rgb.reshape(h, w, 3)
@@ -133,4 +138,4 @@ def render_frame(world: SimWorld, model: OcamModel, laser_on: bool | None = None
         "supersampled_pixels": float(n_super),
         "atlas_pixels": float(geo.atlas_shape[0] * geo.atlas_shape[1]),
     }
-    return RenderResult(rgb_img, laser_img, stats)
+    return RenderResult(rgb_img, laser_img, stats, points.reshape(h, w, 3))

@@ -51,6 +51,7 @@ class Shaded:
     rgb: np.ndarray
     laser: np.ndarray
     key: np.ndarray
+    t: np.ndarray | None = None  # distance along the ray (mm), for the sensor's light effects
 
 
 @dataclass(frozen=True)
@@ -360,7 +361,7 @@ class Shader:
         if self.laser_on:
             self._laser(rays, hits, laser)
         rgb = srgb_to_linear(hits.rgb) if self.decode else hits.rgb
-        return Shaded(rgb, laser, hits.key)
+        return Shaded(rgb, laser, hits.key, hits.t)
 
     def _laser(self, rays: np.ndarray, hits: Hits, out: np.ndarray) -> None:
         """Stripe intensity: Gaussian in the signed distance to the plane, fall-off, shadows."""

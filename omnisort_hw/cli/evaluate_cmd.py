@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.cli import drift_cmd, robot_cmd
+from omnisort_hw.cli import drift_cmd, lighting_cmd, robot_cmd
 
 
 def register(sub: Any) -> None:
@@ -36,6 +36,13 @@ def register(sub: Any) -> None:
         help="the curve the extraction assumes (default: the dataset's own); 'linear' is what "
         "the extraction assumed before it modelled tone curves",
     )
+    t3.add_argument(
+        "--frames",
+        type=int,
+        default=1,
+        help="with --degraded: N > 1 measures every target with captures of N laser-on and N "
+        "laser-off frames, uncompressed (default 1: one rendered frame, as before)",
+    )
     t3.add_argument("--json", action="store_true", help="print one JSON object")
     t3.set_defaults(func=cmd_table3)
     for extension in EXTENSIONS:
@@ -43,7 +50,11 @@ def register(sub: Any) -> None:
 
 
 # Other experiments register here: each adds its own parser to the `evaluate` group.
-EXTENSIONS: list[Any] = [robot_cmd.add_sorting_evaluation, drift_cmd.add_drift_evaluation]
+EXTENSIONS: list[Any] = [
+    robot_cmd.add_sorting_evaluation,
+    drift_cmd.add_drift_evaluation,
+    lighting_cmd.add_lighting_evaluation,
+]
 
 
 def _matching(data: Path, n: int, seed: int, degraded: bool, tone_curve: str) -> bool:
@@ -62,6 +73,8 @@ def cmd_table3(args: argparse.Namespace) -> int:
 
     if args.n < 1:
         raise InputError(f"--n must be at least 1, got {args.n}")
+    if args.frames > 1:
+        return lighting_cmd.table3_with_captures(args)
     data = args.data or Path("build") / (
         f"table3-n{args.n}-seed{args.seed}"
         + ("-degraded" if args.degraded else "")

@@ -45,8 +45,14 @@ def register(sub: Any) -> None:
     cal.set_defaults(func=cmd_calibrate)
 
     mp = sub.add_parser("map", help="laser pixels -> points on the laser plane (mm)")
-    mp.add_argument("image", type=Path)
+    mp.add_argument("image", type=Path, nargs="?", default=None)
     mp.add_argument("--system", type=Path, required=True, help="system.json")
+    mp.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="cell.toml: without an image, measure with its camera and laser (a capture)",
+    )
     mp.add_argument("--json", action="store_true")
     mp.add_argument(
         "--points",
@@ -55,6 +61,21 @@ def register(sub: Any) -> None:
     )
     mp.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
     mp.set_defaults(func=cmd_map)
+
+
+def _capture(config: Path | None, log: Any) -> tuple[Any, dict[str, Any]]:
+    """The laser-light image of a measurement capture with the cell file's camera and laser."""
+    from omnisort_hw.cli.robot_cmd import load_cell
+    from omnisort_hw.pipeline.measurement_capture import capture_measurement
+
+    if config is None:
+        raise InputError("give an image, or --config CELL.toml to measure with the cell")
+    cell, devices = load_cell(config)
+    if devices.camera is None or devices.laser is None:
+        raise InputError(f"{config}: a capture needs the [camera] and [laser] sections")
+    with devices.camera as cam, devices.laser as laser:
+        cap = capture_measurement(cam, laser, cell.capture, log, board=False)
+    return cap.stripe_image, cap.record
 
 
 def load_system(path: Path) -> Any:
@@ -132,11 +153,17 @@ def cmd_map(args: argparse.Namespace) -> int:
     from omnisort_hw.runlog import RunLog
 
     calib = load_system(args.system)
-    image = read_image(args.image)
+    record = None
     with RunLog(args.log) as log:
-        laser_map = map_laser(image, calib, str(args.image), log)
+        if args.image is not None:
+            image, source = read_image(args.image), str(args.image)
+        else:
+            image, record = _capture(args.config, log)
+            source = "capture"
+        laser_map = map_laser(image, calib, source, log)
     if args.json:
-        print(json.dumps(laser_map.summary(with_points=args.points)))
+        out = laser_map.summary(with_points=args.points)
+        print(json.dumps({**out, "capture": record} if record else out))
     else:
         segs = laser_map.segments
         print(f"{len(laser_map.pixels)} laser points, {len(segs)} segments")

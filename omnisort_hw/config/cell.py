@@ -32,6 +32,7 @@ from omnisort_hw.config.sorting import (
 from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
 from omnisort_hw.errors import ConfigError
 from omnisort_hw.pipeline.extrinsics import TARGETS
+from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_settings
 from omnisort_hw.storage import StorageConfig
 
 SECTIONS = (
@@ -46,6 +47,7 @@ SECTIONS = (
     "registration",
     "watchdog",
     "plc",
+    "capture",
 )
 
 
@@ -87,6 +89,7 @@ class CellConfig:
     registration: RegistrationConfig | None = None
     watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
     plc: PlcConfig = field(default_factory=PlcConfig)
+    capture: CaptureSettings = field(default_factory=CaptureSettings)
 
     @property
     def base_dir(self) -> Path | None:
@@ -119,6 +122,7 @@ class CellConfig:
             ),
             watchdog=WatchdogConfig.from_mapping(tables["watchdog"]),
             plc=PlcConfig.from_mapping(tables["plc"]),
+            capture=capture_settings(tables["capture"]),
         )
 
 

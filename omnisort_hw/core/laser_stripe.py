@@ -65,6 +65,7 @@ class StripeStats:
     high: float
     candidates: int
     points: int
+    heights: np.ndarray | None = None  # (points,) each point's stripe height (grey levels)
 
 
 def check_bgr(image: np.ndarray, what: str = "image") -> np.ndarray:
@@ -300,7 +301,8 @@ def laser_stripe_points_stats(
     con = np.concatenate([con_r[ok_r], con_c[ok_c]])
     keep = _keep_chains(pts, amp > high, con, (h, w), s)
     pts = pts[keep]
-    stats = StripeStats(noise, low, high, int(full_r.shape[0] + full_c.shape[0]), int(pts.shape[0]))
+    n_cand = int(full_r.shape[0] + full_c.shape[0])
+    stats = StripeStats(noise, low, high, n_cand, int(pts.shape[0]), amp[keep])
     return pts, stats
 
 

@@ -126,8 +126,10 @@ def check_image(image_bgr: np.ndarray, model: OcamModel) -> np.ndarray:
     return img
 
 
-def _stripe(image: np.ndarray, model: OcamModel) -> tuple[np.ndarray, np.ndarray]:
-    stripe = laser_stripe_points(image)
+def _stripe(
+    image: np.ndarray, model: OcamModel, given: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    stripe = laser_stripe_points(image) if given is None else np.asarray(given, float)
     if stripe.shape[0] == 0:
         raise FeatureNotFoundError(
             "no laser stripe anywhere in the image: is the laser on (and not too faint)?"
@@ -223,17 +225,23 @@ def _check_far_end_open(
 
 
 def extract_target_features(
-    image_bgr: np.ndarray, model: OcamModel, kind: str = "two-sided", tone: ToneCurve = SRGB
+    image_bgr: np.ndarray,
+    model: OcamModel,
+    kind: str = "two-sided",
+    tone: ToneCurve = SRGB,
+    stripe_px: np.ndarray | None = None,
 ) -> TargetFeatures:
     """Markers, borders, wall/floor lines and laser points of every wall of the target.
-    `tone`: the camera's tone curve; edges and marker coverage are measured in linear light."""
+    `tone`: the camera's tone curve; edges and marker coverage are measured in linear light.
+    `stripe_px`: the stripe's points when measured apart (a laser on/off capture); by
+    default they are found in the image."""
     if kind not in KINDS:
         raise InputError(f"target kind must be one of {', '.join(KINDS)}, got {kind!r}")
     image = check_image(image_bgr, model)
     walls_m, used = assign_markers(find_blue_markers(image, tone), model, kind)
     gray = _gray(image)
     light = tone.luminance(image)
-    stripe = _stripe(image, model)
+    stripe = _stripe(image, model, stripe_px)
     walls: dict[str, WallFeatures] = {}
     for side in SIDES:
         walls[side] = _wall(light, model, side, walls_m[side], ("near", "far"), stripe, used)
@@ -309,8 +317,10 @@ def extract_board_features(
     model: OcamModel,
     inner_corners: tuple[int, int] = (9, 6),
     square_mm: float = 97.0,
+    stripe_px: np.ndarray | None = None,
 ) -> BoardsFeatures:
-    """Corners of the two perpendicular boards ("left", "far") and the laser on each."""
+    """Corners of the two perpendicular boards ("left", "far") and the laser on each
+    (`stripe_px`: the stripe measured apart, else found in the image)."""
     image = check_image(image_bgr, model)
     cols, rows = inner_corners
     h, w = image.shape[:2]
@@ -331,7 +341,7 @@ def extract_board_features(
     S = _nominal_S(model.pixel_to_ray(np.stack([b.mean(axis=0) for b in boards])))
     azimuth = np.arctan2(S[:, 1], S[:, 0])
     left_i = int(np.argmax(azimuth))
-    stripe = laser_stripe_points(image)
+    stripe = laser_stripe_points(image) if stripe_px is None else np.asarray(stripe_px, float)
     if stripe.shape[0] == 0:
         raise FeatureNotFoundError(
             "no laser stripe anywhere in the image: is the laser on (and not too faint)?"

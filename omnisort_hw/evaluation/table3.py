@@ -184,11 +184,15 @@ def _calibrate(
 
 
 def evaluate_dataset(
-    data_dir: str | Path, progress: bool = True, tone: ToneCurve | None = None
+    data_dir: str | Path,
+    progress: bool = True,
+    tone: ToneCurve | None = None,
+    first: int | None = None,
 ) -> dict[str, Any]:
     """Run every method on every configuration of a rendered dataset; return the summary.
     `tone`: the tone curve the extraction assumes; by default the simulated camera's, as the
-    dataset records it (datasets from before the record were rendered linear)."""
+    dataset records it (datasets from before the record were rendered linear). `first`: only
+    the first configurations (to compare with a partial run)."""
     from tqdm import tqdm
 
     root = Path(data_dir)
@@ -199,7 +203,7 @@ def evaluate_dataset(
     tone = tone or ToneCurve.parse(index.get("tone_curve", "linear"))
     stats = {m: MethodStats() for m in RUNS}
     mapping: list[np.ndarray] = []
-    configs = index["configs"]
+    configs = index["configs"][:first]
     bar = tqdm(
         total=len(configs) * len(RUNS),
         desc="calibrating",

@@ -65,9 +65,11 @@ def calibrate_system(
     source: str = "image",
     log: RunLog = NullLog,
     tone: ToneCurve = SRGB,
+    stripe_px: np.ndarray | None = None,
 ) -> SystemCalibration:
     """Extract the target's features from one image and run the chosen method on them;
-    `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise)."""
+    `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise);
+    `stripe_px` the laser points of a measurement capture (else found in the image)."""
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
     from omnisort_hw.core.extrinsics.method2 import calibrate_method2
@@ -87,13 +89,15 @@ def calibrate_system(
     check_image_size(image, model, source)
     log.image("extrinsics/image", image)
     if target == "checkerboards":
-        boards = extract_board_features(image, model, board, square_mm)
+        boards = extract_board_features(image, model, board, square_mm, stripe_px)
         for name, b in boards.boards.items():
             log.points2d(f"extrinsics/image/{name}_corners", b.corners_px, color=(0, 200, 0))
             log.points2d(f"extrinsics/image/{name}_laser", b.laser_px, color=(255, 0, 0), radius=1)
         calib = calibrate_method2(boards, model)
     else:
-        features = extract_target_features(image, model, kind=target, tone=tone)
+        features = extract_target_features(
+            image, model, kind=target, tone=tone, stripe_px=stripe_px
+        )
         for name, wall in features.walls.items():
             log.points2d(
                 f"extrinsics/image/{name}_border", wall.border_px, color=(255, 255, 0), radius=1

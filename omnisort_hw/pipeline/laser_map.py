@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.core.laser_stripe import laser_stripe_points
+from omnisort_hw.core.laser_echoes import direct_hits
+from omnisort_hw.core.laser_stripe import laser_stripe_points_stats
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
 from omnisort_hw.pipeline.extrinsics import check_image_size
 from omnisort_hw.runlog import NullLog, RunLog
@@ -25,6 +26,7 @@ class LaserMap:
     pixels: np.ndarray
     points_S: np.ndarray
     segments: list[Segment]
+    echoes: int = 0  # stripe points dropped as reflections (core.laser_echoes)
 
     @property
     def finite_points_S(self) -> np.ndarray:
@@ -37,6 +39,7 @@ class LaserMap:
         out: dict[str, Any] = {
             "points": len(self.pixels),
             "points_on_plane": int(finite.sum()),
+            "echoes_dropped": self.echoes,
             "segments": [seg.summary() for seg in self.segments],
         }
         if with_points:
@@ -48,11 +51,16 @@ class LaserMap:
 def map_laser(
     image: np.ndarray, calib: SystemCalibration, source: str = "image", log: RunLog = NullLog
 ) -> LaserMap:
-    """The laser map of one laser-on image (its size must match the camera model)."""
+    """The laser map of one laser-on image (or a capture's laser-light image; its size must
+    match the camera model). Points that cannot be direct hits of the laser (a reflection at
+    the same bearing, weaker, at another range) are dropped."""
     check_image_size(image, calib.model, source)
-    pixels = laser_stripe_points(image)
+    pixels, stats = laser_stripe_points_stats(image)
     points = pixels_to_plane(pixels, calib)
-    result = LaserMap(pixels, points, segments(points, calib, pixels=pixels))
+    assert stats.heights is not None
+    keep = direct_hits(points, stats.heights)
+    pixels, points = pixels[keep], points[keep]
+    result = LaserMap(pixels, points, segments(points, calib, pixels=pixels), int((~keep).sum()))
     log.image("map/image", image)
     log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
     log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))

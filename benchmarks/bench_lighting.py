@@ -1,0 +1,52 @@
+"""Hostile light: single frame against the measurement capture in every scenario, and the
+capture's cost (`omnisort evaluate lighting`).
+
+Environment: OMNISORT_BENCH_LIGHT_SEED (default 0), OMNISORT_BENCH_LIGHT_WIDTH (camera size,
+default 1920), OMNISORT_BENCH_LIGHT_FRAMES (default 8).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from omnisort_hw.evaluation.lighting import evaluate_lighting
+
+
+def _r(v: Any, k: int) -> Any:
+    return round(float(v), k) if isinstance(v, (int, float)) else v
+
+
+def run(shared: Path) -> dict[str, Any]:
+    seed = int(os.environ.get("OMNISORT_BENCH_LIGHT_SEED", "0"))
+    width = int(os.environ.get("OMNISORT_BENCH_LIGHT_WIDTH", "1920"))
+    frames = int(os.environ.get("OMNISORT_BENCH_LIGHT_FRAMES", "8"))
+    result = evaluate_lighting(seed, frames, width, progress=True)
+    figures: dict[str, Any] = {"seed": seed, "width": width, "frames": frames, "scenarios": {}}
+    for name, sc in result["scenarios"].items():
+        row: dict[str, Any] = {}
+        for key in ("single", "capture"):
+            e = sc[key]
+            if "error" in e:
+                row[key] = {"error": e["error"]}
+                continue
+            mre = e.get("mapping_max_rel_error")
+            pmax = e.get("point_max_rel_error")
+            rec = e.get("record", {})
+            row[key] = {
+                "spurious_points": e["spurious_points"],
+                "laser_points": e["laser_points"],
+                "echoes_dropped": e.get("echoes_dropped", 0),
+                "mapping_max_rel_error_pct": _r(100 * mre, 4) if mre is not None else None,
+                "point_max_rel_error_pct": _r(100 * pmax, 4) if pmax is not None else None,
+                "calibration_max_error_deg": _r(e.get("calibration_max_error_deg"), 4),
+                "calibration_distance_error_mm": _r(e.get("calibration_distance_error_mm"), 3),
+                "calibration_error": e.get("calibration_error"),
+                "capture_s": e.get("capture_s"),
+                "wall_s": e.get("wall_s"),
+                "re_exposures": rec.get("retries", 0),
+                "response_gamma": rec.get("response_gamma"),
+            }
+        figures["scenarios"][name] = row
+    return figures

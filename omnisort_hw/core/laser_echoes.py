@@ -1,0 +1,50 @@
+"""Laser echoes: stripe points that cannot be direct hits of the laser.
+
+The emitter sits on the Z axis of S and lights, along each direction in its plane, only the
+first surface it meets. Two stripe points mapped to the same bearing about the emitter but
+at clearly different ranges cannot both be lit directly: one is light that came some other
+way, typically the stripe mirrored by a glossy floor (it maps nearer than the wall it comes
+from) or by a shiny object. The direct hit is the brighter one (a reflection loses light);
+the weaker one is dropped when its surface's strength there (the median over its points at
+that bearing and range: speckle makes single points vary by tens of percent) is less than
+`ECHO_RATIO` of the brightest surface's at that bearing and its range differs by more than
+`RANGE_GAP`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ECHO_RATIO = 0.5  # a reflection returns at most half the light (floors, lacquer, glass)
+RANGE_GAP = 0.02  # relative range difference that is not the same surface (noise << 2 %)
+BEARING_WINDOW_DEG = 0.5  # points within this bearing see the same emitter ray (> a pixel)
+
+
+def direct_hits(points_S: np.ndarray, strength: np.ndarray) -> np.ndarray:
+    """Mask of the (N, 3) plane points (S, mm; NaN rows kept) that may be direct hits."""
+    pts = np.asarray(points_S, float).reshape(-1, 3)
+    amp = np.asarray(strength, float).reshape(-1)
+    keep = np.ones(len(pts), bool)
+    ok = np.flatnonzero(np.all(np.isfinite(pts), axis=1))
+    if ok.size < 2:
+        return keep
+    bearing = np.degrees(np.arctan2(pts[ok, 1], pts[ok, 0]))
+    rng = np.hypot(pts[ok, 0], pts[ok, 1])
+    order = np.argsort(bearing)
+    b, r, a = bearing[order], rng[order], amp[ok][order]
+    lo = np.searchsorted(b, b - BEARING_WINDOW_DEG, side="left")
+    hi = np.searchsorted(b, b + BEARING_WINDOW_DEG, side="right")
+    # A point's strength is the median over its own surface nearby (same bearing window,
+    # same range): speckle makes single points flicker by tens of percent, surfaces do not.
+    level = np.empty(len(b))
+    for i in range(len(b)):  # one pass over points (hundreds), not pixels
+        w = slice(lo[i], hi[i])
+        same = np.abs(r[w] - r[i]) <= RANGE_GAP * r[i]
+        level[i] = np.median(a[w][same])
+    drop = np.zeros(len(b), bool)
+    for i in range(len(b)):
+        j = lo[i] + int(np.argmax(level[lo[i] : hi[i]]))
+        weak = level[i] < ECHO_RATIO * level[j]
+        drop[i] = weak and abs(r[i] - r[j]) > RANGE_GAP * r[j]
+    keep[ok[order[drop]]] = False
+    return keep

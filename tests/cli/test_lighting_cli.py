@@ -1,0 +1,93 @@
+"""`omnisort evaluate lighting`: one JSON object with single frame and capture per scenario."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.timeout(600)
+
+
+def test_lighting_json_has_the_keys_and_the_capture_maps_no_spurious_point() -> None:
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "omnisort_hw.cli",
+            "evaluate",
+            "lighting",
+            "--seed",
+            "3",
+            "--frames",
+            "2",
+            "--width",
+            "640",
+            "--scenario",
+            "red_objects",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=580,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout)
+    sc = out["scenarios"]["red_objects"]
+    for key in ("single", "capture"):
+        for field in ("spurious_points", "laser_points", "mapping_max_rel_error"):
+            assert field in sc[key]
+    assert sc["capture"]["laser_points"] > 30
+    assert sc["capture"]["spurious_points"] == 0  # red tape and cubes vanish in the difference
+
+
+def test_unknown_scenario_is_refused_by_name() -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", "evaluate", "lighting", "--scenario", "fog"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode != 0
+    assert "fog" in proc.stderr
+
+
+def test_table3_frames_needs_the_degraded_camera() -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", "evaluate", "table3", "--frames", "4"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode != 0
+    assert "--degraded" in proc.stderr
+
+
+def test_map_without_an_image_measures_with_the_configured_cell(tmp_path) -> None:
+    """`omnisort map --config`: a capture with the cell file's camera and laser (sim)."""
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
+
+    _, truth = render_scene(sized(load_scene("sorting"), 960), seed=0, degraded=False)
+    system = tmp_path / "system.json"
+    system.write_text(json.dumps(truth))
+    cell = tmp_path / "cell.toml"
+    cell.write_text(
+        '[camera]\nbackend = "sim"\nscene = "sorting"\nwidth = 960\nheight = 960\n'
+        'degraded = true\n[laser]\nbackend = "sim"\nscene = "sorting"\n'
+        "[capture]\nframes = 2\n"
+    )
+    args = ["map", "--system", str(system), "--config", str(cell), "--json"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout)
+    assert out["capture"]["frames"] == 2
+    assert out["capture"]["pixel_format"] == "BGR3"
+    assert out["points"] > 20 and out["segments"]
