@@ -558,7 +558,8 @@ def table3_capture(r: dict[str, Any]) -> str:
         rows.append([f"{label}, clean"] + [f"{clean[p]:.4f}" for p in PARAMS])
         rows.append([f"{label}, ratio"] + [f"{ratio[p]:.2f}x" for p in PARAMS])
     note = (
-        f"\n{t['configurations']} configurations, seed {t['seed']}, {t['width']} px, captures "
+        f"\n{t.get('configurations_done', t['configurations'])} of {t['configurations']} "
+        f"configurations (clean: the same ones), seed {t['seed']}, {t['width']} px, captures "
         f"of {t['frames']} on/off pairs (mean capture time {t['mean_capture_s']:.3f} s, "
         f"{t['re_exposures']} re-exposures); mapping check max error "
         f"{t['mapping_max_rel_error_pct']:.3f} % "

@@ -65,12 +65,14 @@ def register(sub: Any) -> None:
 
 def _capture(config: Path | None, log: Any) -> tuple[Any, dict[str, Any]]:
     """The laser-light image of a measurement capture with the cell file's camera and laser."""
-    from omnisort_hw.cli.robot_cmd import load_cell
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.devices import open_devices
     from omnisort_hw.pipeline.measurement_capture import capture_measurement
 
     if config is None:
         raise InputError("give an image, or --config CELL.toml to measure with the cell")
-    cell, devices = load_cell(config)
+    cell = load_cell_config(config)
+    devices = open_devices(cell.devices)
     if devices.camera is None or devices.laser is None:
         raise InputError(f"{config}: a capture needs the [camera] and [laser] sections")
     with devices.camera as cam, devices.laser as laser:
