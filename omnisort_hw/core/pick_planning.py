@@ -570,15 +570,20 @@ class Planner:
                     q_start, q_app, with_target, "move above the cube"
                 )
                 plan.descend = self.plan_linear(q_app, T_grasp, free, "descend onto the cube")
-                break
+                plan.lift = self.plan_linear(
+                    plan.descend.q_target,
+                    T_lift,
+                    free,
+                    "lift the cube",
+                    holding=True,
+                    held_on_floor=True,
+                )
+                break  # an arm branch that reaches down to the cube and back up
             except MotionRefusedError as exc:
                 last = exc
         else:
             assert last is not None
             raise last
-        plan.lift = self.plan_linear(
-            plan.descend.q_target, T_lift, free, "lift the cube", holding=True, held_on_floor=True
-        )
         q_lift = plan.lift.q_target
         base = bin_yaw + 90.0 * round((yaw - bin_yaw) / 90.0)
         releases = [tool_pose(targets["release"], base + d) for d in (0.0, 90.0, -90.0, 180.0)]
