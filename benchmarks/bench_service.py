@@ -5,7 +5,9 @@ port come over a notify socket). Two long commands are measured, one after the o
 - `calibrate what=intrinsics` on rendered checkerboard views: CPU-bound work in the service
   process, the worst case for the status path;
 - a joint `move` of the simulated arm paced to the wall clock (`realtime = true`).
-Each client has its own connection and sends `status` every 50 ms on a fixed schedule. A reply
+Each client has its own connection, from its own loopback address (20 HMIs on the line's
+network; the service limits connections per address), and sends `status` every 50 ms on a
+fixed schedule. A reply
 that is missing (1 s timeout) or an error counts as missed. Reported per phase: requests,
 missed replies, median, p99 and max round-trip latency.
 """
@@ -27,13 +29,18 @@ WIDTH = 960
 
 
 def _poll(
-    port: int, stop: threading.Event, latencies: list[float], missed: list[str], busy: list[int]
+    port: int,
+    source: str,
+    stop: threading.Event,
+    latencies: list[float],
+    missed: list[str],
+    busy: list[int],
 ) -> None:
     from omnisort_hw.service.client import Client, ClientError
 
     period = 1.0 / RATE_HZ
     try:
-        client = Client("127.0.0.1", port, timeout_s=REPLY_TIMEOUT_S)
+        client = Client("127.0.0.1", port, timeout_s=REPLY_TIMEOUT_S, source_host=source)
     except ClientError as exc:
         missed.append(f"connect: {exc}")
         return
@@ -55,8 +62,12 @@ def _poll(
             time.sleep(max(0.0, next_t - time.monotonic()))
 
 
-def _phase(port: int, cmd: str, args: dict[str, Any]) -> dict[str, Any]:
-    """Poll status from CLIENTS threads while `cmd` runs on another connection."""
+IDLE_S = 10.0
+
+
+def _phase(port: int, cmd: str | None, args: dict[str, Any]) -> dict[str, Any]:
+    """Poll status from CLIENTS threads while `cmd` runs on another connection (None: for
+    IDLE_S with nothing running, the reference under the same client load)."""
     from omnisort_hw.service.client import Client
 
     latencies: list[float] = []
@@ -64,15 +75,17 @@ def _phase(port: int, cmd: str, args: dict[str, Any]) -> dict[str, Any]:
     busy = [0]
     stop = threading.Event()
     threads = [
-        threading.Thread(target=_poll, args=(port, stop, latencies, missed, busy))
-        for _ in range(CLIENTS)
+        threading.Thread(
+            target=_poll, args=(port, f"127.0.1.{k + 1}", stop, latencies, missed, busy)
+        )
+        for k in range(CLIENTS)
     ]
     with Client("127.0.0.1", port, timeout_s=600) as runner:
         for t in threads:
             t.start()
         time.sleep(0.5)
         t0 = time.monotonic()
-        reply = runner.call(cmd, args)
+        reply = runner.call(cmd, args) if cmd is not None else {"ok": time.sleep(IDLE_S) is None}
         job_s = time.monotonic() - t0
         stop.set()
         for t in threads:
@@ -107,6 +120,7 @@ def run(shared: Path) -> dict[str, Any]:
         svc = start_service(cfg, tmp)
         port = svc.port
         try:
+            idle = _phase(port, None, {})
             cpu = _phase(
                 port, "calibrate", {"what": "intrinsics", "folder": str(views), "square_mm": 116}
             )
@@ -126,6 +140,9 @@ def run(shared: Path) -> dict[str, Any]:
         "service_exit_code_after_sigterm": rc,
         "load_avg_1min_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
     }
+    out.update(
+        {f"idle.{k}": v for k, v in idle.items() if k.startswith(("status", "missed", "lat"))}
+    )
     out.update({f"during_intrinsics.{k}": v for k, v in cpu.items()})
     out.update({f"during_sort.{k}": v for k, v in sort.items()})
     return out

@@ -286,9 +286,11 @@ def service(r: dict[str, Any]) -> str:
     v = r["service"]
     runs = sorted({k.split(".", 1)[0] for k in v if k.startswith("during_")})
     prefixes = [f"{name}." for name in runs] or [""]
+    if "idle.latency_p99_ms" in v:
+        prefixes.insert(0, "idle.")
     rows = []
     for pre in prefixes:
-        command = v[f"{pre}long_command"]
+        command = v.get(f"{pre}long_command", "none (idle, same clients)")
         if not isinstance(command, str):
             command = json.dumps(command)
         rows.append(

@@ -31,10 +31,16 @@ class Client:
         token: str | None = None,
         timeout_s: float = 10.0,
         connect_timeout_s: float = 5.0,
+        source_host: str | None = None,
     ) -> None:
+        """`source_host`: the local address to connect from (a test or benchmark standing in for
+        several hosts uses addresses of 127.0.0.0/8)."""
         self.host, self.port, self.token, self.timeout_s = host, port, token, timeout_s
+        source = (source_host, 0) if source_host is not None else None
         try:
-            self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
+            self._sock = socket.create_connection(
+                (host, port), timeout=connect_timeout_s, source_address=source
+            )
         except OSError as exc:
             raise ClientError(f"cannot connect to {host}:{port}: {exc}") from None
         self._sock.settimeout(timeout_s)
