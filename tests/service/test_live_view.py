@@ -24,7 +24,9 @@ from omnisort_hw.service.server import Service, start_in_thread
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
-WANTED = {"/camera/raw", "/map/points_S", "/service/state"}
+# `map` without an image measures with a capture: its laser-on camera frame, the map's points
+# and the service's state changes.
+WANTED = {"/capture/stripe/on", "/map/points_S", "/service/state"}
 
 
 def _free_address() -> tuple[str, int]:
