@@ -85,7 +85,11 @@ def _phase(port: int, cmd: str | None, args: dict[str, Any]) -> dict[str, Any]:
             t.start()
         time.sleep(0.5)
         t0 = time.monotonic()
-        reply = runner.call(cmd, args) if cmd is not None else {"ok": time.sleep(IDLE_S) is None}
+        if cmd is None:
+            time.sleep(IDLE_S)
+            reply = {"ok": True}
+        else:
+            reply = runner.call(cmd, args)
         job_s = time.monotonic() - t0
         stop.set()
         for t in threads:
