@@ -108,6 +108,15 @@ class MethodStats:
     failures: list[str] = field(default_factory=list)
     stds: list[np.ndarray] = field(default_factory=list)  # reported std, where a method has one
 
+    def add(self, calib: SystemCalibration, truth: dict[str, Any], seconds: float) -> None:
+        """Count one calibration: its time, its signed errors and its reported std."""
+        self.times.append(seconds)
+        want = truth_parameters(truth)
+        got = calib.parameters()
+        self.errors.append(np.array([got[k] - want[k] for k in PARAMETERS]))
+        if all(k in calib.std for k in PARAMETERS):
+            self.stds.append(np.array([calib.std[k] for k in PARAMETERS]))
+
     def summary(self) -> dict[str, Any]:
         out: dict[str, Any] = {"n": len(self.errors), "failures": self.failures}
         if self.errors:
@@ -222,12 +231,7 @@ def evaluate_dataset(
                 stats[row].failures.append(f"{cfg['folder']}: {exc}")
                 bar.update(1)
                 continue
-            stats[row].times.append(time.perf_counter() - t0)
-            want = truth_parameters(truth)
-            got = calib.parameters()
-            stats[row].errors.append(np.array([got[k] - want[k] for k in PARAMETERS]))
-            if all(k in calib.std for k in PARAMETERS):
-                stats[row].stds.append(np.array([calib.std[k] for k in PARAMETERS]))
+            stats[row].add(calib, truth, time.perf_counter() - t0)
             if row == "joint":
                 mapping.append(mapping_errors(calib, SystemCalibration.from_json(truth)))
             bar.update(1)

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS, SystemCalibration
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import OmnisortError
 from omnisort_hw.evaluation.table3 import (
@@ -26,7 +26,6 @@ from omnisort_hw.evaluation.table3 import (
     TARGET_OF,
     MethodStats,
     mapping_errors,
-    truth_parameters,
 )
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 from omnisort_hw.pipeline.measurement_capture import (
@@ -138,12 +137,7 @@ def evaluate_captures(
                 except OmnisortError as exc:
                     stats[row].failures.append(f"{cfg.folder}: {exc}")
                     continue
-                stats[row].times.append(time.perf_counter() - t0)
-                want = truth_parameters(truth)
-                got = calib.parameters()
-                stats[row].errors.append(np.array([got[p] - want[p] for p in PARAMETERS]))
-                if all(p in calib.std for p in PARAMETERS):
-                    stats[row].stds.append(np.array([calib.std[p] for p in PARAMETERS]))
+                stats[row].add(calib, truth, time.perf_counter() - t0)
                 if row == "joint":
                     mapping.append(mapping_errors(calib, SystemCalibration.from_json(truth)))
             bar.update(1)
