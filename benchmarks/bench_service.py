@@ -1,15 +1,18 @@
 """Service responsiveness: 20 clients polling `status` at 20 Hz while a long command runs.
 
-`omnisort serve` runs in its own process on the simulated cell (as under systemd; READY and the
-port come over a notify socket). Two long commands are measured, one after the other:
-- `calibrate what=intrinsics` on rendered checkerboard views: CPU-bound work in the service
-  process, the worst case for the status path;
-- a joint `move` of the simulated arm paced to the wall clock (`realtime = true`).
+`omnisort serve` runs in its own process (as under systemd; READY and the port come over a
+notify socket) on a virtual cell: the simulated cell in a process of its own, driven through
+the real drivers and protocols (MJPEG stream, Modbus, ur-rtde), so the service's process holds
+what it holds on a real cell and no more. Measured, one after the other on the same service:
+- idle: the same clients with nothing running (the reference p99, under identical load);
+- `calibrate what=intrinsics` on rendered checkerboard views (the compute worker's job);
+- `sort` of the scene's cubes, paced by the emulated controller's wall clock.
+For reference, a `sort` on the in-process simulated cell (`backend = "sim"`: pybullet's
+rendering and physics hold the service process's GIL for a whole render).
 Each client has its own connection, from its own loopback address (20 HMIs on the line's
 network; the service limits connections per address), and sends `status` every 50 ms on a
-fixed schedule. A reply
-that is missing (1 s timeout) or an error counts as missed. Reported per phase: requests,
-missed replies, median, p99 and max round-trip latency.
+fixed schedule. A reply that is missing (1 s timeout) or an error counts as missed. Reported
+per phase: requests, missed replies, median, p99 and max round-trip latency.
 """
 
 from __future__ import annotations
@@ -109,18 +112,17 @@ def _phase(port: int, cmd: str | None, args: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def run(shared: Path) -> dict[str, Any]:
+def _virtual_cell_phases(tmp: Path, views: Path) -> dict[str, Any]:
+    """Idle, intrinsics and sort phases on one service whose devices are a virtual cell."""
     from omnisort_hw.service.client import Client
-    from omnisort_hw.service.demo import write_config
     from omnisort_hw.service.launch import start_service
-    from sim_backend.dataset import checkerboard_views
+    from sim_backend.virtual_cell.cell_file import cell_file_text
+    from sim_backend.virtual_cell.launcher import VirtualCellProcess
 
-    load_before = os.getloadavg()[0]
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        views = tmp / "views"
-        checkerboard_views(views, n=12, seed=2, width=WIDTH, progress=False)
-        cfg = write_config(tmp, WIDTH)
+    out: dict[str, Any] = {}
+    with VirtualCellProcess("sorting", width=WIDTH, unlock_delay_s=5.0) as vc:
+        cfg = tmp / "cell.toml"
+        cfg.write_text(cell_file_text(vc.host, state_dir="state", log_dir="logs"))
         svc = start_service(cfg, tmp)
         port = svc.port
         try:
@@ -136,17 +138,46 @@ def run(shared: Path) -> dict[str, Any]:
             failed = [r["error"]["message"][:160] for r in prep if not r.get("ok")]
             sort = _phase(port, "sort", {}) if not failed else {"skipped": failed}
         finally:
-            rc = svc.stop()
-    out: dict[str, Any] = {
-        "devices": f"simulated cell (scene sorting, {WIDTH}x{WIDTH} camera)",
-        "clients": CLIENTS,
-        "rate_hz_per_client": RATE_HZ,
-        "service_exit_code_after_sigterm": rc,
-        "load_avg_1min_before_after": [round(load_before, 2), round(os.getloadavg()[0], 2)],
-    }
+            out["service_exit_code_after_sigterm"] = svc.stop()
     out.update(
         {f"idle.{k}": v for k, v in idle.items() if k.startswith(("status", "missed", "lat"))}
     )
     out.update({f"during_intrinsics.{k}": v for k, v in cpu.items()})
     out.update({f"during_sort.{k}": v for k, v in sort.items()})
+    return out
+
+
+def _in_process_sort(tmp: Path) -> dict[str, Any]:
+    """The sort phase on the in-process simulated cell (calibration from the sim's truth)."""
+    from omnisort_hw.service.demo import calibrate_from_truth, write_config
+    from omnisort_hw.service.launch import start_service
+
+    tmp.mkdir()
+    cfg = write_config(tmp, WIDTH)
+    calibrate_from_truth(cfg)
+    svc = start_service(cfg, tmp)
+    try:
+        sort = _phase(svc.port, "sort", {})
+    finally:
+        svc.stop()
+    sort["devices"] = f"in-process simulated cell (backend sim, {WIDTH}x{WIDTH} camera)"
+    return {f"during_sort_in_process_sim.{k}": v for k, v in sort.items()}
+
+
+def run(shared: Path) -> dict[str, Any]:
+    from sim_backend.dataset import checkerboard_views
+
+    load_before = os.getloadavg()[0]
+    out: dict[str, Any] = {
+        "devices": f"virtual cell (scene sorting, {WIDTH}x{WIDTH} camera; real drivers)",
+        "clients": CLIENTS,
+        "rate_hz_per_client": RATE_HZ,
+    }
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        views = tmp / "views"
+        checkerboard_views(views, n=12, seed=2, width=WIDTH, progress=False)
+        out.update(_virtual_cell_phases(tmp, views))
+        out.update(_in_process_sort(tmp / "sim"))
+    out["load_avg_1min_before_after"] = [round(load_before, 2), round(os.getloadavg()[0], 2)]
     return out

@@ -296,7 +296,7 @@ def service(r: dict[str, Any]) -> str:
         rows.append(
             [
                 command,
-                v["devices"],
+                v.get(f"{pre}devices", v["devices"]),
                 v["clients"],
                 v[f"{pre}status_requests"],
                 v[f"{pre}missed_replies"],

@@ -38,6 +38,10 @@ PROGRESS_KEEP = 50
 LOADED_PHASES = frozenset({"grasping", "holding"})
 
 
+def _copy(record: dict[str, Any] | None) -> dict[str, Any] | None:
+    return json.loads(json.dumps(record)) if record is not None else None
+
+
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
 
@@ -49,6 +53,10 @@ class JobJournal:
         self.path = Path(state_dir) / JOURNAL_NAME
         self._lock = threading.Lock()
         self._record: dict[str, Any] | None = self._read()
+        # A copy of the record as of its last change, for `status` on the event loop: read
+        # without the lock, which a write holds through its two fsyncs (tens of ms on a busy
+        # disk); replaced whole at every change, never mutated.
+        self._published = _copy(self._record)
         self.problem: str | None = None
 
     def _read(self) -> dict[str, Any] | None:
@@ -64,6 +72,7 @@ class JobJournal:
     def _write(self) -> None:
         assert self._record is not None
         self._record["updated"] = _now()
+        self._published = _copy(self._record)
         try:
             fileio.atomic_write_json(self.path, self._record, keep_history=False)
             self.problem = None
@@ -75,9 +84,9 @@ class JobJournal:
 
     @property
     def record(self) -> dict[str, Any] | None:
-        """A copy of the current record (None before the first job)."""
-        with self._lock:
-            return json.loads(json.dumps(self._record)) if self._record is not None else None
+        """A copy of the current record (None before the first job); never waits for a
+        write in progress. Callers must not change it (it is shared until the next change)."""
+        return self._published
 
     def start(self, job: str, request_id: int | str | None, args: dict[str, Any]) -> None:
         """A new job begins; an unresolved cube in flight is carried over (still unresolved)."""
