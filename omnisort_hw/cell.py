@@ -685,9 +685,10 @@ class Cell:
         payload = dict(self.store.load_system())
         calib = SystemCalibration.from_json(payload, source=str(self.store.path("system")))
         img = self._image(image, laser=False)
-        _raise_if_cancelled(cancel, "register_robot")
         self.runlog.image("registration/image", img)
-        reg = register_from_image(img, calib, rc, self.runlog)
+        reg = self.compute.call_logged(
+            register_from_image, self.runlog, img, calib, rc, cancel=cancel
+        )
         payload["robot_base"] = robot_base_record(reg, rc, image or "capture")
         path = self.store.save_system(payload)
         self.drift.save_reference(img)
@@ -707,10 +708,8 @@ class Cell:
         acq = self.measure(image) if with_laser else None
         colour = acq.board if acq is not None else self._image(image, laser=False)
         laser_img = acq.stripe if acq is not None else None
-        _raise_if_cancelled(cancel, "locate")
-        cubes, _ = locate_in_images(
-            colour, laser_img, calib, cfg, T_SB, calib.robot_base, self.runlog
-        )
+        args = (colour, laser_img, calib, cfg, T_SB, calib.robot_base)  # located in the worker
+        cubes, _ = self.compute.call_logged(locate_in_images, self.runlog, *args, cancel=cancel)
         found = [c.summary() for c in cubes if colors is None or c.color in colors]
         return {"cubes": found, "count": len(found)}
 
@@ -742,6 +741,7 @@ class Cell:
             cancel=cancel,
             progress=progress,
             on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
+            compute=self.compute,
         )
         sorter.calibration.check_motion_allowed()
         self.drift.before_sort()

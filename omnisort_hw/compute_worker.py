@@ -85,6 +85,33 @@ def _logged(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any
     return fn(*args, log=rec, **kwargs), rec.calls
 
 
+class InCaller:
+    """`ComputeWorker`'s interface, running the function in the caller's thread: for the CLI
+    and the evaluations, which have no service to keep answering."""
+
+    def call(
+        self,
+        fn: Callable[..., T],
+        *args: Any,
+        timeout_s: float | None = None,
+        cancel: threading.Event | None = None,
+        what: str = "job",
+        **kwargs: Any,
+    ) -> T:
+        return fn(*args, **kwargs)
+
+    def call_logged(
+        self,
+        fn: Callable[..., T],
+        log: Any,
+        *args: Any,
+        cancel: threading.Event | None = None,
+        what: str = "job",
+        **kwargs: Any,
+    ) -> T:
+        return fn(*args, log=log, **kwargs)
+
+
 class ComputeWorker:
     """One child process that runs CPU-bound functions for the service (see module doc)."""
 
@@ -139,6 +166,8 @@ class ComputeWorker:
     ) -> T:
         """fn(*args, **kwargs) in the worker; raises what fn raised, `WorkerError` when the
         worker dies or overruns `timeout_s`, `MotionRefusedError` when `cancel` is set."""
+        if cancel is not None and cancel.is_set():  # before the job: the worker stays
+            raise MotionRefusedError(f"{what} cancelled")
         with self._lock:
             if self._proc is None or not self._proc.is_alive():
                 if self._proc is not None:

@@ -22,7 +22,7 @@ MM = 1e-3
 HALL_RADIUS_MM = 9000.0
 FAN_RAYS = 14400
 FAN_RANGE_MM = 15000.0
-_BATCH = 8000
+_BATCH = 1000  # rays per pybullet call: each holds the GIL ~3 ms (8000: 20-40 ms)
 
 
 @dataclass(frozen=True)

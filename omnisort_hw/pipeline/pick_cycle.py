@@ -6,7 +6,9 @@ without a return home). Cubes already picked or in flight are not obstacles any 
 refused because another one was in the way is tried again once a cube has gone; other
 refusals are final. The queue is used by one thread at a time: the sorter plans the next pick
 on a helper thread while the arm carries out the current one, and waits for that plan only
-when the arm needs it.
+when the arm needs it. In the service the planning itself runs in the compute worker
+(`next_plan_via`: the queue is sent there and comes back with the plan), so the service's
+process keeps its GIL for the event loop.
 
 `CycleTimes` records a run's time the way a cell's cycle is judged: the arm's motion (on the
 arm's clock), the gripper's actions, the computation the arm waited for (not hidden behind
@@ -16,15 +18,19 @@ motion) and each plan's CPU time (the computation per pick on one core).
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
 from omnisort_hw.core.cube_location import Cube
 from omnisort_hw.core.pick_planning import BLOCKED, PickPlan, Planner
+from omnisort_hw.errors import MotionRefusedError
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -64,6 +70,28 @@ class CycleTimes:
             picks_per_minute=round(60.0 / cycle, 2) if cycle else None,
         )
         return out
+
+
+class Compute(Protocol):
+    """Where CPU-bound work runs (`compute_worker.ComputeWorker` or `InCaller`)."""
+
+    def call(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T: ...
+
+    def call_logged(self, fn: Callable[..., T], log: Any, *args: Any, **kwargs: Any) -> T: ...
+
+
+def _never() -> bool:
+    return False
+
+
+def _next_plan_of(
+    queue: PickQueue, q_from: np.ndarray
+) -> tuple[PickQueue, tuple[int, PickPlan] | None, list[tuple[int, str]]]:
+    """`queue.next_plan(q_from)` on a copy of the queue (in a worker): the updated copy, the
+    result and the refusals met (the caller reports them)."""
+    refusals: list[tuple[int, str]] = []
+    queue.on_refused = lambda i, reason: refusals.append((i, reason))
+    return queue, queue.next_plan(q_from), refusals
 
 
 class PickQueue:
@@ -114,6 +142,32 @@ class PickQueue:
             return None
         finally:
             self.plan_s.append(time.thread_time() - t0)
+
+    def next_plan_via(
+        self, compute: Compute, q_from: np.ndarray, cancel: threading.Event
+    ) -> tuple[int, PickPlan] | None:
+        """`next_plan` computed by `compute` (a worker process: the queue travels there and
+        back, so the caller's process is not held); None when cancelled meanwhile."""
+        keep = self.on_refused, self.cancelled
+        try:
+            done, job, refusals = compute.call(
+                _next_plan_of, self, q_from, cancel=cancel, what="pick planning"
+            )
+        except MotionRefusedError:
+            if cancel.is_set():
+                return None
+            raise
+        finally:
+            self.on_refused, self.cancelled = keep
+        self.__dict__.update(done.__dict__)
+        self.on_refused, self.cancelled = keep
+        for i, reason in refusals:
+            self.on_refused(i, reason)
+        return job
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The queue without its callbacks (they stay with the caller)."""
+        return {**self.__dict__, "on_refused": None, "cancelled": _never}
 
     def give_back(self, i: int, plan: PickPlan) -> None:
         """Undo the plan of cube i that will not be carried out: the cube is to sort again

@@ -24,13 +24,14 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from omnisort_hw.compute_worker import InCaller
 from omnisort_hw.config.sorting import RegistrationConfig, SortSection
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import Move, PickPlan, Planner, SortConfig
 from omnisort_hw.errors import ConfigError, MotionRefusedError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
 from omnisort_hw.pipeline.locate import Located, locate_in_images
-from omnisort_hw.pipeline.pick_cycle import CycleTimes, PickQueue
+from omnisort_hw.pipeline.pick_cycle import Compute, CycleTimes, PickQueue
 from omnisort_hw.pipeline.registration import register_from_image
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -181,6 +182,7 @@ class Sorter:
         progress: Callable[[dict[str, Any]], None] | None = None,
         on_pick: Callable[[str, CubeOutcome], None] | None = None,
         clock: Callable[[], float] | None = None,
+        compute: Compute | None = None,
     ) -> None:
         self.camera = camera
         self.arm = arm
@@ -196,6 +198,8 @@ class Sorter:
         self.clock = clock or time.monotonic
         self.cycle: CycleTimes | None = None
         self._ahead: Future[tuple[int, PickPlan] | None] | None = None
+        # Location and planning run here: the service's compute worker, else this process.
+        self.compute: Compute = compute or InCaller()
 
     # -- capture and location -------------------------------------------------------------
 
@@ -231,14 +235,31 @@ class Sorter:
         if register:
             if self.registration is None:
                 raise ConfigError("[registration]: needed to register the robot from the image")
-            reg = register_from_image(colour, calib, self.registration, self.log)
+            reg = self.compute.call_logged(
+                register_from_image,
+                self.log,
+                colour,
+                calib,
+                self.registration,
+                cancel=self.cancel,
+                what="robot registration",
+            )
             T_SB = reg.T_SB
         else:
             T_SB = robot_base_T(calib)
         t2 = time.perf_counter()
         robot_base = reg.record() if reg else calib.robot_base
-        cubes, diag = locate_in_images(
-            colour, laser_img, calib, self.cfg, T_SB, robot_base, self.log
+        cubes, diag = self.compute.call_logged(
+            locate_in_images,
+            self.log,
+            colour,
+            laser_img,
+            calib,
+            self.cfg,
+            T_SB,
+            robot_base,
+            cancel=self.cancel,
+            what="cube location",
         )
         diag["timings_s"] = {
             "capture": t1 - t0,
@@ -338,7 +359,9 @@ class Sorter:
                     break
                 out.status, out.reason = "planned", ""
                 self.log.event("sorting/plan", f"cube {i} ({out.color}): {plan.duration_s:.1f} s")
-                self._ahead = ahead.submit(queue.next_plan, plan.end_q)
+                self._ahead = ahead.submit(
+                    queue.next_plan_via, self.compute, plan.end_q, self.cancel
+                )
                 self._execute(plan, out, planner)
                 done += 1
                 if self.progress is not None:
@@ -393,7 +416,7 @@ class Sorter:
     def _plan_now(self, queue: PickQueue, q: np.ndarray) -> tuple[int, PickPlan] | None:
         """Plan the next pick while the arm waits (the first pick, or after a failed one)."""
         t0 = time.perf_counter()
-        job = queue.next_plan(q)
+        job = queue.next_plan_via(self.compute, q, self.cancel)
         if self.cycle is not None:
             self.cycle.wait_s += time.perf_counter() - t0
         return job
