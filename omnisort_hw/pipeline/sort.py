@@ -26,6 +26,7 @@ import numpy as np
 
 from omnisort_hw.compute_worker import InCaller
 from omnisort_hw.config.sorting import RegistrationConfig, SortSection
+from omnisort_hw.core.cube_location import Cube
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import Move, PickPlan, Planner, SortConfig
 from omnisort_hw.errors import ConfigError, MotionRefusedError
@@ -33,6 +34,7 @@ from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_bas
 from omnisort_hw.pipeline.locate import Located, locate_in_images
 from omnisort_hw.pipeline.pick_cycle import Compute, CycleTimes, PickQueue
 from omnisort_hw.pipeline.registration import register_from_image
+from omnisort_hw.pipeline.scene_check import ChangeWatch, SceneCheck
 from omnisort_hw.runlog import NullLog, RunLog
 
 if TYPE_CHECKING:
@@ -103,6 +105,7 @@ class CubeOutcome:
     motion_s: float = 0.0
     error_mm: float | None = None  # filled by a verifier
     in_right_bin: bool | None = None  # filled by a verifier
+    relocated: bool = False  # moved after the first capture; located again by a check
 
     def to_dict(self) -> dict[str, Any]:
         out = {
@@ -121,6 +124,8 @@ class CubeOutcome:
             out["error_mm"] = round(self.error_mm, 3)
         if self.in_right_bin is not None:
             out["in_right_bin"] = self.in_right_bin
+        if self.relocated:
+            out["relocated"] = True
         return out
 
 
@@ -183,6 +188,7 @@ class Sorter:
         on_pick: Callable[[str, CubeOutcome], None] | None = None,
         clock: Callable[[], float] | None = None,
         compute: Compute | None = None,
+        check_changes: bool = True,
     ) -> None:
         self.camera = camera
         self.arm = arm
@@ -200,6 +206,8 @@ class Sorter:
         self._ahead: Future[tuple[int, PickPlan] | None] | None = None
         # Location and planning run here: the service's compute worker, else this process.
         self.compute: Compute = compute or InCaller()
+        self.check_changes = check_changes  # a check capture after each release
+        self._watch: ChangeWatch | None = None
 
     # -- capture and location -------------------------------------------------------------
 
@@ -349,6 +357,7 @@ class Sorter:
             self.progress({"located": len(loc.cubes), "to_pick": len(todo)})
         t_exec = time.perf_counter()
         done = 0
+        self._watch = self._change_watch(loc, planner) if self.check_changes else None
         with ThreadPoolExecutor(1, thread_name_prefix="plan-ahead") as ahead:
             job = self._plan_now(queue, np.asarray(arm.joint_positions(), float))
             while job is not None:
@@ -368,15 +377,19 @@ class Sorter:
                     self.progress({"cube": out.index, "status": out.status, "color": out.color})
                 t_wait = time.perf_counter()
                 nxt = self._join_ahead()
+                changed = self._watch is not None and self._watch.settle(queue, nxt, outcomes)
                 cycle.wait_s += time.perf_counter() - t_wait
-                if out.status == "sorted":
-                    cycle.picks += 1
+                cycle.picks += out.status == "sorted"
+                if out.status == "sorted" and not changed:
                     job = nxt
-                else:  # the arm went home: plan again from there, the cube an obstacle again
-                    if nxt is not None:
+                else:  # the arm went home or the scene changed: plan again from here
+                    if nxt is not None and not changed:
                         queue.give_back(*nxt)
-                    queue.gone.discard(i)
+                    if out.status != "sorted":
+                        queue.gone.discard(i)  # the cube is an obstacle again
                     job = self._plan_now(queue, np.asarray(arm.joint_positions(), float))
+        if self._watch is not None:
+            self._watch.close()
         for i, reason in queue.waiting().items():
             out = outcomes[i]
             out.status = "skipped"
@@ -402,10 +415,26 @@ class Sorter:
             "execute": round(time.perf_counter() - t_exec, 3),
         }
         report.extra["cycle"] = cycle.summary()
+        if self._watch is not None:
+            report.extra["checks"] = self._watch.results
         if on_done is not None:
             on_done(report, loc)
         report.wall_s = time.perf_counter() - t0
         return report
+
+    def _change_watch(self, loc: Located, planner: Planner) -> ChangeWatch:
+        """The checks after each release against this location (see `scene_check`)."""
+        robot_base = loc.registration.record() if loc.registration else loc.calib.robot_base
+
+        def relocate(image: np.ndarray) -> list[Cube]:
+            args = (image, None, loc.calib, self.cfg, loc.T_SB, robot_base)
+            cubes, _ = self.compute.call_logged(
+                locate_in_images, self.log, *args, cancel=self.cancel, what="re-location"
+            )
+            return list(cubes)
+
+        check = SceneCheck(list(loc.cubes), loc.image, self.cfg, loc.calib, loc.T_SB, planner)
+        return ChangeWatch(check, self.camera, self._require_arm(), relocate, self.log)
 
     def _locate_s(self, loc: Located) -> float:
         """Capture and locate time the parked arm waited for (registration excluded: it is a
@@ -499,7 +528,10 @@ class Sorter:
                 self._go_home(planner)
                 return
             phase("holding", out)
-            for move in [plan.lift, *plan.carry]:
+            self._send(plan.lift)
+            if self._watch is not None:  # the check capture overlaps the carry
+                self._watch.capture_now()
+            for move in plan.carry:
                 self._send(move)
             if grip.holding is False:
                 out.status, out.reason = "failed", "the cube was lost on the way to its bin"

@@ -1,0 +1,261 @@
+"""Change checks between picks: what changed since the one capture that located every cube.
+
+The sort locates every cube once, from a capture taken with the arm parked out of view. Once
+each picked cube is lifted, a check capture is taken (it overlaps the carry to the bin) and
+compared with that first image only where it matters: each cube still to pick is looked for
+in its blob's box, by its colour. A cube still covering its box is left as it is, without a
+new location. A cube that no longer does was knocked or taken away: the check image is
+located again (in the compute worker) and the cube is matched to a cube of its colour near
+where it was; it is `moved` (its new pose replaces the old) or `gone` (removed by hand: it is
+neither picked nor an obstacle any more). A box the arm covers in the check image cannot be
+judged: the cube is `hidden` and judged at the next check.
+
+How much of its box a cube must still cover follows from the gripper: a cube shifted by half
+the gripper's margin on each side ((stroke - size) / 4) still grasps; such a shift leaves a
+fraction 1 - margin / (4 size) of the box covered.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from omnisort_hw.core.cube_location import Cube
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.kinematics import joint_frames
+from omnisort_hw.core.motion import arm_capsules
+from omnisort_hw.core.pick_planning import Planner, SortConfig
+
+# Pixels around a cube's box that count as covered when an arm point lands there.
+ARM_MARGIN_PX = 6
+# The longest a check capture may take (a camera frame; the simulated one renders).
+CAPTURE_TIMEOUT_S = 60.0
+# Points per capsule axis (and its radius offsets) projected to find what the arm covers.
+ARM_SAMPLES = 12
+
+
+@dataclass
+class CheckResult:
+    """What one check found, per cube index."""
+
+    still: list[int] = field(default_factory=list)
+    hidden: list[int] = field(default_factory=list)
+    moved: dict[int, Cube] = field(default_factory=dict)
+    gone: list[int] = field(default_factory=list)
+    covered: dict[int, float] = field(default_factory=dict)  # fraction of the box still covered
+
+    @property
+    def changed(self) -> bool:
+        return bool(self.moved or self.gone)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "still": self.still,
+            "hidden": self.hidden,
+            "moved": sorted(self.moved),
+            "gone": self.gone,
+            "covered": {k: round(v, 3) for k, v in self.covered.items()},
+        }
+
+
+def keep_fraction(cfg: SortConfig) -> float:
+    """The fraction of its box a cube that has not moved enough to matter still covers."""
+    margin = max(0.0, cfg.gripper_stroke_mm - cfg.cube_size_mm) / 2.0
+    return 1.0 - margin / (4.0 * cfg.cube_size_mm)
+
+
+def _crop(img: np.ndarray, bbox: tuple[int, int, int, int]) -> np.ndarray:
+    x, y, w, h = bbox
+    return img[max(0, y) : y + h, max(0, x) : x + w]
+
+
+def colour_mask(cfg: SortConfig, img: np.ndarray, color: str) -> np.ndarray:
+    """The pixels of `img` (BGR) in `color` of the colour table (bool)."""
+    masks, _ = cfg.colors.masks(img)
+    return masks[color] > 0 if color in masks else np.zeros(img.shape[:2], bool)
+
+
+def arm_pixels(
+    planner: Planner, calib: SystemCalibration, T_SB: np.ndarray, q_deg: Iterable[np.ndarray]
+) -> np.ndarray:
+    """Image points (n, 2) that the arm and its gripper cover at each of the joints `q_deg`:
+    points along each capsule's axis and at its radius around it, projected."""
+    caps = (*arm_capsules(planner.model), *planner.gripper)
+    s = np.linspace(0.0, 1.0, ARM_SAMPLES)[:, None]
+    pts_B = []
+    for q in q_deg:
+        frames = joint_frames(planner.model, np.asarray(q, float))
+        for c in caps:
+            T = frames[c.frame]
+            a = T[:3, :3] @ np.asarray(c.start_mm, float) + T[:3, 3]
+            b = T[:3, :3] @ np.asarray(c.end_mm, float) + T[:3, 3]
+            axis = a + s * (b - a)
+            offsets = np.vstack([np.zeros(3), c.radius_mm * np.vstack([np.eye(3), -np.eye(3)])])
+            pts_B.append((axis[:, None, :] + offsets[None]).reshape(-1, 3))
+    if not pts_B:
+        return np.zeros((0, 2))
+    p_B = np.vstack(pts_B)
+    p_S = p_B @ T_SB[:3, :3].T + T_SB[:3, 3]
+    p_C = p_S @ calib.R_SC
+    return np.asarray(calib.model.ray_to_pixel(p_C), float).reshape(-1, 2)
+
+
+def _boxes_hit(boxes: dict[int, tuple[int, int, int, int]], px: np.ndarray) -> set[int]:
+    hit = set()
+    m = ARM_MARGIN_PX
+    for k, (x, y, w, h) in boxes.items():
+        inside = (
+            (px[:, 0] >= x - m)
+            & (px[:, 0] <= x + w + m)
+            & (px[:, 1] >= y - m)
+            & (px[:, 1] <= y + h + m)
+        )
+        if np.any(inside):
+            hit.add(k)
+    return hit
+
+
+class SceneCheck:
+    """The reference of every cube still to pick (its box and colour pixels in the first
+    image) and the comparison of a check image with it (see module doc)."""
+
+    def __init__(
+        self,
+        cubes: list[Cube],
+        image: np.ndarray,
+        cfg: SortConfig,
+        calib: SystemCalibration,
+        T_SB: np.ndarray,
+        planner: Planner,
+    ) -> None:
+        self.cfg = cfg
+        self.calib = calib
+        self.T_SB = T_SB
+        self.planner = planner
+        self.keep = keep_fraction(cfg)
+        self.ref: dict[int, tuple[str, tuple[int, int, int, int], np.ndarray, np.ndarray]] = {}
+        for k, cube in enumerate(cubes):
+            self._set_ref(k, cube, image)
+
+    def _set_ref(self, k: int, cube: Cube, image: np.ndarray) -> None:
+        x, y, w, h = (int(v) for v in cube.bbox)
+        bbox = (x, y, w, h)
+        mask = colour_mask(self.cfg, _crop(image, bbox), cube.color)
+        self.ref[k] = (cube.color, bbox, mask, cube.center_B.copy())
+
+    def check(
+        self,
+        image: np.ndarray,
+        indices: Iterable[int],
+        q_deg: Iterable[np.ndarray],
+        relocate: Callable[[np.ndarray], list[Cube]],
+    ) -> CheckResult:
+        """Compare `image` (taken with the arm at the joints `q_deg`) for the cubes `indices`;
+        `relocate(image)` locates every cube of the image (called only after a change)."""
+        out = CheckResult()
+        todo = [k for k in indices if k in self.ref]
+        covered_by_arm = _boxes_hit(
+            {k: self.ref[k][1] for k in todo},
+            arm_pixels(self.planner, self.calib, self.T_SB, list(q_deg)),
+        )
+        changed = []
+        for k in todo:
+            if k in covered_by_arm:
+                out.hidden.append(k)
+                continue
+            color, bbox, ref, _ = self.ref[k]
+            now = colour_mask(self.cfg, _crop(image, bbox), color)
+            n = int(ref.sum())
+            frac = float((ref & now).sum()) / n if n else 0.0
+            out.covered[k] = frac
+            (out.still if frac >= self.keep else changed).append(k)
+        if not changed:
+            return out
+        found = relocate(image)
+        taken: set[int] = set()
+        for k in changed:
+            color, _, _, c_B = self.ref[k]
+            best, best_d = None, 2.0 * self.cfg.cube_size_mm
+            for j, cube in enumerate(found):
+                d = float(np.linalg.norm(cube.center_B[:2] - c_B[:2]))
+                if cube.color == color and j not in taken and d < best_d:
+                    best, best_d = j, d
+            if best is not None:
+                taken.add(best)
+                out.moved[k] = found[best]
+                self._set_ref(k, found[best], image)
+            else:
+                out.gone.append(k)
+                del self.ref[k]
+        return out
+
+
+class ChangeWatch:
+    """The sort's side of the checks: a check capture taken on a helper thread once a cube is
+    lifted (`capture_now`), compared when the next pick is due (`settle`), and the
+    queue and the report brought up to date with what it found."""
+
+    def __init__(
+        self,
+        check: SceneCheck,
+        camera: Any,
+        arm: Any,
+        relocate: Callable[[np.ndarray], list[Cube]],
+        log: Any,
+    ) -> None:
+        self.check = check
+        self.camera = camera
+        self.arm = arm
+        self.relocate = relocate
+        self.log = log
+        self.results: list[dict[str, Any]] = []
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="scene-check")
+        self._pending: Future[tuple[np.ndarray, list[np.ndarray]]] | None = None
+
+    def _capture(self) -> tuple[np.ndarray, list[np.ndarray]]:
+        q0 = np.asarray(self.arm.joint_positions(), float)
+        image = self.camera.grab().image
+        return image, [q0, np.asarray(self.arm.joint_positions(), float)]
+
+    def capture_now(self) -> None:
+        """Start the check capture on the helper thread (it overlaps the arm's motion)."""
+        self._pending = self._pool.submit(self._capture)
+
+    def settle(self, queue: Any, nxt: tuple[int, Any] | None, outcomes: list[Any]) -> bool:
+        """Compare the pending check capture for the cubes still to pick (and the next one,
+        planned already); on a change the next plan is given back (the caller plans again
+        with what is there now), moved cubes take their new pose and gone cubes leave the
+        queue. True when something changed."""
+        fut, self._pending = self._pending, None
+        if fut is None:
+            return False
+        image, qs = fut.result(timeout=CAPTURE_TIMEOUT_S)
+        indices = list(queue.todo) + ([nxt[0]] if nxt is not None else [])
+        res = self.check.check(image, indices, qs, self.relocate)
+        self.results.append(res.summary())
+        if not res.changed:
+            return False
+        self.log.event("sorting/check", f"changed since the first capture: {res.summary()}")
+        if nxt is not None:
+            queue.give_back(*nxt)
+        for k, cube in res.moved.items():
+            queue.cubes[k] = cube
+            queue._tried_with.pop(k, None)
+            o = outcomes[k]
+            o.center_S_mm, o.center_B_mm = cube.center_S.tolist(), cube.center_B.tolist()
+            o.yaw_B_deg, o.sigma_mm = cube.yaw_B_deg, cube.sigma_mm
+            o.relocated = True
+        for k in res.gone:
+            if k in queue.todo:
+                queue.todo.remove(k)
+            queue.gone.add(k)  # neither to pick nor an obstacle any more
+            outcomes[k].status = "skipped"
+            outcomes[k].reason = "gone: not where the first capture saw it (taken away?)"
+        return True
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True)
