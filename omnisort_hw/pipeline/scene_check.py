@@ -11,8 +11,8 @@ neither picked nor an obstacle any more). A box the arm covers in the check imag
 judged: the cube is `hidden` and judged at the next check.
 
 How much of its box a cube must still cover follows from the gripper: a cube shifted by half
-the gripper's margin on each side ((stroke - size) / 4) still grasps; such a shift leaves a
-fraction 1 - margin / (4 size) of the box covered.
+the gripper's margin on each side (margin = (stroke - size) / 2) still grasps; such a shift
+leaves a fraction 1 - margin / (2 size) of the box covered.
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ class CheckResult:
 def keep_fraction(cfg: SortConfig) -> float:
     """The fraction of its box a cube that has not moved enough to matter still covers."""
     margin = max(0.0, cfg.gripper_stroke_mm - cfg.cube_size_mm) / 2.0
-    return 1.0 - margin / (4.0 * cfg.cube_size_mm)
+    return 1.0 - margin / (2.0 * cfg.cube_size_mm)
 
 
 def _crop(img: np.ndarray, bbox: tuple[int, int, int, int]) -> np.ndarray:
