@@ -206,7 +206,7 @@ class Sorter:
         self._ahead: Future[tuple[int, PickPlan] | None] | None = None
         # Location and planning run here: the service's compute worker, else this process.
         self.compute: Compute = compute or InCaller()
-        self.check_changes = check_changes  # a check capture after each release
+        self.check_changes = check_changes  # a check capture once each cube is lifted
         self._watch: ChangeWatch | None = None
 
     # -- capture and location -------------------------------------------------------------
