@@ -727,6 +727,7 @@ class Cell:
         from omnisort_hw.pipeline.calibration_source import StoreCalibration, robot_base_T
         from omnisort_hw.pipeline.gripper_load import resolve_before_sort
         from omnisort_hw.pipeline.sort import Sorter
+        from omnisort_hw.pipeline.sort_capture import sort_capture_for
 
         cfg = self._sorting("the sorting pipeline")
         if self.devices.camera is None or self.devices.arm is None:
@@ -743,6 +744,7 @@ class Cell:
             cancel=cancel,
             progress=progress,
             on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
+            acquire=sort_capture_for(self),
         )
         sorter.calibration.check_motion_allowed()
         self.drift.before_sort()

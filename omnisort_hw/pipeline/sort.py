@@ -181,8 +181,12 @@ class Sorter:
         progress: Callable[[dict[str, Any]], None] | None = None,
         on_pick: Callable[[str, CubeOutcome], None] | None = None,
         clock: Callable[[], float] | None = None,
+        acquire: Callable[[], tuple[np.ndarray, np.ndarray | None, dict[str, Any]]] | None = None,
     ) -> None:
         self.camera = camera
+        # the cycle's images from a measurement capture (`pipeline.sort_capture`), if given
+        self.acquire = acquire
+        self.last_capture: dict[str, Any] | None = None
         self.arm = arm
         self.laser = laser
         self.calibration = calibration
@@ -202,6 +206,12 @@ class Sorter:
     def capture(self) -> tuple[np.ndarray, np.ndarray | None]:
         """A laser-off colour image and, with a laser switch and `use_laser`, a laser-on one."""
         laser_img = None
+        if self.acquire is not None and self.laser is not None and self.cfg.use_laser:
+            colour, laser_img, self.last_capture = self.acquire()
+            self.log.image("sorting/image", colour)
+            if laser_img is not None:
+                self.log.image("sorting/laser_image", laser_img)
+            return colour, laser_img
         if self.laser is not None:
             self.laser.off()
         colour = self.camera.grab().image
@@ -240,6 +250,8 @@ class Sorter:
         cubes, diag = locate_in_images(
             colour, laser_img, calib, self.cfg, T_SB, robot_base, self.log
         )
+        if self.last_capture is not None and images is None:
+            diag["capture"] = self.last_capture
         diag["timings_s"] = {
             "capture": t1 - t0,
             "register": t2 - t1,
@@ -379,6 +391,8 @@ class Sorter:
             "execute": round(time.perf_counter() - t_exec, 3),
         }
         report.extra["cycle"] = cycle.summary()
+        if "capture" in loc.diagnostics:
+            report.extra["capture"] = loc.diagnostics["capture"]
         if on_done is not None:
             on_done(report, loc)
         report.wall_s = time.perf_counter() - t0
