@@ -633,12 +633,13 @@ class Cell:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
 
         `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels."""
-        from omnisort_hw.pipeline.laser_map import map_laser
+        from omnisort_hw.pipeline.laser_map import floor_plane_S, map_laser
 
         calib = self.system_calibration()
         acq = self.measure(image, board=False)
         _raise_if_cancelled(cancel, "mapping")
-        laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog)
+        floor = floor_plane_S(calib, self.sort_config)  # the floor's mirror images go
+        laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog, floor)
         return {"image": acq.record, **laser_map.summary(with_points)}
 
     def measure(self, image: str | None, board: bool = True) -> Any:
@@ -725,6 +726,7 @@ class Cell:
         from omnisort_hw.pipeline.calibration_source import StoreCalibration, robot_base_T
         from omnisort_hw.pipeline.gripper_load import resolve_before_sort
         from omnisort_hw.pipeline.sort import Sorter
+        from omnisort_hw.pipeline.sort_capture import sort_capture_for
 
         cfg = self._sorting("the sorting pipeline")
         if self.devices.camera is None or self.devices.arm is None:
@@ -742,6 +744,7 @@ class Cell:
             progress=progress,
             on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
             compute=self.compute,
+            acquire=sort_capture_for(self),
         )
         sorter.calibration.check_motion_allowed()
         self.drift.before_sort()

@@ -14,7 +14,14 @@ def register(sub: Any) -> None:
     ext = sub.add_parser("extrinsics", help="calibrate camera rotation and laser plane")
     esub = ext.add_subparsers(dest="extrinsics_command", required=True, metavar="ACTION")
     cal = esub.add_parser("calibrate", help="from one image of a calibration target")
-    cal.add_argument("image", type=Path)
+    cal.add_argument("image", type=Path, nargs="?", default=None)
+    cal.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="cell.toml: without an image, measure the target with its camera and laser (a "
+        "capture: averaged board frames for the edges, on/off pairs for the stripe)",
+    )
     cal.add_argument("--camera", type=Path, required=True, help="camera.json (intrinsics)")
     cal.add_argument(
         "--target", required=True, choices=("two-sided", "three-sided", "checkerboards")
@@ -65,6 +72,12 @@ def register(sub: Any) -> None:
 
 def _capture(config: Path | None, log: Any) -> tuple[Any, dict[str, Any]]:
     """The laser-light image of a measurement capture with the cell file's camera and laser."""
+    cap = _measure(config, log, board=False)
+    return cap.stripe_image, cap.record
+
+
+def _measure(config: Path | None, log: Any, board: bool) -> Any:
+    """A measurement capture with the cell file's camera and laser (`MeasurementCapture`)."""
     from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.devices import open_devices
     from omnisort_hw.pipeline.measurement_capture import capture_measurement
@@ -76,8 +89,7 @@ def _capture(config: Path | None, log: Any) -> tuple[Any, dict[str, Any]]:
     if devices.camera is None or devices.laser is None:
         raise InputError(f"{config}: a capture needs the [camera] and [laser] sections")
     with devices.camera as cam, devices.laser as laser:
-        cap = capture_measurement(cam, laser, cell.capture, log, board=False)
-    return cap.stripe_image, cap.record
+        return capture_measurement(cam, laser, cell.capture, log, board=board)
 
 
 def load_system(path: Path) -> Any:
@@ -113,8 +125,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise InputError(f"--board must look like 9x6, got {args.board!r}") from exc
     tone = ToneCurve.parse(args.tone_curve)
     model, _ = load_camera_json(args.camera)
-    image = read_image(args.image)
     with RunLog(args.log) as log:
+        stripe_px = None
+        if args.image is not None:
+            image, source, record = read_image(args.image), str(args.image), None
+        else:
+            cap = _measure(args.config, log, board=True)
+            image, source, record = cap.board_image, "capture", {"capture": cap.record}
+            stripe_px, tone = cap.stripe_px, cap.tone or tone
         calib = calibrate_system(
             image,
             model,
@@ -123,23 +141,22 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             separation_mm=args.separation if args.separation is not None else 1084.5,
             board=(cols, rows),
             square_mm=args.square,
-            source=str(args.image),
+            source=source,
             log=log,
             tone=tone,
+            stripe_px=stripe_px,
         )
-    atomic_write_json(args.out, system_payload(calib, image_record(args.image)))
+    image_rec = image_record(args.image) if args.image is not None else record
+    atomic_write_json(args.out, system_payload(calib, image_rec))
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "out": str(args.out),
-                    "parameters": calib.parameters(),
-                    "std": calib.std,
-                    "residuals": calib.residuals,
-                    "method": calib.method,
-                }
-            )
-        )
+        out = {
+            "out": str(args.out),
+            "parameters": calib.parameters(),
+            "std": calib.std,
+            "residuals": calib.residuals,
+            "method": calib.method,
+        }
+        print(json.dumps({**out, **(record or {})}))
     else:
         print(f"system calibration ({calib.method}) written to {args.out}")
         for key, value in calib.parameters().items():

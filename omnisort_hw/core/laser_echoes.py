@@ -48,3 +48,67 @@ def direct_hits(points_S: np.ndarray, strength: np.ndarray) -> np.ndarray:
         drop[i] = weak and abs(r[i] - r[j]) > RANGE_GAP * r[j]
     keep[ok[order[drop]]] = False
     return keep
+
+
+def floor_mirror_partners(
+    points_S: np.ndarray,
+    laser_normal: np.ndarray,
+    laser_distance_mm: float,
+    floor_normal: np.ndarray,
+    floor_offset_mm: float,
+) -> np.ndarray:
+    """Where each laser-plane point (N, 3, S, mm) would have come from if it were the floor's
+    mirror image of the stripe: the camera's ray through it goes on to the floor (n . x = k,
+    n up), is reflected there and meets the laser plane again (NaN: the ray does not reach
+    the floor beyond the plane, or the reflection leaves the plane)."""
+    pts = np.asarray(points_S, float).reshape(-1, 3)
+    n = np.asarray(floor_normal, float) / np.linalg.norm(floor_normal)
+    m = np.asarray(laser_normal, float) / np.linalg.norm(laser_normal)
+    c = -laser_distance_mm * m[2]  # the laser plane: m . x = c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = floor_offset_mm / (pts @ n)  # the ray x = t p (t = 1 at the point) meets the floor
+        foot = pts * t[:, None]
+        out = pts - 2.0 * (pts @ n)[:, None] * n  # the ray's direction after the reflection
+        s = (c - foot @ m) / (out @ m)
+        partner = foot + s[:, None] * out
+    bad = ~(t > 1.0) | ~(s > 0.0)
+    partner[bad] = np.nan
+    return partner
+
+
+def floor_echoes(
+    points_S: np.ndarray,
+    laser_normal: np.ndarray,
+    laser_distance_mm: float,
+    floor_normal: np.ndarray,
+    floor_offset_mm: float,
+) -> np.ndarray:
+    """Mask of the points that are the floor's mirror image of another stripe point seen.
+
+    A point X and a point seen where X's floor-mirror partner Q lies (same emitter bearing
+    within `BEARING_WINDOW_DEG`, range within `RANGE_GAP`) cannot both be direct hits: Q lies
+    on the same emitter ray as X, beyond it, so X lit directly would shadow Q. Q seen lit
+    explains X as its reflection, whatever their strengths (a glossy floor in front of a dim
+    or grazing wall returns more than half its light). A mirror image whose direct stripe is
+    hidden from the camera is not caught here."""
+    pts = np.asarray(points_S, float).reshape(-1, 3)
+    echo = np.zeros(len(pts), bool)
+    ok = np.flatnonzero(np.all(np.isfinite(pts), axis=1))
+    if ok.size < 2:
+        return echo
+    q = floor_mirror_partners(
+        pts[ok], laser_normal, laser_distance_mm, floor_normal, floor_offset_mm
+    )
+    has_q = np.all(np.isfinite(q), axis=1)
+    bearing = np.degrees(np.arctan2(pts[ok, 1], pts[ok, 0]))
+    rng = np.hypot(pts[ok, 0], pts[ok, 1])
+    order = np.argsort(bearing)
+    b_sorted, r_sorted = bearing[order], rng[order]
+    qb = np.degrees(np.arctan2(q[:, 1], q[:, 0]))
+    qr = np.hypot(q[:, 0], q[:, 1])
+    lo = np.searchsorted(b_sorted, qb - BEARING_WINDOW_DEG, side="left")
+    hi = np.searchsorted(b_sorted, qb + BEARING_WINDOW_DEG, side="right")
+    for i in np.flatnonzero(has_q):  # one pass over points (hundreds), not pixels
+        near = np.abs(r_sorted[lo[i] : hi[i]] - qr[i]) <= RANGE_GAP * qr[i]
+        echo[ok[i]] = bool(near.any())
+    return echo

@@ -4,10 +4,11 @@
 exposure per task), on the sorting cell (target, cubes, bins, robot in view).
 
 Per scenario and method:
-* `laser_points`: the map's points (`pipeline.laser_map` through the true calibration: the
-  stripe found, echoes dropped); `spurious_points`: those farther than 3 px from every
-  true laser polyline and from every pixel the renderer lit directly (the polylines cover the
-  planar faces; the robot's round base is lit too);
+* `laser_points`: the map's points (`pipeline.laser_map` through the true calibration and
+  the true floor, as a registered cell knows it: the stripe found, echoes dropped);
+  `spurious_points`: those farther than 3 px from every true laser polyline and from every
+  pixel the renderer lit directly (the polylines cover the planar faces; the robot's round
+  base is lit too);
 * `mapping_max_rel_error`: what the map reports per obstacle is its nearest horizontal
   distance (`omnisort map`); per true surface with 3 or more points within 3 px, the relative
   error of the nearest mapped distance against the true one at the same places (each point's
@@ -178,7 +179,8 @@ def run_scenario(
                         raise
                     result[key] = {"error": f"{exc.code}: {exc}"}
                     continue
-                lmap = map_laser(acq.stripe_image, true_calib)
+                floor = (np.array([0.0, 0.0, 1.0]), float(truth["target"]["floor_z_mm"]))
+                lmap = map_laser(acq.stripe_image, true_calib, floor_S=floor)
                 entry = score_points(lmap.pixels, truth, direct)
                 entry["echoes_dropped"] = lmap.echoes
                 entry["capture_s"] = acq.record.get("capture_s")

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.core.laser_echoes import direct_hits
-from omnisort_hw.core.laser_stripe import laser_stripe_points_stats
+from omnisort_hw.core.laser_echoes import direct_hits, floor_echoes
+from omnisort_hw.core.laser_stripe import laser_stripe_points_stats, stripe_interior
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
 from omnisort_hw.pipeline.extrinsics import check_image_size
 from omnisort_hw.runlog import NullLog, RunLog
@@ -27,6 +27,7 @@ class LaserMap:
     points_S: np.ndarray
     segments: list[Segment]
     echoes: int = 0  # stripe points dropped as reflections (core.laser_echoes)
+    ends: int = 0  # stripe points dropped at ends and kinks (core.laser_stripe.stripe_interior)
 
     @property
     def finite_points_S(self) -> np.ndarray:
@@ -40,6 +41,7 @@ class LaserMap:
             "points": len(self.pixels),
             "points_on_plane": int(finite.sum()),
             "echoes_dropped": self.echoes,
+            "stripe_ends_dropped": self.ends,
             "segments": [seg.summary() for seg in self.segments],
         }
         if with_points:
@@ -49,21 +51,57 @@ class LaserMap:
 
 
 def map_laser(
-    image: np.ndarray, calib: SystemCalibration, source: str = "image", log: RunLog = NullLog
+    image: np.ndarray,
+    calib: SystemCalibration,
+    source: str = "image",
+    log: RunLog = NullLog,
+    floor_S: tuple[np.ndarray, float] | None = None,
 ) -> LaserMap:
     """The laser map of one laser-on image (or a capture's laser-light image; its size must
-    match the camera model). Points that cannot be direct hits of the laser (a reflection at
-    the same bearing, weaker, at another range) are dropped."""
+    match the camera model). Points at the stripe's ends and kinks, where the straight-stripe
+    fit is biased, are dropped where their piece has interior points; points that cannot be
+    direct hits of the laser (a reflection at the same bearing, weaker, at another range; with
+    the floor known, `floor_S` = (unit normal up, k) of n . x = k in S, the floor's mirror image
+    of a stripe point seen) are dropped."""
     check_image_size(image, calib.model, source)
     pixels, stats = laser_stripe_points_stats(image)
-    points = pixels_to_plane(pixels, calib)
+    interior = stripe_interior(stats)
     assert stats.heights is not None
-    keep = direct_hits(points, stats.heights)
+    pixels, heights = pixels[interior], stats.heights[interior]
+    points = pixels_to_plane(pixels, calib)
+    keep = direct_hits(points, heights)
+    if floor_S is not None:
+        keep &= ~floor_echoes(
+            points, calib.laser_normal, calib.laser_distance_mm, floor_S[0], floor_S[1]
+        )
     pixels, points = pixels[keep], points[keep]
-    result = LaserMap(pixels, points, segments(points, calib, pixels=pixels), int((~keep).sum()))
+    result = LaserMap(
+        pixels,
+        points,
+        segments(points, calib, pixels=pixels),
+        int((~keep).sum()),
+        int((~interior).sum()),
+    )
     log.image("map/image", image)
     log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
     log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))
     for i, seg in enumerate(result.segments):
         log.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
     return result
+
+
+def floor_plane_S(
+    calib: SystemCalibration, sort_config: Any = None
+) -> tuple[np.ndarray, float] | None:
+    """The floor as (unit normal up, k) of n . x = k in S, from the registered robot base
+    (`robot_base` in system.json: B's z is up) and the floor's height in B (`[sorting]`
+    floor_z_B_mm, 0 without it); None when the robot is not registered."""
+    rb = calib.robot_base
+    if not isinstance(rb, dict) or "matrix" not in rb:
+        return None
+    T = np.asarray(rb["matrix"], float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        return None
+    n = T[:3, 2] / np.linalg.norm(T[:3, 2])
+    floor_z_B = float(getattr(sort_config, "floor_z_B_mm", 0.0) or 0.0)
+    return n, float(n @ T[:3, 3] + floor_z_B)

@@ -189,8 +189,12 @@ class Sorter:
         clock: Callable[[], float] | None = None,
         compute: Compute | None = None,
         check_changes: bool = True,
+        acquire: Callable[[], tuple[np.ndarray, np.ndarray | None, dict[str, Any]]] | None = None,
     ) -> None:
         self.camera = camera
+        # the cycle's images from a measurement capture (`pipeline.sort_capture`), if given
+        self.acquire = acquire
+        self.last_capture: dict[str, Any] | None = None
         self.arm = arm
         self.laser = laser
         self.calibration = calibration
@@ -214,6 +218,12 @@ class Sorter:
     def capture(self) -> tuple[np.ndarray, np.ndarray | None]:
         """A laser-off colour image and, with a laser switch and `use_laser`, a laser-on one."""
         laser_img = None
+        if self.acquire is not None and self.laser is not None and self.cfg.use_laser:
+            colour, laser_img, self.last_capture = self.acquire()
+            self.log.image("sorting/image", colour)
+            if laser_img is not None:
+                self.log.image("sorting/laser_image", laser_img)
+            return colour, laser_img
         if self.laser is not None:
             self.laser.off()
         colour = self.camera.grab().image
@@ -269,6 +279,8 @@ class Sorter:
             cancel=self.cancel,
             what="cube location",
         )
+        if self.last_capture is not None and images is None:
+            diag["capture"] = self.last_capture
         diag["timings_s"] = {
             "capture": t1 - t0,
             "register": t2 - t1,
@@ -417,6 +429,8 @@ class Sorter:
         report.extra["cycle"] = cycle.summary()
         if self._watch is not None:
             report.extra["checks"] = self._watch.results
+        if "capture" in loc.diagnostics:
+            report.extra["capture"] = loc.diagnostics["capture"]
         if on_done is not None:
             on_done(report, loc)
         report.wall_s = time.perf_counter() - t0

@@ -72,11 +72,18 @@ def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
 def _render_worker(
     scene: str, width: int, height: int, seed: int, degraded: bool, conn: Any
 ) -> None:
-    """Renderer process: apply each state to its own world, send back the BGR image."""
+    """Renderer process: apply each state to its own world, send back the BGR image. With
+    `degraded`, the camera's sensor model (`sim_backend.sensor`: shot and read noise, flicker,
+    clipping, the same fixed parameters as the in-process camera) exposes each state's frame
+    at the nominal 10 ms, uncompressed (the stream encodes it); the noise is drawn once per
+    rendered state, not per served frame."""
     from sim_backend.devices import SimCell
+    from sim_backend.exposed_frames import ExposedFrames
+    from sim_backend.sensor import Exposure
 
     cell = SimCell.from_scene(scene, seed=seed, width=width, height=height)
     world = cell.world
+    sensor = ExposedFrames(world, cell.model, seed, cell.lighting) if degraded else None
     conn.send(("ready", None))
     n = 0
     while True:
@@ -93,7 +100,15 @@ def _render_worker(
             p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=world.client)
         world.laser_on = state["laser"]
         n += 1
-        image, _ = cell.render(seed + n, degraded)
+        if sensor is not None:
+            settings = Exposure(
+                laser_on=bool(state["laser"]),
+                flicker_depth=cell.lighting.flicker_depth,
+                pixel_format="BGR3",
+            )
+            image, _ = sensor.frame(settings, n)
+        else:
+            image, _ = cell.render(seed + n, False)
         conn.send(("image", image))
 
 

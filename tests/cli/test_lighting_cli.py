@@ -91,3 +91,45 @@ def test_map_without_an_image_measures_with_the_configured_cell(tmp_path) -> Non
     assert out["capture"]["frames"] == 2
     assert out["capture"]["pixel_format"] == "BGR3"
     assert out["points"] > 20 and out["segments"]
+
+
+def test_extrinsics_calibrate_without_an_image_measures_with_the_configured_cell(tmp_path) -> None:
+    """`omnisort extrinsics calibrate --config`: the target measured with a capture of the cell
+    file's (simulated, degraded) camera and laser: the board from averaged laser-off frames, the
+    stripe from on/off pairs, recorded in system.json. Tolerances: the capture's Table 3 MAE at
+    1280 px is under 0.007 deg and 0.07 mm over 21 configurations; this scene's stripe is short
+    on the walls (cubes and bins in front), so 0.05 deg and 1 mm for one configuration (0.024
+    deg and 0.13 mm measured at seed 0)."""
+    from omnisort_hw.core.camera_io import save_camera_json
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+    from omnisort_hw.evaluation.table3 import truth_parameters
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
+
+    _, truth = render_scene(sized(load_scene("sorting"), 1280), seed=0, degraded=False)
+    camera = tmp_path / "camera.json"
+    save_camera_json(camera, SystemCalibration.from_json(truth).model)
+    cell = tmp_path / "cell.toml"
+    cell.write_text(
+        '[camera]\nbackend = "sim"\nscene = "sorting"\nwidth = 1280\nheight = 1280\n'
+        'degraded = true\n[laser]\nbackend = "sim"\nscene = "sorting"\n'
+        "[capture]\nframes = 8\n"
+    )
+    out = tmp_path / "system.json"
+    args = ["extrinsics", "calibrate", "--config", str(cell), "--camera", str(camera)]
+    args += ["--target", "two-sided", "--out", str(out), "--json"]
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=500,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    res = json.loads(proc.stdout)
+    assert res["capture"]["frames"] == 8 and res["capture"]["pixel_format"] == "BGR3"
+    saved = json.loads(out.read_text())
+    assert saved["image"]["capture"]["method"] == "laser on/off difference"
+    want = truth_parameters(truth)
+    for key, value in res["parameters"].items():
+        tol = 1.0 if key.endswith("_mm") else 0.05
+        assert abs(value - want[key]) < tol, (key, value, want[key])

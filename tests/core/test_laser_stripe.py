@@ -115,3 +115,34 @@ def test_input_must_be_8_bit_bgr() -> None:
         check_bgr(np.zeros((10, 10), np.uint8))
     with pytest.raises(InputError, match="8-bit BGR"):
         laser_stripe_points(np.zeros((10, 10, 3), np.float32))
+
+
+def test_stripe_ends_and_kinks_are_trimmed_where_a_piece_has_an_interior() -> None:
+    """A V (two faces meeting at a corner) and its two free ends: fit windows there see the
+    stripe on one side only or bent and their points may be off by up to ~1.5 px (see the
+    test above); `stripe_interior` drops them. Kept points farther than 8 px from the vertex
+    are as good as inner points anywhere (0.3 px); nearer, the two arms' blurred profiles
+    overlap and the best possible is less clear, so only: better than half the worst. A piece
+    of 8 px keeps most of its points (a small obstacle stays on the map)."""
+    from omnisort_hw.core.laser_stripe import stripe_interior
+
+    arm_a = ((120.0, 100.3), (240.0, 300.0))
+    arm_b = ((240.0, 300.0), (380.0, 160.6))
+    short = ((60.0, 400.2), (66.0, 406.0))  # 8 px: less than one window of 11 scan lines
+    img = background(4)
+    for seg in (arm_a, arm_b, short):
+        img = draw_line(img, *seg)
+    pts, stats = laser_stripe_points_stats(to_u8(img), stride=4)  # as on a 1920 px camera
+    keep = stripe_interior(stats)
+    assert keep.shape == (len(pts),) and 0 < (~keep).sum() < 0.2 * len(pts)
+    on_short = np.hypot(pts[:, 0] - 63.0, pts[:, 1] - 403.0) < 8.0
+    assert keep[on_short].sum() >= 0.5 * on_short.sum()  # the small obstacle stays
+    err = np.minimum(distance_to_line(pts, *arm_a), distance_to_line(pts, *arm_b))
+    v_kept = keep & ~on_short
+    near_vertex = np.hypot(pts[:, 0] - 240.0, pts[:, 1] - 300.0) <= 8.0
+    assert v_kept.sum() > 60  # of ~90 (one point per 4 px scan line along the V)
+    assert err[v_kept & ~near_vertex].max() < 0.3, err[v_kept & ~near_vertex].max()
+    assert err[v_kept].max() < 0.5 * err[~on_short].max()
+    for end in (arm_a[0], arm_b[1]):  # the free ends' last points are trimmed
+        at_end = np.hypot(pts[:, 0] - end[0], pts[:, 1] - end[1]) < 2.0
+        assert at_end.any() and not keep[at_end].any()
