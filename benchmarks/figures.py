@@ -541,6 +541,15 @@ def lighting(r: dict[str, Any]) -> str:
         "on/off pairs; calibration error: worst angle / laser distance (joint); capture "
         "time: exposures plus laser switching.\n"
     )
+    for seed, chk in li.get("check_seeds", {}).items():
+        cap, one = chk["capture"], chk["single"]
+        note += (
+            f"Seed {seed} (nothing tuned on it), all five scenarios: capture "
+            f"{cap['spurious_points']} spurious of {cap['laser_points']} points, worst map "
+            f"error {num(cap['mapping_max_rel_error_pct'], '.3f')} %; single frame "
+            f"{one['spurious_points']} of {one['laser_points']}, "
+            f"{num(one['mapping_max_rel_error_pct'], '.3f')} %.\n"
+        )
     return _table([*head, "capture time"], rows) + note
 
 

@@ -128,6 +128,9 @@ def visible_from(
     return ids < 0
 
 
+FACE_LIFT_MM = 1.0  # off a face, for its visibility test (more than the engine's margin)
+
+
 def laser_polylines(
     world: SimWorld,
     plane: LaserPlane,
@@ -158,11 +161,14 @@ def laser_polylines(
         if name == "floor":
             ok &= np.hypot(pts[:, 0], pts[:, 1]) < HALL_RADIUS_MM
         idx = np.flatnonzero(ok)
+        # the rays end just off the face: ending them on it, a face seen or lit at a grazing
+        # angle hid itself (the physics engine's collision margin) and cut gaps into its line
+        lifted = pts + FACE_LIFT_MM * rect.normal
         if idx.size:
-            ok[idx] = visible_from(world.client, cam, pts[idx])
+            ok[idx] = visible_from(world.client, cam, lifted[idx])
             idx = np.flatnonzero(ok)
         if idx.size:
-            ok[idx] = visible_from(world.client, emitter, pts[idx])
+            ok[idx] = visible_from(world.client, emitter, lifted[idx])
         if not ok.any():
             continue
         edges = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))

@@ -82,8 +82,11 @@ def floor_echoes(
     laser_distance_mm: float,
     floor_normal: np.ndarray,
     floor_offset_mm: float,
+    seen_S: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Mask of the points that are the floor's mirror image of another stripe point seen.
+    """Mask of the points that are the floor's mirror image of another stripe point seen
+    (among `seen_S`, default the points themselves: a stripe point too imprecise to map, at a
+    stripe's end, still shows that the laser lit its place).
 
     A point X and a point seen where X's floor-mirror partner Q lies (same emitter bearing
     within `BEARING_WINDOW_DEG`, range within `RANGE_GAP`) cannot both be direct hits: Q lies
@@ -100,8 +103,10 @@ def floor_echoes(
         pts[ok], laser_normal, laser_distance_mm, floor_normal, floor_offset_mm
     )
     has_q = np.all(np.isfinite(q), axis=1)
-    bearing = np.degrees(np.arctan2(pts[ok, 1], pts[ok, 0]))
-    rng = np.hypot(pts[ok, 0], pts[ok, 1])
+    seen = pts[ok] if seen_S is None else np.asarray(seen_S, float).reshape(-1, 3)
+    seen = seen[np.all(np.isfinite(seen), axis=1)]
+    bearing = np.degrees(np.arctan2(seen[:, 1], seen[:, 0]))
+    rng = np.hypot(seen[:, 0], seen[:, 1])
     order = np.argsort(bearing)
     b_sorted, r_sorted = bearing[order], rng[order]
     qb = np.degrees(np.arctan2(q[:, 1], q[:, 0]))

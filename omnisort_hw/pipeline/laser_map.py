@@ -67,13 +67,12 @@ def map_laser(
     pixels, stats = laser_stripe_points_stats(image)
     interior = stripe_interior(stats)
     assert stats.heights is not None
-    pixels, heights = pixels[interior], stats.heights[interior]
-    points = pixels_to_plane(pixels, calib)
+    every = pixels_to_plane(pixels, calib)
+    pixels, points, heights = pixels[interior], every[interior], stats.heights[interior]
     keep = direct_hits(points, heights)
     if floor_S is not None:
-        keep &= ~floor_echoes(
-            points, calib.laser_normal, calib.laser_distance_mm, floor_S[0], floor_S[1]
-        )
+        n, k = floor_S
+        keep &= ~floor_echoes(points, calib.laser_normal, calib.laser_distance_mm, n, k, every)
     pixels, points = pixels[keep], points[keep]
     result = LaserMap(
         pixels,

@@ -60,3 +60,18 @@ def test_nan_points_and_a_floor_above_the_plane_give_no_echoes() -> None:
     pts = np.vstack([pts, [np.nan, np.nan, np.nan]])
     assert not floor_echoes(pts, LASER_N, D_MM, FLOOR_N, FLOOR_K).any()
     assert not floor_echoes(pts, LASER_N, D_MM, FLOOR_N, -500.0).any()
+
+
+def test_the_floor_comes_from_the_registered_robot_base() -> None:
+    from types import SimpleNamespace
+
+    from omnisort_hw.pipeline.laser_map import floor_plane_S
+
+    T = np.eye(4)
+    T[:3, 3] = (100.0, 650.0, -1200.0)  # the base on the floor, 1.2 m below the camera
+    calib = SimpleNamespace(robot_base={"matrix": T.tolist()})
+    n, k = floor_plane_S(calib)  # type: ignore[arg-type, misc]
+    assert np.allclose(n, (0.0, 0.0, 1.0)) and k == -1200.0
+    _, k2 = floor_plane_S(calib, SimpleNamespace(floor_z_B_mm=-5.0))  # type: ignore[arg-type, misc]
+    assert k2 == -1205.0
+    assert floor_plane_S(SimpleNamespace(robot_base=None)) is None  # type: ignore[arg-type]
