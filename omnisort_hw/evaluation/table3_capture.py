@@ -107,6 +107,13 @@ def _summary(stats: dict[str, MethodStats], mapping: list[np.ndarray]) -> dict[s
     }
 
 
+def _fail(stats: dict[str, MethodStats], name: str, message: str) -> None:
+    """Every row of the table that calibrates from target `name` failed with `message`."""
+    for row, (_, scene) in RUNS.items():
+        if scene == name:
+            stats[row].failures.append(message)
+
+
 def _count(
     stats: dict[str, MethodStats],
     mapping: list[np.ndarray],
@@ -174,9 +181,10 @@ def evaluate_captures(
             except (OmnisortError, Exception) as exc:  # a device error is a failure here too
                 if not isinstance(exc, OmnisortError) and not hasattr(exc, "code"):
                     raise
-                for row, (_, scene) in RUNS.items():
-                    if scene == name:
-                        stats[row].failures.append(f"{cfg.folder}/{name}: {exc}")
+                _fail(stats, name, f"{cfg.folder}/{name}: {exc}")
+                if keep is not None:
+                    (keep / cfg.folder).mkdir(parents=True, exist_ok=True)
+                    (keep / cfg.folder / f"{name}.failed.txt").write_text(f"{exc}")
                 bar.update(1)
                 continue
             if keep is not None:
@@ -250,6 +258,11 @@ def evaluate_kept(
     for folder in configs:
         for name in TABLE3_SCENES:
             base = keep / folder / name
+            failed = Path(f"{base}.failed.txt")
+            if failed.is_file():
+                _fail(stats, name, f"{folder}/{name}: {failed.read_text()}")
+                bar.update(1)
+                continue
             kept = json.loads(Path(f"{base}.capture.json").read_text())
             images = {
                 k: cv2.imread(f"{base}.{k}.png", cv2.IMREAD_COLOR)
