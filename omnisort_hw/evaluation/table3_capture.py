@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -147,6 +148,7 @@ def evaluate_captures(
     progress: bool = True,
     partial: Path | None = None,
     keep: Path | None = None,
+    only: Sequence[int] | None = None,
 ) -> dict[str, Any]:
     """Every configuration measured with captures of `frames` on/off pairs; the summary of
     `evaluate_dataset` plus the capture times, and under `clean` the same summary on the clean
@@ -154,7 +156,9 @@ def evaluate_captures(
     of the clean rendered dataset). `partial`: a JSON file rewritten after every
     configuration (for long runs). `keep`: a folder where each target's capture (board image,
     laser-light image, measured response) and clean image are kept, so a change to the
-    extraction or the solvers is measured again by `evaluate_kept` without exposing again."""
+    extraction or the solvers is measured again by `evaluate_kept` without exposing again.
+    `only`: the indices of the configurations to measure, in that order (shards of a long
+    run, kept in one folder and measured together by `evaluate_kept`)."""
     from tqdm import tqdm
 
     bases = [
@@ -171,8 +175,12 @@ def evaluate_captures(
     capture_s: list[float] = []
     retries = 0
     configs = table3_configs(n, seed)
+    if only is not None:
+        configs = [configs[i] for i in only]
     result: dict[str, Any] = {}
-    bar = tqdm(total=n * len(bases), desc="captures", unit="target", disable=not progress)
+    bar = tqdm(
+        total=len(configs) * len(bases), desc="captures", unit="target", disable=not progress
+    )
     for done, cfg in enumerate(configs, 1):
         for k, (name, base) in enumerate(bases):
             image_seed = seed * 100003 + cfg.index * 7 + k  # as the rendered dataset
@@ -270,7 +278,7 @@ def evaluate_kept(
             }
             truth, record = kept["truth"], kept["record"]
             board_tone = ToneCurve("measured", np.asarray(kept["tone"])) if kept["tone"] else tone
-            stripe_px = laser_stripe_points(images["stripe"])
+            stripe_px = laser_stripe_points(images["stripe"], light_only=True)
             _count(stats, mapping, name, images["board"], truth, board_tone, stripe_px, folder)
             _count(clean, clean_mapping, name, images["clean"], truth, tone, None, folder)
             capture_s.append(float(record["capture_s"]))
