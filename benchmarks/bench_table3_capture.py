@@ -2,12 +2,13 @@
 the clean renders of the same configurations and seeds, at the same camera size.
 
 Environment: OMNISORT_BENCH_N (configurations, default 35), OMNISORT_BENCH_SEED (default 0),
-OMNISORT_BENCH_FRAMES (default 8), OMNISORT_BENCH_CAPTURE_WIDTH (default 1280: a capture
-exposes 4 N frames per target, which at 1920 px takes this 2-core machine over an hour).
-The capture run's raw result and the clean dataset are kept in build/bench/ and reused, as
-the rendered Table 3 datasets are; OMNISORT_BENCH_CAPTURE_PARTIAL=1 records an unfinished
-run as it stands (`configurations_done` says how far it got; the clean reference is then
-restricted to the same configurations).
+OMNISORT_BENCH_FRAMES (default 8), OMNISORT_BENCH_CAPTURE_WIDTH (default 1920, the size of
+the rendered Table 3). The clean reference is calibrated from the render each capture is
+exposed from (the clean dataset's bytes), so both cover the same configurations. The run's
+raw result and every target's capture are kept in build/bench/ and reused;
+OMNISORT_BENCH_CAPTURE_REEVAL=1 measures the kept captures again (a change to the extraction
+or the solvers, without exposing again); OMNISORT_BENCH_CAPTURE_PARTIAL=1 records an
+unfinished run as it stands (`configurations_done` says how far it got).
 """
 
 from __future__ import annotations
@@ -17,29 +18,27 @@ import os
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.evaluation.table3 import evaluate_dataset
-from omnisort_hw.evaluation.table3_capture import evaluate_captures
+from omnisort_hw.evaluation.table3_capture import evaluate_captures, evaluate_kept
 
 BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
 
 
 def run(shared: Path) -> dict[str, Any]:
-    from sim_backend.dataset import make_dataset
-
     n = int(os.environ.get("OMNISORT_BENCH_N", "35"))
     seed = int(os.environ.get("OMNISORT_BENCH_SEED", "0"))
     frames = int(os.environ.get("OMNISORT_BENCH_FRAMES", "8"))
-    width = int(os.environ.get("OMNISORT_BENCH_CAPTURE_WIDTH", "1280"))
-    raw = BUILD / f"table3-capture-n{n}-seed{seed}-f{frames}-w{width}.json"
+    width = int(os.environ.get("OMNISORT_BENCH_CAPTURE_WIDTH", "1920"))
+    name = f"table3-capture-n{n}-seed{seed}-f{frames}-w{width}"
+    raw, keep = BUILD / f"{name}.json", BUILD / name
     result = json.loads(raw.read_text()) if raw.is_file() else None
     partial_ok = os.environ.get("OMNISORT_BENCH_CAPTURE_PARTIAL") == "1"
-    if result is None or (result.get("done") != n and not partial_ok):
-        result = evaluate_captures(n, seed, frames, width, progress=True, partial=raw)
+    if result is None or "clean" not in result or (result.get("done") != n and not partial_ok):
+        result = evaluate_captures(n, seed, frames, width, progress=True, partial=raw, keep=keep)
+    elif os.environ.get("OMNISORT_BENCH_CAPTURE_REEVAL") == "1":
+        result = {**result, **evaluate_kept(keep, result["configs"], frames, progress=True)}
+        raw.write_text(json.dumps(result))
     done = int(result.get("done", n))
-    clean_dir = BUILD / f"table3-n{n}-seed{seed}-srgb-w{width}"
-    if not (clean_dir / "dataset.json").is_file():
-        make_dataset(clean_dir, "table3", n, seed, width=width, progress=True)
-    clean = evaluate_dataset(clean_dir, progress=True, first=done)
+    clean = result["clean"]
     out: dict[str, Any] = {
         "configurations": n,
         "configurations_done": done,
@@ -47,6 +46,7 @@ def run(shared: Path) -> dict[str, Any]:
         "frames": frames,
         "width": width,
         "mean_capture_s": round(result["capture"]["mean_capture_s"], 3),
+        "run_wall_s": result.get("wall_s"),
         "re_exposures": result["capture"]["re_exposures"],
         "mapping_max_rel_error_pct": round(100 * result["mapping"]["max_rel_error"], 4),
         "clean_mapping_max_rel_error_pct": round(100 * clean["mapping"]["max_rel_error"], 4),

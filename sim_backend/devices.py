@@ -120,6 +120,21 @@ class SimCamera(_Connectable, Camera):
         laser lights the scene directly), None before one."""
         return self._frames.direct_laser if self._frames is not None else None
 
+    def clean_image(self) -> np.ndarray:
+        """The renderer's clean image of the world's current state (laser on, no sensor), from
+        the render the degraded frames are exposed from (degraded mode only)."""
+        self._require()
+        if not self.degraded:
+            raise DeviceError(f"{self.name}: clean images come from the degraded mode's render")
+        with self.cell.lock:
+            return self._exposed().clean_image()
+
+    def _exposed(self) -> ExposedFrames:
+        if self._frames is None:
+            cell = self.cell
+            self._frames = ExposedFrames(cell.world, cell.model, cell.seed, cell.lighting)
+        return self._frames
+
     @property
     def pixel_formats(self) -> tuple[str, ...]:
         return PIXEL_FORMATS if self.degraded else ()
@@ -154,9 +169,7 @@ class SimCamera(_Connectable, Camera):
     def _render(self, sequence: int, with_truth: bool) -> tuple[np.ndarray, dict | None]:
         if self.degraded:
             with self.cell.lock:
-                if self._frames is None:
-                    cell = self.cell
-                    self._frames = ExposedFrames(cell.world, cell.model, cell.seed, cell.lighting)
+                frames = self._exposed()
                 settings = Exposure(
                     self._exposure_ms,
                     self._gain,
@@ -165,7 +178,7 @@ class SimCamera(_Connectable, Camera):
                     self._format,
                 )
                 self._draws += 1
-                return self._frames.frame(settings, self._draws, with_truth)
+                return frames.frame(settings, self._draws, with_truth)
         brightness = self._exposure_ms / NOMINAL_EXPOSURE_MS * self._gain
         with self.cell.lock:
             # A clean frame depends only on the state: the same state renders the same bytes.

@@ -12,7 +12,8 @@ import pybullet as p
 
 from omnisort_hw.core.camera_model import OcamModel
 from sim_backend.hostile_light import Lighting, extra_light
-from sim_backend.render import render_frame
+from sim_backend.render import RenderResult, render_frame
+from sim_backend.scene_images import finish_image
 from sim_backend.sensor import Exposure, OpticalImage, SensorParams, expose
 from sim_backend.truth import build_truth
 from sim_backend.world import SimWorld
@@ -45,6 +46,7 @@ class ExposedFrames:
         self._key: bytes | None = None
         self._optical: OpticalImage | None = None
         self.direct_laser: np.ndarray | None = None  # (H, W) the renderer's laser intensity
+        self._rendered: RenderResult | None = None
         self.renders = 0
 
     def optical(self) -> OpticalImage:
@@ -69,8 +71,16 @@ class ExposedFrames:
             )
             self._key = key
             self.direct_laser = result.laser
+            self._rendered = result
             self.renders += 1
         return self._optical
+
+    def clean_image(self) -> np.ndarray:
+        """The renderer's own image of the current state, laser on, without the sensor: the
+        bytes a clean rendered dataset holds for it (one render serves both)."""
+        self.optical()
+        assert self._rendered is not None
+        return finish_image(self.world, self._rendered, self.seed, degraded=False)[0]
 
     def frame(
         self, settings: Exposure, draw: int, with_truth: bool = False

@@ -160,19 +160,29 @@ def expose(
         raise ValueError(f"pixel format {settings.pixel_format!r} not in {PIXEL_FORMATS}")
     f = flicker_factor(settings.flicker_depth, settings.exposure_ms, rng.uniform(0, 2 * np.pi))
     k = np.float32(params.full_well_e * settings.exposure_ms / NOMINAL_EXPOSURE_MS)
-    light = optical.lamp * np.float32(f) + optical.steady
+    # In place, one full-size buffer at a time (a 1920 px frame is 11 M samples): the same
+    # operations in the same order as written out, so the same bytes.
+    e = np.multiply(optical.lamp, np.float32(f))
+    e += optical.steady
     if settings.laser_on:
-        light = light + optical.laser
-    e = np.maximum(light, 0.0) * k
-    sigma = np.sqrt(e + np.float32(params.read_noise_e**2))
-    e += sigma * rng.standard_normal(e.shape, dtype=np.float32)
+        e += optical.laser
+    np.maximum(e, 0.0, out=e)
+    e *= k
+    sigma = e + np.float32(params.read_noise_e**2)
+    np.sqrt(sigma, out=sigma)
+    sigma *= rng.standard_normal(e.shape, dtype=np.float32)
+    e += sigma
+    del sigma
     fw = np.float32(params.full_well_e)
     np.clip(e, 0.0, fw, out=e)
-    v = e * np.float32(settings.gain / params.full_well_e)
-    np.clip(v, 0.0, 1.0, out=v)
-    clipped = float(np.mean(v >= 1.0))
-    idx = (v * np.float32(_LUT_MAX) + np.float32(0.5)).astype(np.uint16)
-    bgr = np.ascontiguousarray(_code_lut(params.gamma, tone_curve)[idx][..., ::-1])
+    e *= np.float32(settings.gain / params.full_well_e)
+    np.clip(e, 0.0, 1.0, out=e)
+    clipped = float(np.count_nonzero(e >= 1.0) / e.size)
+    e *= np.float32(_LUT_MAX)
+    e += np.float32(0.5)
+    idx = e[..., ::-1].astype(np.uint16)  # RGB -> BGR while converting
+    del e
+    bgr = _code_lut(params.gamma, tone_curve)[idx]
     if settings.pixel_format == "MJPG":
         ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, params.jpeg_quality])
         if not ok:

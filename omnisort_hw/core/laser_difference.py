@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from omnisort_hw.core.laser_stripe import check_bgr
@@ -43,14 +44,17 @@ def stack_frames(frames: Sequence[np.ndarray], tone: ToneCurve, what: str) -> Fr
         raise InputError(f"{what}: no frames")
     first = check_bgr(frames[0], what)
     acc = np.zeros(first.shape, np.float32)
-    clipped = np.zeros(first.shape[:2], bool)
+    peak = np.zeros(first.shape, np.uint8)  # each sample's largest value over the frames
+    lut = np.ascontiguousarray(tone.light, np.float32)
     for i, f in enumerate(frames):
         img = check_bgr(f, f"{what} frame {i}")
         if img.shape != first.shape:
             raise InputError(f"{what} frame {i} is {img.shape}, frame 0 is {first.shape}")
-        acc += tone.linearise(img)
-        clipped |= (img == 255).any(axis=2)
-    return FrameStack(acc / np.float32(len(frames)), clipped, len(frames))
+        acc += cv2.LUT(img, lut)  # tone.linearise, multi-threaded
+        np.maximum(peak, img, out=peak)
+    clipped = (peak == 255).any(axis=2)
+    acc /= np.float32(len(frames))
+    return FrameStack(acc, clipped, len(frames))
 
 
 @dataclass(frozen=True)
@@ -135,9 +139,8 @@ def corrected_tone(tone: ToneCurve, gamma: float) -> ToneCurve:
 def encode_mean(stack: FrameStack, tone: ToneCurve) -> np.ndarray:
     """The mean frame back in the camera's 8-bit code values (for target and colour features,
     which expect what the camera writes)."""
-    codes = np.searchsorted(tone.light, stack.mean.ravel(), side="left")
-    lo = np.clip(codes - 1, 0, 255)
-    hi = np.clip(codes, 0, 255)
-    v = stack.mean.ravel()
-    pick = np.where(np.abs(tone.light[lo] - v) <= np.abs(tone.light[hi] - v), lo, hi)
-    return pick.astype(np.uint8).reshape(stack.mean.shape)
+    light = tone.light.astype(np.float64)
+    # the nearest code, ties to the lower one: values above the midpoint between two codes
+    midpoints = (light[:-1] + light[1:]) / 2.0
+    codes = np.searchsorted(midpoints, stack.mean.ravel(), side="left")
+    return codes.astype(np.uint8).reshape(stack.mean.shape)

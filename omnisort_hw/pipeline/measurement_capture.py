@@ -298,7 +298,7 @@ def capture_measurement(
                 }
             )
             faint = diff.stripe_pixels < MIN_STRIPE_PIXELS
-            if faint and len(laser_stripe_points(diff.image)) < MIN_STRIPE_POINTS:
+            if faint and len(laser_stripe_points(diff.image, light_only=True)) < MIN_STRIPE_POINTS:
                 raise NoLaserDifferenceError(
                     f"{laser.name} reads back on, but {camera.name} sees no laser light between "
                     f"laser-on and laser-off frames ({diff.stripe_pixels} px above the noise): is "
@@ -318,7 +318,7 @@ def capture_measurement(
             )
         assert diff is not None
         log.image("capture/stripe/difference", diff.image)
-        pixels = laser_stripe_points(diff.image)
+        pixels = laser_stripe_points(diff.image, light_only=True)
         log.points2d("capture/stripe/difference/laser", pixels, color=(255, 0, 0), radius=1)
     finally:
         _restore(camera, laser, old_exposure, old_gain, old_format, old_laser)

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from omnisort_hw.core.laser_difference import (
+    FrameStack,
     corrected_tone,
+    encode_mean,
     laser_difference,
     response_gamma,
     stack_frames,
@@ -116,3 +118,25 @@ def test_an_echo_at_the_same_bearing_is_dropped_and_real_depth_edges_are_kept() 
     keep = direct_hits(pts, strength)
     assert keep[:61].all() and keep[-3:].all()
     assert not keep[61:-3].any()
+
+
+@pytest.mark.parametrize("gamma", [1.0, 1.15])
+def test_stacking_and_encoding_are_the_mean_in_light_and_the_nearest_code(gamma: float) -> None:
+    """The fast paths (a LUT per frame, a running maximum, a search over midpoints) give
+    exactly what their definitions give."""
+    tone = corrected_tone(ToneCurve.srgb(), gamma)
+    rng = np.random.default_rng(7)
+    shots = [rng.integers(0, 256, (31, 17, 3)).astype(np.uint8) for _ in range(5)]
+    shots[2][3, 4, 1] = 255
+    stack = stack_frames(shots, tone, "test")
+    want = np.mean([tone.linearise(f) for f in shots], axis=0, dtype=np.float64)
+    np.testing.assert_allclose(stack.mean, want, rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(stack.clipped, np.any([(f == 255).any(axis=2) for f in shots], 0))
+    light = tone.light.astype(np.float64)
+    values = np.concatenate([light, (light[:-1] + light[1:]) / 2, rng.uniform(0, 1, 5000)]).astype(
+        np.float32
+    )
+    codes = encode_mean(FrameStack(values.reshape(1, -1, 1), np.zeros((1, 1), bool), 1), tone)
+    dist = np.abs(light[None, :] - values.astype(np.float64)[:, None])
+    nearest = np.argmin(dist, axis=1)  # the first (lower) code on a tie
+    np.testing.assert_array_equal(codes.ravel(), nearest)
