@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.evaluation.table3_capture import evaluate_captures, evaluate_kept
+from sim_backend.dataset import table3_configs
 
 BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
 
@@ -32,11 +33,14 @@ def run(shared: Path) -> dict[str, Any]:
     raw, keep = BUILD / f"{name}.json", BUILD / name
     result = json.loads(raw.read_text()) if raw.is_file() else None
     partial_ok = os.environ.get("OMNISORT_BENCH_CAPTURE_PARTIAL") == "1"
-    if result is None or "clean" not in result or (result.get("done") != n and not partial_ok):
-        result = evaluate_captures(n, seed, frames, width, progress=True, partial=raw, keep=keep)
-    elif os.environ.get("OMNISORT_BENCH_CAPTURE_REEVAL") == "1":
-        result = {**result, **evaluate_kept(keep, result["configs"], frames, progress=True)}
+    if os.environ.get("OMNISORT_BENCH_CAPTURE_REEVAL") == "1":
+        # every configuration kept (by this run or by shards of it, `evaluate_captures(only=)`)
+        configs = [c.folder for c in table3_configs(n, seed)]
+        kept = evaluate_kept(keep, configs, frames, progress=True)
+        result = {**(result or {}), **kept, "seed": seed, "width": width}
         raw.write_text(json.dumps(result))
+    elif result is None or "clean" not in result or (result.get("done") != n and not partial_ok):
+        result = evaluate_captures(n, seed, frames, width, progress=True, partial=raw, keep=keep)
     done = int(result.get("done", n))
     clean = result["clean"]
     out: dict[str, Any] = {

@@ -568,13 +568,18 @@ def table3_capture(r: dict[str, Any]) -> str:
         rows.append([f"{label}, capture"] + [f"{cap[p]:.4f}" for p in PARAMS])
         rows.append([f"{label}, clean"] + [f"{clean[p]:.4f}" for p in PARAMS])
         rows.append([f"{label}, ratio"] + [f"{ratio[p]:.2f}x" for p in PARAMS])
+    run = (
+        f"; the whole run took {t['run_wall_s'] / 60:.0f} min on the shared 2-core machine"
+        if t.get("run_wall_s")
+        else ""
+    )
     note = (
         f"\n{t.get('configurations_done', t['configurations'])} of {t['configurations']} "
-        f"configurations (clean: the same ones), seed {t['seed']}, {t['width']} px, captures "
-        f"of {t['frames']} on/off pairs (mean capture time {t['mean_capture_s']:.3f} s, "
-        f"{t['re_exposures']} re-exposures); mapping check max error "
-        f"{t['mapping_max_rel_error_pct']:.3f} % "
-        f"(clean {t['clean_mapping_max_rel_error_pct']:.3f} %).\n"
+        f"configurations (clean: the renders the captures are exposed from), seed {t['seed']}, "
+        f"{t['width']} px, captures of {t['frames']} on/off pairs (mean capture time "
+        f"{t['mean_capture_s']:.3f} s, {t['re_exposures']} re-exposures); mapping check max "
+        f"error {t['mapping_max_rel_error_pct']:.3f} % "
+        f"(clean {t['clean_mapping_max_rel_error_pct']:.3f} %){run}.\n"
     )
     return _table(["MAE", *PARAM_HEADS.split(" | ")], rows) + note
 
