@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -140,6 +141,46 @@ def _count(
             mapping.append(mapping_errors(calib, SystemCalibration.from_json(truth)))
 
 
+@dataclass
+class _Tally:
+    """What both evaluations accumulate: each row's errors on the captures and on the clean
+    renders they were exposed from, the joint rows' mapping errors, and the capture records."""
+
+    stats: dict[str, MethodStats] = field(default_factory=lambda: {m: MethodStats() for m in RUNS})
+    clean: dict[str, MethodStats] = field(default_factory=lambda: {m: MethodStats() for m in RUNS})
+    mapping: list[np.ndarray] = field(default_factory=list)
+    clean_mapping: list[np.ndarray] = field(default_factory=list)
+    capture_s: list[float] = field(default_factory=list)
+    retries: int = 0
+
+    def add(
+        self,
+        name: str,
+        folder: str,
+        truth: dict[str, Any],
+        record: dict[str, Any],
+        board: tuple[np.ndarray, ToneCurve, np.ndarray | None],
+        clean: tuple[np.ndarray, ToneCurve],
+    ) -> None:
+        """One target's capture (`record`; board image, its tone curve, the stripe pixels) and
+        the clean render it was exposed from (image, nominal tone curve)."""
+        self.capture_s.append(float(record["capture_s"]))
+        self.retries += int(record["retries"])
+        image, tone, stripe_px = board
+        _count(self.stats, self.mapping, name, image, truth, tone, stripe_px, folder)
+        _count(self.clean, self.clean_mapping, name, clean[0], truth, clean[1], None, folder)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            **_summary(self.stats, self.mapping),
+            "capture": {
+                "mean_capture_s": float(np.mean(self.capture_s)) if self.capture_s else None,
+                "re_exposures": self.retries,
+            },
+            "clean": _summary(self.clean, self.clean_mapping),
+        }
+
+
 def evaluate_captures(
     n: int,
     seed: int,
@@ -168,12 +209,7 @@ def evaluate_captures(
     t_start = time.perf_counter()
     settings = CaptureSettings(frames=frames)
     tone = ToneCurve.srgb()  # the simulated camera's nominal curve; a capture measures its own
-    stats = {m: MethodStats() for m in RUNS}
-    clean = {m: MethodStats() for m in RUNS}
-    mapping: list[np.ndarray] = []
-    clean_mapping: list[np.ndarray] = []
-    capture_s: list[float] = []
-    retries = 0
+    tally = _Tally()
     configs = table3_configs(n, seed)
     if only is not None:
         configs = [configs[i] for i in only]
@@ -189,7 +225,7 @@ def evaluate_captures(
             except (OmnisortError, Exception) as exc:  # a device error is a failure here too
                 if not isinstance(exc, OmnisortError) and not hasattr(exc, "code"):
                     raise
-                _fail(stats, name, f"{cfg.folder}/{name}: {exc}")
+                _fail(tally.stats, name, f"{cfg.folder}/{name}: {exc}")
                 if keep is not None:
                     (keep / cfg.folder).mkdir(parents=True, exist_ok=True)
                     (keep / cfg.folder / f"{name}.failed.txt").write_text(f"{exc}")
@@ -197,14 +233,9 @@ def evaluate_captures(
                 continue
             if keep is not None:
                 _keep(keep / cfg.folder, name, cap, truth, clean_image)
-            capture_s.append(float(cap.record["capture_s"]))
-            retries += int(cap.record["retries"])
             assert cap.board_image is not None
-            board_tone = cap.tone or tone
-            _count(
-                stats, mapping, name, cap.board_image, truth, board_tone, cap.stripe_px, cfg.folder
-            )
-            _count(clean, clean_mapping, name, clean_image, truth, tone, None, cfg.folder)
+            board = (cap.board_image, cap.tone or tone, cap.stripe_px)
+            tally.add(name, cfg.folder, truth, cap.record, board, (clean_image, tone))
             bar.update(1)
         result = {
             "n": n,
@@ -215,12 +246,7 @@ def evaluate_captures(
             "frames": frames,
             "differencing": True,
             "width": width or 1920,
-            **_summary(stats, mapping),
-            "capture": {
-                "mean_capture_s": float(np.mean(capture_s)) if capture_s else None,
-                "re_exposures": retries,
-            },
-            "clean": _summary(clean, clean_mapping),
+            **tally.summary(),
             "wall_s": round(time.perf_counter() - t_start, 1),
         }
         if partial is not None:
@@ -256,19 +282,14 @@ def evaluate_kept(
     from omnisort_hw.core.laser_stripe import laser_stripe_points
 
     tone = ToneCurve.srgb()
-    stats = {m: MethodStats() for m in RUNS}
-    clean = {m: MethodStats() for m in RUNS}
-    mapping: list[np.ndarray] = []
-    clean_mapping: list[np.ndarray] = []
-    capture_s: list[float] = []
-    retries = 0
+    tally = _Tally()
     bar = tqdm(total=len(configs) * len(TABLE3_SCENES), desc="kept captures", disable=not progress)
     for folder in configs:
         for name in TABLE3_SCENES:
             base = keep / folder / name
             failed = Path(f"{base}.failed.txt")
             if failed.is_file():
-                _fail(stats, name, f"{folder}/{name}: {failed.read_text()}")
+                _fail(tally.stats, name, f"{folder}/{name}: {failed.read_text()}")
                 bar.update(1)
                 continue
             kept = json.loads(Path(f"{base}.capture.json").read_text())
@@ -279,10 +300,8 @@ def evaluate_kept(
             truth, record = kept["truth"], kept["record"]
             board_tone = ToneCurve("measured", np.asarray(kept["tone"])) if kept["tone"] else tone
             stripe_px = laser_stripe_points(images["stripe"], light_only=True)
-            _count(stats, mapping, name, images["board"], truth, board_tone, stripe_px, folder)
-            _count(clean, clean_mapping, name, images["clean"], truth, tone, None, folder)
-            capture_s.append(float(record["capture_s"]))
-            retries += int(record["retries"])
+            board = (images["board"], board_tone, stripe_px)
+            tally.add(name, folder, truth, record, board, (images["clean"], tone))
             bar.update(1)
     bar.close()
     return {
@@ -291,10 +310,5 @@ def evaluate_kept(
         "configs": configs,
         "frames": frames,
         "differencing": True,
-        **_summary(stats, mapping),
-        "capture": {
-            "mean_capture_s": float(np.mean(capture_s)) if capture_s else None,
-            "re_exposures": retries,
-        },
-        "clean": _summary(clean, clean_mapping),
+        **tally.summary(),
     }
