@@ -335,6 +335,35 @@ def _fit_cube(
     return best.x, best.fun, best.jac
 
 
+def blob_verdict(
+    centroid_px: np.ndarray,
+    area_px: float,
+    geom: FloorGeometry,
+    model: OcamModel,
+    R_SC: np.ndarray,
+    st: LocateSettings,
+) -> tuple[np.ndarray, str] | None:
+    """Whether a colour blob can be a cube: its centroid on the cubes' top plane (xy) and an
+    empty reason, or why not (outside the region, in an excluded area, not a cube's area
+    there); None when its ray misses the plane."""
+    size = st.cube_size_mm
+    ray = model.pixel_to_ray(np.asarray(centroid_px, float).reshape(1, 2)) @ R_SC.T
+    xy, ok = geom.to_plane(ray, size)
+    if not ok[0]:
+        return None
+    where = geom.from_plane(xy, size)[0]
+    if st.region_S_mm is not None:
+        x0r, x1r, y0r, y1r = st.region_S_mm
+        if not (x0r <= where[0] <= x1r and y0r <= where[1] <= y1r):
+            return xy[0], "outside the search region"
+    if any(a <= where[0] <= b and c <= where[1] <= d for a, b, c, d in st.exclude_S_mm):
+        return xy[0], "in an excluded region"
+    expected = _predicted_area_px(geom, model, R_SC, xy[0], size)
+    if not st.min_area_fraction * expected <= area_px <= st.max_area_fraction * expected:
+        return xy[0], f"area {area_px:.0f} px, a cube there covers ~{expected:.0f} px"
+    return xy[0], ""
+
+
 def locate_cubes(
     image: np.ndarray,
     model: OcamModel,
@@ -387,25 +416,14 @@ def locate_cubes(
             x, y, w, h, area = (int(v) for v in stats[i])
             if area < 30:
                 continue
-            ray = model.pixel_to_ray(centroids[i][None]) @ R_SC.T
-            xy, ok = geom.to_plane(ray, size)
-            if not ok[0]:
+            verdict = blob_verdict(centroids[i], area, geom, model, R_SC, st)
+            if verdict is None:
                 continue
-            where = geom.from_plane(xy, size)[0]
+            xy, reason = verdict
+            where = geom.from_plane(xy[None], size)[0]
             info = {"color": name, "area_px": area, "at_S_mm": np.round(where, 1).tolist()}
-            if st.region_S_mm is not None:
-                x0r, x1r, y0r, y1r = st.region_S_mm
-                if not (x0r <= where[0] <= x1r and y0r <= where[1] <= y1r):
-                    rejected.append({**info, "reason": "outside the search region"})
-                    continue
-            if any(a <= where[0] <= b and c <= where[1] <= d for a, b, c, d in st.exclude_S_mm):
-                rejected.append({**info, "reason": "in an excluded region"})
-                continue
-            expected = _predicted_area_px(geom, model, R_SC, xy[0], size)
-            if not st.min_area_fraction * expected <= area <= st.max_area_fraction * expected:
-                rejected.append(
-                    {**info, "reason": f"area {area} px, a cube there covers ~{expected:.0f} px"}
-                )
+            if reason:
+                rejected.append({**info, "reason": reason})
                 continue
             cube = _locate_one(
                 labels[y - 1 : y + h + 1, x - 1 : x + w + 1] == i,

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from omnisort_hw.core.cube_location import Cube, locate_cubes
+from omnisort_hw.core.cube_location import Cube, LocateSettings, locate_cubes
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
@@ -53,12 +53,21 @@ def locate_in_images(
         px = laser_stripe_points(laser_image)
         lp = pixels_to_plane(px, calib)
         log.points2d(f"{prefix}/laser_image/stripe", px, color=(255, 0, 0), radius=1)
-    settings = cfg.locate_settings(board_exclusion(robot_base))
-    if settings.region_S_mm is None:
-        settings = replace(settings, region_S_mm=default_region(calib.target))
+    settings = locate_settings_for(cfg, calib, robot_base)
     cubes, diag = locate_cubes(colour, calib.model, calib.R_SC, T_SB, cfg.colors, settings, lp)
     log_cubes(log, prefix, cubes, diag)
     return cubes, diag
+
+
+def locate_settings_for(
+    cfg: SortConfig, calib: SystemCalibration, robot_base: Mapping[str, Any] | None
+) -> LocateSettings:
+    """Where cubes are looked for: `[sorting]`'s region (else between the target's walls),
+    without the floor board's area."""
+    settings = cfg.locate_settings(board_exclusion(robot_base))
+    if settings.region_S_mm is None:
+        settings = replace(settings, region_S_mm=default_region(calib.target))
+    return settings
 
 
 def board_exclusion(

@@ -10,6 +10,13 @@ where it was; it is `moved` (its new pose replaces the old) or `gone` (removed b
 neither picked nor an obstacle any more). A box the arm covers in the check image cannot be
 judged: the cube is `hidden` and judged at the next check.
 
+A cube put down after the first capture is found the same way, without a full location: the
+check image's colour pixels that the first image did not have (per colour, a few pixels of
+slack) form blobs, and a blob that could be a cube (the location's own region, exclusions and
+area rule) and that the arm does not cover has the image located again; a located cube that
+matches no known cube is `added` (to pick if its colour is requested, an obstacle anyway).
+Every blob judged is then part of the reference, so it is judged once.
+
 How much of its box a cube must still cover follows from the gripper: a cube shifted by half
 the gripper's margin on each side (margin = (stroke - size) / 2) still grasps; such a shift
 leaves a fraction 1 - margin / (2 size) of the box covered.
@@ -17,14 +24,15 @@ leaves a fraction 1 - margin / (2 size) of the box covered.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
 
-from omnisort_hw.core.cube_location import Cube
+from omnisort_hw.core.cube_location import Cube, FloorGeometry, LocateSettings, blob_verdict
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.kinematics import joint_frames
 from omnisort_hw.core.motion import arm_capsules
@@ -36,6 +44,12 @@ ARM_MARGIN_PX = 6
 CAPTURE_TIMEOUT_S = 60.0
 # Points per capsule axis (and its radius offsets) projected to find what the arm covers.
 ARM_SAMPLES = 12
+# Slack (px) within which a colour pixel of a check image counts as seen in the first one, and
+# the smallest new blob looked at (the location's own smallest blob).
+SEEN_SLACK_PX = 4
+MIN_BLOB_PX = 30
+_SEEN_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SEEN_SLACK_PX + 1,) * 2)
+_KERNEL3 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
 
 
 @dataclass
@@ -46,11 +60,13 @@ class CheckResult:
     hidden: list[int] = field(default_factory=list)
     moved: dict[int, Cube] = field(default_factory=dict)
     gone: list[int] = field(default_factory=list)
+    added: list[Cube] = field(default_factory=list)
+    located_again: bool = False  # the image was located again (a change or a new blob)
     covered: dict[int, float] = field(default_factory=dict)  # fraction of the box still covered
 
     @property
     def changed(self) -> bool:
-        return bool(self.moved or self.gone)
+        return bool(self.moved or self.gone or self.added)
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -58,6 +74,8 @@ class CheckResult:
             "hidden": self.hidden,
             "moved": sorted(self.moved),
             "gone": self.gone,
+            "added": [c.color for c in self.added],
+            "located_again": self.located_again,
             "covered": {k: round(v, 3) for k, v in self.covered.items()},
         }
 
@@ -77,6 +95,17 @@ def colour_mask(cfg: SortConfig, img: np.ndarray, color: str) -> np.ndarray:
     """The pixels of `img` (BGR) in `color` of the colour table (bool)."""
     masks, _ = cfg.colors.masks(img)
     return masks[color] > 0 if color in masks else np.zeros(img.shape[:2], bool)
+
+
+def colour_masks(cfg: SortConfig, img: np.ndarray) -> dict[str, np.ndarray]:
+    """Every colour of the colour table's pixels in `img` (BGR), as 0/255 masks."""
+    masks, _ = cfg.colors.masks(img)
+    return dict(masks)
+
+
+def _grown(mask: np.ndarray) -> np.ndarray:
+    """`mask` grown by the slack within which a colour pixel counts as already seen."""
+    return cv2.dilate(mask, _SEEN_KERNEL)
 
 
 def arm_pixels(
@@ -121,7 +150,8 @@ def _boxes_hit(boxes: dict[int, tuple[int, int, int, int]], px: np.ndarray) -> s
 
 class SceneCheck:
     """The reference of every cube still to pick (its box and colour pixels in the first
-    image) and the comparison of a check image with it (see module doc)."""
+    image), the colour pixels the first image had, and the comparison of a check image with
+    them (see module doc)."""
 
     def __init__(
         self,
@@ -131,15 +161,18 @@ class SceneCheck:
         calib: SystemCalibration,
         T_SB: np.ndarray,
         planner: Planner,
+        settings: LocateSettings | None = None,
     ) -> None:
         self.cfg = cfg
         self.calib = calib
         self.T_SB = T_SB
         self.planner = planner
+        self.settings = settings or cfg.locate_settings()
         self.keep = keep_fraction(cfg)
         self.ref: dict[int, tuple[str, tuple[int, int, int, int], np.ndarray, np.ndarray]] = {}
         for k, cube in enumerate(cubes):
             self._set_ref(k, cube, image)
+        self.seen = {c: _grown(m) for c, m in colour_masks(cfg, image).items()}
 
     def _set_ref(self, k: int, cube: Cube, image: np.ndarray) -> None:
         x, y, w, h = (int(v) for v in cube.bbox)
@@ -153,15 +186,15 @@ class SceneCheck:
         indices: Iterable[int],
         q_deg: Iterable[np.ndarray],
         relocate: Callable[[np.ndarray], list[Cube]],
+        masks: Mapping[str, np.ndarray] | None = None,
     ) -> CheckResult:
-        """Compare `image` (taken with the arm at the joints `q_deg`) for the cubes `indices`;
-        `relocate(image)` locates every cube of the image (called only after a change)."""
+        """Compare `image` (taken with the arm at the joints `q_deg`) for the cubes `indices`,
+        and look for cubes put down since; `relocate(image)` locates every cube of the image
+        (called only after a change). `masks` are the image's colour masks if known."""
         out = CheckResult()
         todo = [k for k in indices if k in self.ref]
-        covered_by_arm = _boxes_hit(
-            {k: self.ref[k][1] for k in todo},
-            arm_pixels(self.planner, self.calib, self.T_SB, list(q_deg)),
-        )
+        arm_px = arm_pixels(self.planner, self.calib, self.T_SB, list(q_deg))
+        covered_by_arm = _boxes_hit({k: self.ref[k][1] for k in todo}, arm_px)
         changed = []
         for k in todo:
             if k in covered_by_arm:
@@ -173,9 +206,12 @@ class SceneCheck:
             frac = float((ref & now).sum()) / n if n else 0.0
             out.covered[k] = frac
             (out.still if frac >= self.keep else changed).append(k)
-        if not changed:
+        masks = dict(masks) if masks is not None else colour_masks(self.cfg, image)
+        new_boxes = self._new_blobs(masks, arm_px)
+        if not changed and not new_boxes:
             return out
         found = relocate(image)
+        out.located_again = True
         taken: set[int] = set()
         for k in changed:
             color, _, _, c_B = self.ref[k]
@@ -191,7 +227,67 @@ class SceneCheck:
             else:
                 out.gone.append(k)
                 del self.ref[k]
+        out.added = [
+            cube
+            for j, cube in enumerate(found)
+            if j not in taken and self._is_new(cube, new_boxes, arm_px)
+        ]
+        for c, (x, y, w, h) in new_boxes.values():  # a blob judged is judged once
+            self.seen[c][y : y + h, x : x + w] |= _grown(_crop(masks[c], (x, y, w, h)))
         return out
+
+    def add(self, k: int, cube: Cube, image: np.ndarray) -> None:
+        """Keep cube `k` (an added one) in the reference."""
+        self._set_ref(k, cube, image)
+
+    def _new_blobs(
+        self, masks: Mapping[str, np.ndarray], arm_px: np.ndarray
+    ) -> dict[int, tuple[str, tuple[int, int, int, int]]]:
+        """Colours and boxes of the colour blobs the first image did not have that could be a
+        cube and that the arm does not cover."""
+        geom = FloorGeometry(np.asarray(self.T_SB, float), self.settings.floor_z_B_mm)
+        model, R_SC = self.calib.model, self.calib.R_SC
+        boxes: dict[int, tuple[str, tuple[int, int, int, int]]] = {}
+        for c, m in masks.items():
+            if c not in self.seen:
+                continue
+            new = cv2.morphologyEx(
+                np.where(self.seen[c] > 0, 0, m).astype(np.uint8), cv2.MORPH_OPEN, _KERNEL3
+            )
+            n, _, stats, centroids = cv2.connectedComponentsWithStats(new, connectivity=4)
+            for i in range(1, n):
+                x, y, w, h, area = (int(v) for v in stats[i])
+                if area < MIN_BLOB_PX:
+                    continue
+                verdict = blob_verdict(centroids[i], area, geom, model, R_SC, self.settings)
+                if verdict is not None and not verdict[1]:
+                    boxes[len(boxes)] = (c, (x, y, w, h))
+        hidden = _boxes_hit({k: b for k, (_, b) in boxes.items()}, arm_px)
+        return {k: b for k, b in boxes.items() if k not in hidden}
+
+    def _is_new(
+        self,
+        cube: Cube,
+        new_boxes: dict[int, tuple[str, tuple[int, int, int, int]]],
+        arm_px: np.ndarray,
+    ) -> bool:
+        """A located cube is new when it lies on a new blob, the arm does not cover it and no
+        known cube of its colour is within a cube's size of it."""
+        x, y, w, h = (int(v) for v in cube.bbox)
+        on_new = any(
+            x < bx + bw and bx < x + w and y < by + bh and by < y + h
+            for _, (bx, by, bw, bh) in new_boxes.values()
+        )
+        if not on_new or _boxes_hit({0: (x, y, w, h)}, arm_px):
+            return False
+        size = self.cfg.cube_size_mm
+        return all(
+            color != cube.color or float(np.linalg.norm(cube.center_B[:2] - c_B[:2])) >= size
+            for color, _, _, c_B in self.ref.values()
+        )
+
+
+_Check = tuple[np.ndarray, list[np.ndarray], dict[str, np.ndarray]]
 
 
 class ChangeWatch:
@@ -206,20 +302,23 @@ class ChangeWatch:
         arm: Any,
         relocate: Callable[[np.ndarray], list[Cube]],
         log: Any,
+        new_outcome: Callable[[int, Cube], tuple[Any, bool]],
     ) -> None:
         self.check = check
+        self.new_outcome = new_outcome
         self.camera = camera
         self.arm = arm
         self.relocate = relocate
         self.log = log
         self.results: list[dict[str, Any]] = []
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="scene-check")
-        self._pending: Future[tuple[np.ndarray, list[np.ndarray]]] | None = None
+        self._pending: Future[_Check] | None = None
 
-    def _capture(self) -> tuple[np.ndarray, list[np.ndarray]]:
+    def _capture(self) -> _Check:
         q0 = np.asarray(self.arm.joint_positions(), float)
         image = self.camera.grab().image
-        return image, [q0, np.asarray(self.arm.joint_positions(), float)]
+        q1 = np.asarray(self.arm.joint_positions(), float)
+        return image, [q0, q1], colour_masks(self.check.cfg, image)
 
     def capture_now(self) -> None:
         """Start the check capture on the helper thread (it overlaps the arm's motion)."""
@@ -233,9 +332,9 @@ class ChangeWatch:
         fut, self._pending = self._pending, None
         if fut is None:
             return False
-        image, qs = fut.result(timeout=CAPTURE_TIMEOUT_S)
+        image, qs, masks = fut.result(timeout=CAPTURE_TIMEOUT_S)
         indices = list(queue.todo) + ([nxt[0]] if nxt is not None else [])
-        res = self.check.check(image, indices, qs, self.relocate)
+        res = self.check.check(image, indices, qs, self.relocate, masks)
         self.results.append(res.summary())
         if not res.changed:
             return False
@@ -255,6 +354,14 @@ class ChangeWatch:
             queue.gone.add(k)  # neither to pick nor an obstacle any more
             outcomes[k].status = "skipped"
             outcomes[k].reason = "gone: not where the first capture saw it (taken away?)"
+        for cube in res.added:
+            k = len(queue.cubes)
+            queue.cubes.append(cube)
+            self.check.add(k, cube, image)
+            out, to_pick = self.new_outcome(k, cube)
+            outcomes.append(out)
+            if to_pick:
+                queue.todo.append(k)
         return True
 
     def close(self) -> None:

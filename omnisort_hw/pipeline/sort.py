@@ -31,7 +31,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import Move, PickPlan, Planner, SortConfig
 from omnisort_hw.errors import ConfigError, MotionRefusedError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
-from omnisort_hw.pipeline.locate import Located, locate_in_images
+from omnisort_hw.pipeline.locate import Located, locate_in_images, locate_settings_for
 from omnisort_hw.pipeline.pick_cycle import Compute, CycleTimes, PickQueue
 from omnisort_hw.pipeline.registration import register_from_image
 from omnisort_hw.pipeline.scene_check import ChangeWatch, SceneCheck
@@ -339,8 +339,10 @@ class Sorter:
             on_located(loc)
         cycle = self.cycle = CycleTimes(locate_s=self._locate_s(loc))
         planner = self._planner(loc.T_SB)
-        outcomes = [
-            CubeOutcome(
+
+        def outcome_of(i: int, cube: Cube) -> tuple[CubeOutcome, bool]:
+            """Cube i's outcome before it is picked, and whether it is to pick."""
+            out = CubeOutcome(
                 i,
                 cube.color,
                 cube.center_S.tolist(),
@@ -351,14 +353,14 @@ class Sorter:
                 "",
                 bin_color(self.cfg, cube.color),
             )
-            for i, cube in enumerate(loc.cubes)
-        ]
-        todo = []
-        for out in outcomes:
-            if colors is not None and out.color not in colors:
-                out.reason = f"colour {out.color!r} not requested"
-            else:
-                todo.append(out.index)
+            if colors is not None and cube.color not in colors:
+                out.reason = f"colour {cube.color!r} not requested"
+                return out, False
+            return out, True
+
+        made = [outcome_of(i, cube) for i, cube in enumerate(loc.cubes)]
+        outcomes = [out for out, _ in made]
+        todo = [out.index for out, to_pick in made if to_pick]
 
         def refused(i: int, reason: str) -> None:
             outcomes[i].status, outcomes[i].reason = "skipped", reason
@@ -369,7 +371,7 @@ class Sorter:
             self.progress({"located": len(loc.cubes), "to_pick": len(todo)})
         t_exec = time.perf_counter()
         done = 0
-        self._watch = self._change_watch(loc, planner) if self.check_changes else None
+        self._watch = self._change_watch(loc, planner, outcome_of) if self.check_changes else None
         with ThreadPoolExecutor(1, thread_name_prefix="plan-ahead") as ahead:
             job = self._plan_now(queue, np.asarray(arm.joint_positions(), float))
             while job is not None:
@@ -436,7 +438,12 @@ class Sorter:
         report.wall_s = time.perf_counter() - t0
         return report
 
-    def _change_watch(self, loc: Located, planner: Planner) -> ChangeWatch:
+    def _change_watch(
+        self,
+        loc: Located,
+        planner: Planner,
+        outcome_of: Callable[[int, Cube], tuple[CubeOutcome, bool]],
+    ) -> ChangeWatch:
         """The checks after each release against this location (see `scene_check`)."""
         robot_base = loc.registration.record() if loc.registration else loc.calib.robot_base
 
@@ -447,8 +454,12 @@ class Sorter:
             )
             return list(cubes)
 
-        check = SceneCheck(list(loc.cubes), loc.image, self.cfg, loc.calib, loc.T_SB, planner)
-        return ChangeWatch(check, self.camera, self._require_arm(), relocate, self.log)
+        settings = locate_settings_for(self.cfg, loc.calib, robot_base)
+        check = SceneCheck(
+            list(loc.cubes), loc.image, self.cfg, loc.calib, loc.T_SB, planner, settings
+        )
+        arm = self._require_arm()
+        return ChangeWatch(check, self.camera, arm, relocate, self.log, outcome_of)
 
     def _locate_s(self, loc: Located) -> float:
         """Capture and locate time the parked arm waited for (registration excluded: it is a

@@ -1,6 +1,7 @@
 """Change checks between picks on the simulated cell: a cube taken away by hand while the arm
-picks another is never approached; a cube knocked aside is located again and sorted; with
-nothing changed, no cube is located again. Truth (bins, contacts) from the simulator."""
+picks another is never approached; a cube knocked aside is located again and sorted; a cube put
+down after the first capture is found and sorted; with nothing changed, no cube is located
+again. Truth (bins, contacts) from the simulator."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ from tests.pipeline.sorting_scene import sorting_scene
 
 def _sort(change: str) -> dict[str, Any]:
     """Sort the shipped scene; at the first grasp, `change` ("remove", "knock" or "none") the
-    truth cube farthest from the one being grasped. Returns what the test checks."""
+    truth cube farthest from the one being grasped, or ("add") put back the cube that was taken
+    out of the cell before the first capture. Returns what the test checks."""
     from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
 
     scene = sorting_scene()
@@ -44,9 +46,26 @@ def _sort(change: str) -> dict[str, Any]:
 
         arm.move_linear = move_linear  # type: ignore[method-assign]
         changed: dict[str, Any] = {}
+        if change == "add":  # out of the cell during the first capture, put down later
+            last = max(verifier.true_cubes(), key=lambda t: float(t.center_S[1]))
+            with cell.lock:
+                cid = cell.world.client
+                pose = p.getBasePositionAndOrientation(last.body, physicsClientId=cid)
+                p.resetBasePositionAndOrientation(
+                    last.body, [5.0, 5.0, pose[0][2]], pose[1], physicsClientId=cid
+                )
+                cell.world.version += 1
 
         def on_pick(phase: str, out: Any) -> None:
             if phase != "grasping" or changed or change == "none":
+                return
+            if change == "add":
+                changed.update(color=last.color, before_S=last.center_S.copy(), body=last.body)
+                with cell.lock:
+                    p.resetBasePositionAndOrientation(
+                        last.body, *pose, physicsClientId=cell.world.client
+                    )
+                    cell.world.version += 1
                 return
             grasped = np.asarray(out.center_S_mm, float)
             cubes = verifier.true_cubes()
@@ -93,7 +112,7 @@ def _sort(change: str) -> dict[str, Any]:
         cell.close()
 
 
-@pytest.mark.parametrize("change", ["remove", "knock", "none"])
+@pytest.mark.parametrize("change", ["remove", "knock", "add", "none"])
 def test_checks_between_picks(change: str) -> None:
     res = _sort(change)
     rep, changed = res["report"], res["changed"]
@@ -101,7 +120,8 @@ def test_checks_between_picks(change: str) -> None:
     checks = rep["checks"]
     assert checks, "no check capture was taken"
     if change == "none":
-        assert not any(c["moved"] or c["gone"] for c in checks), checks
+        assert not any(c["moved"] or c["gone"] or c["added"] for c in checks), checks
+        assert not any(c["located_again"] for c in checks), checks
         assert all(o["status"] == "sorted" for o in rep["cubes"]), rep["cubes"]
         assert all(res["bins"][b] == res["colors"][b] for b in res["bins"])
         return
@@ -115,6 +135,11 @@ def test_checks_between_picks(change: str) -> None:
         d = [np.linalg.norm(t[:2] - changed["before_S"][:2]) for t in res["targets_S"]]
         assert min(d) > res["size_mm"], min(d)
         assert sum(o["status"] == "sorted" for o in rep["cubes"]) == len(rep["cubes"]) - 1
+    elif change == "add":
+        assert [c["added"] for c in checks if c["added"]] == [[changed["color"]]], checks
+        assert len(rep["cubes"]) == len(res["bins"]), rep["cubes"]  # every true cube, once
+        assert all(o["status"] == "sorted" for o in rep["cubes"]), rep["cubes"]
+        assert res["bins"][body] == changed["color"]  # the cube put down is in its bin
     else:
         moved = [o for o in rep["cubes"] if o.get("relocated")]
         assert len(moved) == 1 and moved[0]["color"] == changed["color"], rep["cubes"]
