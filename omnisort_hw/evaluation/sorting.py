@@ -193,6 +193,7 @@ def evaluate_sorting(
                 ],
                 collision_events=report.extra.get("collision_events", []),
                 timings_s=report.extra.get("timings_s", {}),
+                checks=report.extra.get("checks", []),
             )
         except Exception as exc:
             row.update(sorted_ok=0, collisions=None, error=f"{type(exc).__name__}: {exc}")
@@ -340,6 +341,10 @@ def summarize_sorting(
         "wall_s_per_pick": mean(wall_pick),
         "wall_s": round(wall_s, 1),
         "stage_wall_s_per_scene": timings,
+        "checks": sum(len(r.get("checks", [])) for r in rows),
+        "checks_located_again": sum(
+            bool(c.get("located_again")) for r in rows for c in r.get("checks", [])
+        ),
         "not_sorted": [
             {"scene": r["scene"], "reasons": r.get("skipped", []), "error": r.get("error")}
             for r in rows
