@@ -131,6 +131,7 @@ class Service:
         )
         self.exit_problems: list[str] = []
         self.log_check_s = LOG_CHECK_S
+        self._roll: asyncio.Future[None] | None = None  # the run log roll in flight
 
     # -- state -----------------------------------------------------------------------------
 
@@ -222,7 +223,7 @@ class Service:
         finally:
             for t in tasks:
                 t.cancel()
-            await asyncio.gather(*tasks, return_exceptions=True)
+            await asyncio.gather(*tasks, *filter(None, [self._roll]), return_exceptions=True)
             if install_signals:
                 for sig in (signal.SIGTERM, signal.SIGINT):
                     self._loop.remove_signal_handler(sig)
@@ -245,7 +246,10 @@ class Service:
         while True:
             await asyncio.sleep(self.log_check_s)
             try:
-                await asyncio.to_thread(self.cell.roll_runlog)
+                # shielded: a cancel at shutdown waits for the roll (run's finally) instead
+                # of leaving it running while the cell closes
+                self._roll = asyncio.ensure_future(asyncio.to_thread(self.cell.roll_runlog))
+                await asyncio.shield(self._roll)
                 problem = self.cell.log_health().get("problem")
             except Exception as exc:
                 problem = f"run log check failed: {exc}"
