@@ -130,6 +130,7 @@ class _Served:
         self.targets["cell"] = self.cell
         self._verifier = SimVerifier
         self._ids = itertools.count()
+        self._trace: dict[str, Any] | None = None
         self.pool = ThreadPoolExecutor(max_workers=16, thread_name_prefix="simhost")
 
     def hello(self) -> dict[str, Any]:
@@ -148,6 +149,8 @@ class _Served:
             key = f"verifier:{next(self._ids)}"
             self.targets[key] = self._verifier(self.targets["arm"])
             return key, _describe(self.targets[key])
+        if op == "trace":
+            return self.trace()
         obj = self.targets[target]
         if op == "get":
             return _resolve(obj, name)
@@ -158,6 +161,27 @@ class _Served:
             obj.on_done(*args, **kwargs)
             return args[0]
         return getattr(obj, name)(*args, **kwargs)
+
+    def trace(self) -> dict[str, Any]:
+        """The arm time of the last motion sample and of every `stop()`'s arrival, recorded from
+        the first call on (what bounds a stop's latency in the arm's own time)."""
+        arm, world = self.targets["arm"], self.cell.world
+        if self._trace is None:
+            rec: dict[str, Any] = {"samples": 0, "last_sample": None, "stops": []}
+            set_joints, stop = world.set_joints, arm.stop
+
+            def sample(q: Any) -> None:
+                rec["samples"] += 1
+                rec["last_sample"] = world.sim_time
+                set_joints(q)
+
+            def stopped() -> None:
+                rec["stops"].append(world.sim_time)
+                stop()
+
+            world.set_joints, arm.stop = sample, stopped
+            self._trace = rec
+        return {**self._trace, "stops": list(self._trace["stops"]), "now": world.sim_time}
 
     def reply(self, rid: int, request: tuple) -> None:
         try:
@@ -231,7 +255,15 @@ class _Pending:
 class SimHost:
     """One child process holding one simulated cell; calls go through `call` (see module doc)."""
 
-    def __init__(self, sections: dict[str, dict[str, Any]], base_dir: Path | None) -> None:
+    def __init__(
+        self,
+        sections: dict[str, dict[str, Any]],
+        base_dir: Path | None,
+        call_timeout_s: float = CALL_TIMEOUT_S,
+        reply_margin_s: float = REPLY_MARGIN_S,
+    ) -> None:
+        self.call_timeout_s = float(call_timeout_s)
+        self.reply_margin_s = float(reply_margin_s)
         ctx = mp.get_context("spawn")
         parent, child = ctx.Pipe()
         self._proc = ctx.Process(
@@ -326,10 +358,12 @@ class SimHost:
         name: str = "",
         args: tuple[Any, ...] = (),
         kwargs: dict[str, Any] | None = None,
-        timeout_s: float = CALL_TIMEOUT_S,
+        timeout_s: float | None = None,
     ) -> Any:
         """Run `op` ("call", "get", "set", ...) of `name` on `target` in the child and return
-        its result; raises what it raised, or a typed error naming `device`."""
+        its result; raises what it raised, or a typed error naming `device`. `timeout_s`
+        defaults to `call_timeout_s`."""
+        timeout_s = self.call_timeout_s if timeout_s is None else timeout_s
         if self._dead is not None:
             raise DeviceDisconnectedError(f"{device}: {self._dead}", device=device)
         rid = next(self._ids)

@@ -34,7 +34,7 @@ import numpy as np
 
 from drivers.base import Arm, Camera, Frame, Gripper, LaserSwitch, MotionLimits
 from drivers.errors import DeviceDisconnectedError
-from sim_backend.device_host import CALL_TIMEOUT_S, REPLY_MARGIN_S, SimHost
+from sim_backend.device_host import SimHost
 from sim_backend.devices import DEFAULT_SIM_GRAB_TIMEOUT_S, _check_settings
 from sim_backend.sort_harness import SimScene
 
@@ -43,15 +43,16 @@ __all__ = ["HostCell", "HostedScene", "open_devices"]
 STOP_TIMEOUT_S = 5.0
 
 
-def _timeout_of(fn: Any, args: tuple[Any, ...], kwargs: dict[str, Any], default: float) -> float:
-    """How long to wait for a forwarded call: its own `timeout_s` plus a margin, or `default`."""
+def _timeout_of(host: SimHost, fn: Any, args: tuple[Any, ...], kwargs: dict[str, Any]) -> float:
+    """How long to wait for a forwarded call: its own `timeout_s` plus the host's margin, or
+    the host's call timeout."""
     try:
         bound = inspect.signature(fn).bind(None, *args, **kwargs)
     except (TypeError, ValueError):
-        return default
+        return host.call_timeout_s
     bound.apply_defaults()
     value = bound.arguments.get("timeout_s")
-    return default if value is None else float(value) + REPLY_MARGIN_S
+    return host.call_timeout_s if value is None else float(value) + host.reply_margin_s
 
 
 class _Remote:
@@ -64,7 +65,7 @@ class _Remote:
         object.__setattr__(self, "_host", host)
         object.__setattr__(self, "_device", device)
 
-    def _call(self, name: str, *args: Any, timeout_s: float = CALL_TIMEOUT_S, **kw: Any) -> Any:
+    def _call(self, name: str, *args: Any, timeout_s: float | None = None, **kw: Any) -> Any:
         return self._host.call(self._device, self._target, "call", name, args, kw, timeout_s)
 
     def _get(self, name: str) -> Any:
@@ -81,7 +82,7 @@ class _Remote:
 
             def forward(*args: Any, **kwargs: Any) -> Any:
                 t = kwargs.get("timeout_s")
-                wait = CALL_TIMEOUT_S if t is None else float(t) + REPLY_MARGIN_S
+                wait = None if t is None else float(t) + self._host.reply_margin_s
                 return self._call(name, *args, timeout_s=wait, **kwargs)
 
             forward.__name__ = name
@@ -120,7 +121,7 @@ def _forward_interface(cls: type, base: type) -> type:
 
 def _remote_method(name: str, fn: Any) -> Any:
     def forward(self: _Remote, *args: Any, **kwargs: Any) -> Any:
-        wait = _timeout_of(fn, args, kwargs, CALL_TIMEOUT_S)
+        wait = _timeout_of(self._host, fn, args, kwargs)
         return self._call(name, *args, timeout_s=wait, **kwargs)
 
     forward.__name__ = name
@@ -175,7 +176,7 @@ class _HostedDevice(_Remote):
                 "devices again",
                 device=self._device,
             )
-        self._call("connect", timeout_s=CALL_TIMEOUT_S)
+        self._call("connect")
         object.__setattr__(self, "_connected", True)
 
     def close(self) -> None:
@@ -186,7 +187,7 @@ class _HostedDevice(_Remote):
         host = self._host
         if host.alive:
             with contextlib.suppress(Exception):
-                self._call("close", timeout_s=CALL_TIMEOUT_S)
+                self._call("close")
         host.users -= 1
         if host.users <= 0:
             host.close()
@@ -217,7 +218,7 @@ class HostedCamera(_HostedDevice, Camera):
         """A fresh frame rendered in the child (`with_truth=True` keeps its truth there, read
         with `last_truth`)."""
         limit = timeout_s if timeout_s is not None else self._static("grab_timeout_s")
-        wait = float(limit or DEFAULT_SIM_GRAB_TIMEOUT_S) + REPLY_MARGIN_S
+        wait = float(limit or DEFAULT_SIM_GRAB_TIMEOUT_S) + self._host.reply_margin_s
         frame = self._call("grab", timeout_s, timeout_s=wait, **kwargs)
         if not isinstance(frame, Frame):  # pragma: no cover - the child always sends one
             frame = Frame.now(np.asarray(frame), 0)
@@ -254,6 +255,12 @@ class HostedArm(_HostedDevice, Arm):
         if not self._host.alive:
             return  # the process that moved the arm is gone: nothing moves
         self._call("stop", timeout_s=STOP_TIMEOUT_S)
+
+    def motion_trace(self) -> dict[str, Any]:
+        """From the first call on, the child records the arm time (simulated seconds) of the
+        last motion sample and of every `stop()`'s arrival: `{"samples", "last_sample",
+        "stops", "now"}` (a stop's latency in the arm's own time, for tests and diagnosis)."""
+        return self._host.call(self._device, "arm", "trace")  # type: ignore[no-any-return]
 
 
 for _cls, _base in (
@@ -314,14 +321,15 @@ class RemoteVerifier(_Remote):
 
 
 def open_devices(
-    sections: dict[str, dict[str, Any]], base_dir: Path | None = None
+    sections: dict[str, dict[str, Any]], base_dir: Path | None = None, **host: Any
 ) -> dict[str, Camera | LaserSwitch | Arm]:
     """The `backend = "sim"` devices of a cell configuration (keys of
-    `sim_backend.devices.open_devices`), unconnected, on one simulated cell in a child process."""
+    `sim_backend.devices.open_devices`), unconnected, on one simulated cell in a child process;
+    `host` passes `call_timeout_s` / `reply_margin_s` to `SimHost`."""
     checked = {kind: _check_settings(kind, dict(s)) for kind, s in sections.items()}
-    host = SimHost(checked, base_dir)
+    sim = SimHost(checked, base_dir, **host)
     made: dict[str, Camera | LaserSwitch | Arm] = {}
     kinds = {"camera": HostedCamera, "laser": HostedLaserSwitch, "arm": HostedArm}
-    for kind in host.kinds:
-        made[kind] = kinds[kind](host, kind)
+    for kind in sim.kinds:
+        made[kind] = kinds[kind](sim, kind)
     return made
