@@ -58,7 +58,7 @@ def test_capture_move_and_stop_through_the_hosted_devices(tmp_path: Path) -> Non
             assert shot["ok"], shot
             assert (shot["result"]["width"], shot["result"]["height"]) == (320, 320)
             home = np.asarray(arm.cell.scene.robot.home_deg, float)
-            target = home + [15.0, 0, 0, 0, 0, 0]
+            target = home + np.array([15.0, 0, 0, 0, 0, 0])
             moved = c.call("move", {"joints_deg": target.tolist()})
             assert moved["ok"], moved
             np.testing.assert_allclose(arm.joint_positions(), target, atol=1e-6)
@@ -66,7 +66,7 @@ def test_capture_move_and_stop_through_the_hosted_devices(tmp_path: Path) -> Non
             arm.realtime = True
             period = arm.cell.read("world.time_step")
             arm.motion_trace()
-            rid = c.send("move", {"joints_deg": (home - [60.0, 0, 0, 0, 0, 0]).tolist()})
+            rid = c.send("move", {"joints_deg": (home - np.array([60.0, 0, 0, 0, 0, 0])).tolist()})
             _wait_moving(arm, 40)
             requested = arm.motion_trace()["now"]
             assert safety.call("stop")["ok"]
