@@ -9,6 +9,7 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -205,3 +206,39 @@ def test_configuration_errors_in_the_child_stay_typed_and_leave_no_child() -> No
     with pytest.raises(DeviceConfigError, match=r"\[arm\]\.speed"):
         open_devices({"arm": {"speed": 3.0}})  # refused before any child starts
     assert not [p for p in multiprocessing.active_children() if p.name == "omnisort-sim-host"]
+
+
+ORPHAN_SCRIPT = """
+import sys, time
+from sim_backend.device_proxies import open_devices
+
+if __name__ == "__main__":
+    made = open_devices({"laser": {}})
+    made["laser"].connect()
+    print(made["laser"].host_pid, flush=True)
+    time.sleep(120)
+"""
+
+
+def test_the_child_ends_when_its_parent_is_killed(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    script = tmp_path / "parent.py"
+    script.write_text(ORPHAN_SCRIPT)
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    parent = subprocess.Popen(
+        [sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=env, cwd=root
+    )
+    try:
+        line = parent.stdout.readline()  # type: ignore[union-attr]
+        assert line.strip().isdigit(), f"the parent did not start its sim host: {line!r}"
+        child = int(line)
+        parent.kill()
+        parent.wait(10)
+        # The child sees the end of its pipe, closes the world and exits (reaped by init).
+        assert _gone(child, within_s=20), "the sim host outlived its killed parent"
+    finally:
+        parent.kill()
+        parent.wait(10)
