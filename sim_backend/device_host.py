@@ -197,6 +197,9 @@ class _Served:
                 self.conn.send((rid, "raised", encode_exception(DeviceError(str(exc)))))
 
     def close(self) -> None:
+        arm = self.targets.get("arm")
+        if arm is not None:
+            arm.stop()  # a move still stepping on a pool thread ends before the process does
         for kind in ("camera", "laser", "arm"):
             dev = self.targets.get(kind)
             if dev is not None:
