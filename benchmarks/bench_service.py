@@ -142,9 +142,8 @@ def _virtual_cell_phases(tmp: Path, views: Path) -> dict[str, Any]:
             sort = _phase(port, "sort", {}) if not failed else {"skipped": failed}
         finally:
             out["service_exit_code_after_sigterm"] = svc.stop()
-    out.update(
-        {f"idle.{k}": v for k, v in idle.items() if k.startswith(("status", "missed", "lat"))}
-    )
+    kept = ("status", "missed", "lat", "load")
+    out.update({f"idle.{k}": v for k, v in idle.items() if k.startswith(kept)})
     out.update({f"during_intrinsics.{k}": v for k, v in cpu.items()})
     out.update({f"during_sort.{k}": v for k, v in sort.items()})
     return out
@@ -163,6 +162,7 @@ def _sim_host_phases(tmp: Path, views: Path) -> dict[str, Any]:
     svc = start_service(cfg, tmp)
     phases: dict[str, dict[str, Any]] = {}
     try:
+        idle = _phase(svc.port, None, {})
         phases["sort"] = _phase(svc.port, "sort", {})
         phases["intrinsics"] = _phase(
             svc.port, "calibrate", {"what": "intrinsics", "folder": str(views), "square_mm": 116}
@@ -172,7 +172,11 @@ def _sim_host_phases(tmp: Path, views: Path) -> dict[str, Any]:
         )
     finally:
         svc.stop()
-    out: dict[str, Any] = {}
+    out = {
+        f"idle_sim_host.{k}": v
+        for k, v in idle.items()
+        if k.startswith(("status", "missed", "lat", "load"))
+    }
     for name, phase in phases.items():
         phase["devices"] = f"simulated cell, backend sim ({WIDTH}x{WIDTH} camera; sim host)"
         out.update({f"during_{name}_sim_host.{k}": v for k, v in phase.items()})

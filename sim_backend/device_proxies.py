@@ -43,12 +43,16 @@ __all__ = ["HostCell", "HostedScene", "open_devices"]
 STOP_TIMEOUT_S = 5.0
 
 
-def _timeout_of(host: SimHost, fn: Any, args: tuple[Any, ...], kwargs: dict[str, Any]) -> float:
+def _timeout_of(
+    host: SimHost, sig: inspect.Signature, args: tuple[Any, ...], kwargs: dict[str, Any]
+) -> float:
     """How long to wait for a forwarded call: its own `timeout_s` plus the host's margin, or
     the host's call timeout."""
+    if "timeout_s" not in sig.parameters:
+        return host.call_timeout_s
     try:
-        bound = inspect.signature(fn).bind(None, *args, **kwargs)
-    except (TypeError, ValueError):
+        bound = sig.bind(None, *args, **kwargs)
+    except TypeError:
         return host.call_timeout_s
     bound.apply_defaults()
     value = bound.arguments.get("timeout_s")
@@ -120,8 +124,10 @@ def _forward_interface(cls: type, base: type) -> type:
 
 
 def _remote_method(name: str, fn: Any) -> Any:
+    sig = inspect.signature(fn)
+
     def forward(self: _Remote, *args: Any, **kwargs: Any) -> Any:
-        wait = _timeout_of(self._host, fn, args, kwargs)
+        wait = _timeout_of(self._host, sig, args, kwargs)
         return self._call(name, *args, timeout_s=wait, **kwargs)
 
     forward.__name__ = name
