@@ -16,22 +16,12 @@ import pytest
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.server import Service, start_in_thread
+from tests.service.procs import process_gone
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 STOP_BOUND_S = 0.1  # the bound, in the arm's time
-
-
-def _gone(pid: int, within_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + within_s
-    while time.monotonic() < deadline:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def _wait_moving(arm: object, samples: int, within_s: float = 90.0) -> None:
@@ -81,7 +71,7 @@ def test_capture_move_and_stop_through_the_hosted_devices(tmp_path: Path) -> Non
     assert trace["last_sample"] - trace["stops"][0] <= period + 1e-9, trace
     print(f"\nstop: motion ended {1e3 * (trace['last_sample'] - requested):.1f} ms of arm time")
     assert trace["last_sample"] - requested <= STOP_BOUND_S, (trace, requested)
-    assert _gone(pid), "the service's shutdown left the sim host running"
+    assert process_gone(pid), "the service's shutdown left the sim host running"
 
 
 def test_killing_the_child_mid_sort_gives_a_typed_error_and_the_service_stays_up(
@@ -124,4 +114,4 @@ def test_killing_the_child_mid_sort_gives_a_typed_error_and_the_service_stays_up
             assert time.monotonic() - t0 < 10
     finally:
         running.stop()
-    assert _gone(pid)
+    assert process_gone(pid)

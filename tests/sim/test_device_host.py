@@ -17,23 +17,12 @@ import pytest
 
 from drivers.base import Arm, Camera, LaserSwitch
 from drivers.errors import DeviceConfigError, DeviceDisconnectedError, DeviceTimeoutError
+from tests.service.procs import process_gone
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = pytest.mark.timeout(180)
 
 WIDTH = 160
-
-
-def _gone(pid: int, within_s: float = 10.0) -> bool:
-    """True once no process `pid` exists (reaped), waiting at most `within_s`."""
-    deadline = time.monotonic() + within_s
-    while time.monotonic() < deadline:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def _open(**host: Any) -> dict[str, Any]:
@@ -99,34 +88,42 @@ def test_proxies_do_what_the_in_process_devices_do_and_close_ends_the_child() ->
         assert len(verifier.true_cubes()) == len(arm.cell.scene.cubes)
     finally:
         _close(made)
-    assert _gone(pid), "the sim host outlived its devices"
+    assert process_gone(pid), "the sim host outlived its devices"
     assert not arm.is_connected
     with pytest.raises(DeviceDisconnectedError, match="sim:sorting/arm"):
         arm.joint_positions()
+
+
+def _moving(arm: Any, dq: list[float], samples: int) -> tuple[threading.Thread, list]:
+    """A paced joint move by `dq` on a thread of its own, returned once the child has carried
+    out `samples` motion samples; the list receives what the move raised."""
+    arm.realtime = True  # paced to the wall clock, as a real arm moves
+    arm.motion_trace()  # start recording
+    q = arm.joint_positions() + np.asarray(dq, float)
+    raised: list[BaseException] = []
+
+    def move() -> None:
+        try:
+            arm.move_joints(q)
+        except BaseException as exc:
+            raised.append(exc)
+
+    mover = threading.Thread(target=move)
+    mover.start()
+    deadline = time.monotonic() + 30
+    while arm.motion_trace()["samples"] < samples:
+        assert time.monotonic() < deadline, "the arm never moved"
+        time.sleep(0.01)
+    return mover, raised
 
 
 def test_stop_reaches_a_move_in_the_child_within_one_physics_step() -> None:
     made = _open()
     arm = made["arm"]
     try:
-        arm.realtime = True  # paced to the wall clock, as a real arm moves
-        assert arm.realtime is True
         period = arm.cell.read("world.time_step")
-        arm.motion_trace()  # start recording
-        q = arm.joint_positions() + np.array([90.0, 0, 0, 0, 0, 0])
-        outcome: list[BaseException] = []
-
-        def move() -> None:
-            try:
-                arm.move_joints(q)
-            except BaseException as exc:
-                outcome.append(exc)
-
-        mover = threading.Thread(target=move)
-        mover.start()
-        deadline = time.monotonic() + 30
-        while arm.motion_trace()["samples"] < 60 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        mover, outcome = _moving(arm, [90.0, 0, 0, 0, 0, 0], 60)
+        assert arm.realtime is True  # set in the child
         requested = arm.motion_trace()["now"]
         arm.stop()
         mover.join(30)
@@ -146,22 +143,7 @@ def test_a_killed_child_is_a_typed_error_naming_the_device_never_a_hang() -> Non
     cam, arm = made["camera"], made["arm"]
     pid = arm.host_pid
     try:
-        arm.motion_trace()
-        q = arm.joint_positions() + np.array([0.0, 0, 0, 0, 0, 90.0])
-        arm.realtime = True
-        caught: list[BaseException] = []
-
-        def move() -> None:
-            try:
-                arm.move_joints(q)
-            except BaseException as exc:
-                caught.append(exc)
-
-        mover = threading.Thread(target=move)
-        mover.start()
-        deadline = time.monotonic() + 30
-        while arm.motion_trace()["samples"] < 10 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        mover, caught = _moving(arm, [0.0, 0, 0, 0, 0, 90.0], 10)
         os.kill(pid, signal.SIGKILL)
         mover.join(15)
         assert not mover.is_alive(), "the move's caller hung on a dead child"
@@ -173,7 +155,7 @@ def test_a_killed_child_is_a_typed_error_naming_the_device_never_a_hang() -> Non
         arm.stop()  # never refused: nothing moves in a process that is gone
     finally:
         _close(made)
-    assert _gone(pid)
+    assert process_gone(pid)
 
 
 def test_a_hung_child_is_a_device_timeout_and_is_ended() -> None:
@@ -186,7 +168,7 @@ def test_a_hung_child_is_a_device_timeout_and_is_ended() -> None:
         with pytest.raises(DeviceTimeoutError, match="sim:sorting/arm"):
             arm.joint_positions()
         assert time.monotonic() - t0 < 10  # the call's timeout, not forever
-        assert _gone(pid), "a hung child must be ended"
+        assert process_gone(pid), "a hung child must be ended"
         with pytest.raises(DeviceDisconnectedError):
             made["laser"].state()
     finally:
@@ -238,7 +220,7 @@ def test_the_child_ends_when_its_parent_is_killed(tmp_path: Path) -> None:
         parent.kill()
         parent.wait(10)
         # The child sees the end of its pipe, closes the world and exits (reaped by init).
-        assert _gone(child, within_s=20), "the sim host outlived its killed parent"
+        assert process_gone(child, within_s=20), "the sim host outlived its killed parent"
     finally:
         parent.kill()
         parent.wait(10)
