@@ -46,7 +46,6 @@ START_TIMEOUT_S = 120.0  # spawning, importing pybullet and building the world
 CLOSE_TIMEOUT_S = 5.0
 REPLY_MARGIN_S = 10.0  # added to a call's own timeout before the child counts as hung
 CALL_TIMEOUT_S = 30.0  # calls without a timeout of their own (reads, clean images, truth)
-NICE = 5  # the child's scheduling priority below its caller's (see `serve`)
 # Calls the child's reader thread runs itself, at once: they must pass whatever else runs.
 INLINE = frozenset({"stop", "trigger_protective_stop"})
 
@@ -219,10 +218,6 @@ def serve(conn: Connection, sections: dict[str, dict[str, Any]], base_dir: str |
     from sim_backend.devices import open_devices
 
     sys.setswitchinterval(0.001)  # the reader thread (stop) gets the GIL quickly
-    # The simulator stands in for hardware that runs elsewhere: on shared cores it must not
-    # take the CPU from the caller's event loop (its stop path has a thread of its own here).
-    with contextlib.suppress(OSError):
-        os.nice(NICE)
     try:
         made = open_devices(sections, Path(base_dir) if base_dir else None)
         served = _Served(conn, made)
