@@ -7,8 +7,9 @@ what it holds on a real cell and no more. Measured, one after the other on the s
 - idle: the same clients with nothing running (the reference p99, under identical load);
 - `calibrate what=intrinsics` on rendered checkerboard views (the compute worker's job);
 - `sort` of the scene's cubes, paced by the emulated controller's wall clock.
-For reference, a `sort` on the in-process simulated cell (`backend = "sim"`: pybullet's
-rendering and physics hold the service process's GIL for a whole render).
+Then the same sort and calibrations on the simulated cell as `omnisort serve` opens it
+(`backend = "sim"`): the pybullet world, its renders and the sensor's exposures run in the
+service's child process (`sim_backend/device_host.py`), the service holds proxies.
 Each client has its own connection, from its own loopback address (20 HMIs on the line's
 network; the service limits connections per address), and sends `status` every 50 ms on a
 fixed schedule. A reply that is missing (1 s timeout) or an error counts as missed. Reported
@@ -83,6 +84,7 @@ def _phase(port: int, cmd: str | None, args: dict[str, Any]) -> dict[str, Any]:
         )
         for k in range(CLIENTS)
     ]
+    load = os.getloadavg()[0]
     with Client("127.0.0.1", port, timeout_s=600) as runner:
         for t in threads:
             t.start()
@@ -102,6 +104,7 @@ def _phase(port: int, cmd: str | None, args: dict[str, Any]) -> dict[str, Any]:
         "long_command": f"{cmd} {args}",
         "long_command_ok": bool(reply.get("ok")),
         "long_command_s": round(job_s, 2),
+        "load_avg_1min_at_start": round(load, 2),
         "status_requests": len(lat_ms),
         "status_during_job": busy[0],
         "missed_replies": len(missed),
@@ -139,16 +142,17 @@ def _virtual_cell_phases(tmp: Path, views: Path) -> dict[str, Any]:
             sort = _phase(port, "sort", {}) if not failed else {"skipped": failed}
         finally:
             out["service_exit_code_after_sigterm"] = svc.stop()
-    out.update(
-        {f"idle.{k}": v for k, v in idle.items() if k.startswith(("status", "missed", "lat"))}
-    )
+    kept = ("status", "missed", "lat", "load")
+    out.update({f"idle.{k}": v for k, v in idle.items() if k.startswith(kept)})
     out.update({f"during_intrinsics.{k}": v for k, v in cpu.items()})
     out.update({f"during_sort.{k}": v for k, v in sort.items()})
     return out
 
 
-def _in_process_sort(tmp: Path) -> dict[str, Any]:
-    """The sort phase on the in-process simulated cell (calibration from the sim's truth)."""
+def _sim_host_phases(tmp: Path, views: Path) -> dict[str, Any]:
+    """Sort, then intrinsics and extrinsics calibrations, on the simulated cell as the service
+    opens it (`backend = "sim"`: the world in the service's child process; calibration from
+    the sim's truth, so the sort can start at once)."""
     from omnisort_hw.service.demo import calibrate_from_truth, write_config
     from omnisort_hw.service.launch import start_service
 
@@ -156,12 +160,27 @@ def _in_process_sort(tmp: Path) -> dict[str, Any]:
     cfg = write_config(tmp, WIDTH)
     calibrate_from_truth(cfg)
     svc = start_service(cfg, tmp)
+    phases: dict[str, dict[str, Any]] = {}
     try:
-        sort = _phase(svc.port, "sort", {})
+        idle = _phase(svc.port, None, {})
+        phases["sort"] = _phase(svc.port, "sort", {})
+        phases["intrinsics"] = _phase(
+            svc.port, "calibrate", {"what": "intrinsics", "folder": str(views), "square_mm": 116}
+        )
+        phases["extrinsics"] = _phase(
+            svc.port, "calibrate", {"what": "extrinsics", "target": "two-sided"}
+        )
     finally:
         svc.stop()
-    sort["devices"] = f"in-process simulated cell (backend sim, {WIDTH}x{WIDTH} camera)"
-    return {f"during_sort_in_process_sim.{k}": v for k, v in sort.items()}
+    out = {
+        f"idle_sim_host.{k}": v
+        for k, v in idle.items()
+        if k.startswith(("status", "missed", "lat", "load"))
+    }
+    for name, phase in phases.items():
+        phase["devices"] = f"simulated cell, backend sim ({WIDTH}x{WIDTH} camera; sim host)"
+        out.update({f"during_{name}_sim_host.{k}": v for k, v in phase.items()})
+    return out
 
 
 def run(shared: Path) -> dict[str, Any]:
@@ -178,6 +197,6 @@ def run(shared: Path) -> dict[str, Any]:
         views = tmp / "views"
         checkerboard_views(views, n=12, seed=2, width=WIDTH, progress=False)
         out.update(_virtual_cell_phases(tmp, views))
-        out.update(_in_process_sort(tmp / "sim"))
+        out.update(_sim_host_phases(tmp / "sim", views))
     out["load_avg_1min_before_after"] = [round(load_before, 2), round(os.getloadavg()[0], 2)]
     return out

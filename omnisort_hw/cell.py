@@ -123,11 +123,12 @@ class Cell:
     # -- construction and life cycle -------------------------------------------------------
 
     @classmethod
-    def from_settings(cls, settings: CellConfig) -> Cell:
-        """Build the cell of a configuration: devices from the device factory, store, run log."""
+    def from_settings(cls, settings: CellConfig, devices_in_child: bool = False) -> Cell:
+        """Build the cell of a configuration: devices from the device factory (`in_child`: the
+        service's choice), store, run log."""
         from omnisort_hw.service.rrd import RunLogRotator
 
-        devices = open_devices(settings.devices)
+        devices = open_devices(settings.devices, in_child=devices_in_child)
         lg = settings.logging
         rotator = RunLogRotator(
             lg.log_dir if lg.rerun else None,

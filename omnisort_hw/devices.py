@@ -15,7 +15,8 @@ pybullet. Its contract (implemented in `sim_backend/devices.py`):
 `sections` maps "camera" / "laser" / "arm" (only those whose backend is "sim") to their settings
 (every key of the section but `backend`); the result maps the same names to unconnected
 `drivers.base` devices. All sim devices of a cell are requested in one call so they can share
-one simulated world.
+one simulated world. `sim_backend/device_proxies.py` implements the same contract with the
+world in a child process (`open_devices(..., in_child=True)`, what the service uses).
 """
 
 from __future__ import annotations
@@ -53,14 +54,18 @@ class Devices:
 
 
 def _open_sim(
-    sections: dict[str, DeviceSection], base_dir: Path | None
+    sections: dict[str, DeviceSection], base_dir: Path | None, in_child: bool = False
 ) -> tuple[dict[str, Any], SceneLayout | None]:
-    """Build the `backend = "sim"` devices through `sim_backend.devices.open_devices`, and the
-    simulated cell's scene for the sorting pipeline."""
+    """Build the `backend = "sim"` devices through `sim_backend.devices.open_devices` (or, with
+    `in_child`, `sim_backend.device_proxies.open_devices`: the same devices in a child process),
+    and the simulated cell's scene for the sorting pipeline."""
     first = next(iter(sections))
     key = f"[{first}].backend"
     try:
-        from sim_backend import devices as sim_devices  # type: ignore[attr-defined]
+        if in_child:
+            from sim_backend import device_proxies as sim_devices
+        else:
+            from sim_backend import devices as sim_devices  # type: ignore[no-redef]
     except ImportError as exc:
         raise config_error(
             key,
@@ -131,10 +136,15 @@ def open_arm(section: DeviceSection, base_dir: Path | None = None) -> Arm:
 
 
 def open_devices(
-    config: Mapping[str, Any] | CellDeviceConfig, config_path: Path | None = None
+    config: Mapping[str, Any] | CellDeviceConfig,
+    config_path: Path | None = None,
+    in_child: bool = False,
 ) -> Devices:
     """All devices of a cell (unconnected). `config` is the parsed TOML document or its
-    device sections; relative paths resolve against `config_path`'s folder."""
+    device sections; relative paths resolve against `config_path`'s folder. `in_child`: devices
+    that would compute in the caller's process (the simulated cell's rendering and physics) run
+    in a child process behind proxies instead (the service asks for it; real drivers are not
+    affected)."""
     if isinstance(config, CellDeviceConfig):
         cell = config
     else:
@@ -142,7 +152,7 @@ def open_devices(
         cell = parse_device_config(config, base)
     present = {k: s for k, s in cell.sections() if s is not None}
     sim = {k: s for k, s in present.items() if s.is_sim}
-    made, scene = _open_sim(sim, cell.base_dir) if sim else ({}, None)
+    made, scene = _open_sim(sim, cell.base_dir, in_child) if sim else ({}, None)
     for kind, section in present.items():
         if not section.is_sim:
             made[kind] = _open_real(section)

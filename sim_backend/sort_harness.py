@@ -342,4 +342,7 @@ class SimScene:
 def scene_of(devices: dict[str, Any]) -> SimScene | None:
     """The scene of the simulated devices made by `sim_backend.devices.open_devices`."""
     cell = next((d.cell for d in devices.values() if hasattr(d, "cell")), None)
-    return SimScene(cell, devices.get("arm")) if cell is not None else None
+    if cell is None:
+        return None
+    hosted = getattr(cell, "scene_layout", None)  # a cell in a child process (device_proxies)
+    return hosted(devices.get("arm")) if hosted is not None else SimScene(cell, devices.get("arm"))

@@ -772,7 +772,7 @@ def serve(
     check_directories(settings)
     with InstanceLock(settings.storage.state_dir):
         notifier.status("opening devices")
-        cell = cell or Cell.from_settings(settings)
+        cell = cell or Cell.from_settings(settings, devices_in_child=True)  # no pybullet here
         try:
             cell.connect()
             service = Service(cell, cfg, notifier)

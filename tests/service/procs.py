@@ -53,3 +53,15 @@ def start_service(
     proc.kill()
     proc.wait(10)
     raise AssertionError(f"service did not start: {(tmp / 'stderr.txt').read_text()[-2000:]}")
+
+
+def process_gone(pid: int, within_s: float = 10.0) -> bool:
+    """True once no process `pid` exists (ended and reaped), waiting at most `within_s`."""
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.02)
+    return False

@@ -12,11 +12,12 @@ from omnisort_hw.service.demo import calibrate_from_truth, write_config
 WIDTH = 320
 
 
-def calibrated_sim_cell(tmp: Path, width: int = WIDTH) -> Cell:
-    """A connected simulated cell with the true calibration in its state directory."""
+def calibrated_sim_cell(tmp: Path, width: int = WIDTH, devices_in_child: bool = False) -> Cell:
+    """A connected simulated cell with the true calibration in its state directory;
+    `devices_in_child`: the world in a child process, as the service opens it."""
     tmp.mkdir(parents=True, exist_ok=True)
     config = write_config(tmp, width)
     calibrate_from_truth(config)
-    cell = Cell.from_settings(load_cell_config(config))
+    cell = Cell.from_settings(load_cell_config(config), devices_in_child=devices_in_child)
     cell.connect()
     return cell
