@@ -21,9 +21,17 @@ import numpy as np
 
 from omnisort_hw.core.blended_path import BlendedPath, Segment, plan_blended_path
 from omnisort_hw.core.kinematics import forward
-from omnisort_hw.core.motion import Box, Capsule, FloorPlane, collision_mask, find_collision
+from omnisort_hw.core.motion import (
+    Box,
+    Capsule,
+    CollisionError,
+    CollisionHit,
+    FloorPlane,
+    collision_mask,
+    find_collision,
+)
 
-__all__ = ["BlendedMoves", "MoveChecks", "blend_moves", "corner_clearance"]
+__all__ = ["BlendedMoves", "MoveChecks", "blend_moves", "check_blends", "corner_clearance"]
 
 # Halvings of a radius whose blend comes too close before the via point is a stop.
 _HALVINGS = 3
@@ -127,9 +135,9 @@ def _segments(planner: Any, moves: Sequence[Any], blends: Sequence[float]) -> li
 
 def _bad_windows(
     planner: Any, path: BlendedPath, joint: Sequence[MoveChecks], margin: float
-) -> list[int]:
+) -> dict[int, CollisionHit]:
     """Via points whose overlap window brings the arm (or its cube) within the margin."""
-    bad = []
+    bad = {}
     q = path.trajectory.q
     for first, last, k in path.windows():
         tools = planner.tool_capsules(joint[k].holding)
@@ -141,5 +149,29 @@ def _bad_windows(
             margin_mm=margin,
         )
         if hit is not None:
-            bad.append(k)
+            bad[k] = hit
     return bad
+
+
+def check_blends(
+    planner: Any,
+    q0: np.ndarray,
+    moves: Sequence[Any],
+    blends_mm: Sequence[float],
+    checks: Sequence[MoveChecks],
+) -> BlendedPath:
+    """The blended path of `moves` with the given radii, or `CollisionError` naming the via
+    point whose blended corner comes within the margin of an obstacle (nothing has moved)."""
+    joint = [_union(checks[k], checks[k + 1]) for k in range(len(moves) - 1)]
+    margin = float(planner.cfg.collision_margin_mm)
+    path = plan_blended_path(
+        planner.model, q0, _segments(planner, moves, blends_mm), tool=planner.tool
+    )
+    bad = _bad_windows(planner, path, joint, margin)
+    if bad:
+        k, hit = next(iter(bad.items()))
+        raise CollisionError(
+            f"blend of {blends_mm[k]:.0f} mm after {moves[k].what}: the {hit.link} would come "
+            f"within {margin:g} mm of {hit.obstacle!r}"
+        )
+    return path
