@@ -541,10 +541,17 @@ class Planner:
         checks = {"reach": reach, "carry": carry, "back": [MoveChecks(free)] * len(plan.back)}
         q0 = q_start
         for name, moves in plan.paths.items():
-            blended = blend_moves(self, q0, moves, checks[name])
-            for m, r in zip(moves, blended.blends_mm, strict=True):
-                m.blend_mm = r
-            plan.paths_s[name] = blended.duration_s
+            try:
+                blended = blend_moves(self, q0, moves, checks[name])
+            except MotionRefusedError:  # not blendable: the checked moves, with stops
+                blended = None
+            for k, m in enumerate(moves):
+                m.blend_mm = blended.blends_mm[k] if blended is not None else 0.0
+            plan.paths_s[name] = (
+                blended.duration_s
+                if blended is not None
+                else float(sum(m.traj.duration for m in moves))
+            )
             q0 = moves[-1].q_target
 
     def path_to_any(

@@ -514,8 +514,9 @@ class Sorter:
     def _send_path(self, moves: list[Move], planned_s: float | None) -> None:
         """Execute planned moves as one blended path (each move blends into the next within
         its `blend_mm`, as planned and checked); the arm plans the same path again."""
-        if len(moves) == 1 and planned_s is None:
-            self._send(moves[0])
+        if all(m.blend_mm <= 0.0 for m in moves[:-1]):  # nothing to blend: single moves
+            for move in moves:
+                self._send(move)
             return
         arm = self._require_arm()
         if self.cancel.is_set():
