@@ -11,9 +11,9 @@ until the summed joint speeds and accelerations stay within the two moves' limit
 the overlap windows the path is exactly its moves, so only the windows need a new collision
 check (`BlendedPath.windows`). A blend radius of 0 stops at the via point.
 
-Paths are planned at one rate (`PATH_RATE_HZ`, 1 ms) whoever plays them, and `resample`d to
-the player's own rate, so the simulated arm (240 Hz physics) and the emulated controller
-(500 Hz) play the same path in the same time to within one of their periods.
+Paths are planned at one rate (`PATH_RATE_HZ`, the e-Series controller's 500 Hz) whoever plays
+them, and `resample`d to the player's own rate, so the simulated arm (240 Hz physics) and the
+emulated controller play the same path in the same time to within one simulator step.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ __all__ = [
     "resample",
 ]
 
-PATH_RATE_HZ = 1000.0
+PATH_RATE_HZ = 500.0
 # A blend is shortened by this factor until the summed joint rates are within limits.
 _SHRINK = 0.8
 # Relative slack on the joint-rate check of a window (finite differences of exact samples).

@@ -27,7 +27,7 @@ from omnisort_hw.core.motion import (
     CollisionError,
     CollisionHit,
     FloorPlane,
-    collision_mask,
+    clearance,
     find_collision,
 )
 
@@ -35,7 +35,7 @@ __all__ = ["BlendedMoves", "MoveChecks", "blend_moves", "check_blends", "corner_
 
 # Halvings of a radius whose blend comes too close before the via point is a stop.
 _HALVINGS = 3
-# Clearance is found to this resolution (mm).
+# A radius below this (mm) is not worth halving again.
 _RESOLUTION_MM = 1.0
 
 
@@ -66,21 +66,9 @@ def corner_clearance(
     tools: Sequence[Capsule],
     hi_mm: float,
 ) -> float:
-    """The largest margin (mm, up to hi_mm) at which the arm at joints q (6,) touches nothing."""
-    q = np.asarray(q, float).reshape(1, 6)
-
-    def free(margin: float) -> bool:
-        return not collision_mask(model, q, obstacles, tool_capsules=tools, margin_mm=margin)[0]
-
-    if not free(0.0):
-        return 0.0
-    if free(hi_mm):
-        return hi_mm
-    lo, hi = 0.0, hi_mm
-    while hi - lo > _RESOLUTION_MM:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if free(mid) else (lo, mid)
-    return lo
+    """The largest margin (mm, 0 to hi_mm) at which the arm at joints q (6,) touches nothing."""
+    gap = clearance(model, q, obstacles, tool_capsules=tools)
+    return float(min(max(gap, 0.0), hi_mm))
 
 
 def _union(a: MoveChecks, b: MoveChecks) -> MoveChecks:

@@ -2,7 +2,7 @@
 
 Tolerances: a blended path ends on the exact last sample of its last move; "within the blend
 radius" is by construction (the overlap starts on a sample inside the sphere), so it is
-checked with no slack; joint rates are checked by finite differences of the 1 ms samples
+checked with no slack; joint rates are checked by finite differences of the 2 ms samples
 against the moves' limits with the planner's own slack (0.1 % speed, 1 % acceleration).
 """
 
@@ -157,3 +157,19 @@ def test_a_blended_corner_that_would_hit_is_refused_and_the_radius_comes_from_th
     free = blend_moves(planner, q0, moves, [MoveChecks([]), MoveChecks([])])
     assert free.blends_mm[0] > r  # the post is what limits it
     assert chosen.duration_s < chosen.path.stopped_duration
+
+
+def test_clearance_is_the_margin_at_which_the_collision_check_first_hits() -> None:
+    from omnisort_hw.core.motion import FloorPlane, clearance, collision_mask
+
+    planner, moves, _ = _corner()
+    floor = FloorPlane(np.eye(4), "floor")
+    obstacles = [POST, floor]
+    for q in (moves[0].q_target, moves[1].q_target, Q0):
+        gap = clearance(planner.model, q, obstacles, tool_capsules=planner.gripper)
+        assert np.isfinite(gap) and gap > 0.0
+        for margin, hit in ((gap - 0.01, False), (gap + 0.01, True)):
+            got = collision_mask(
+                planner.model, q[None], obstacles, tool_capsules=planner.gripper, margin_mm=margin
+            )[0]
+            assert got == hit, (q, gap, margin)

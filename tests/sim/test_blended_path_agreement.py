@@ -5,10 +5,10 @@ same path with stops, and take the same time. A stop during a blended path ends 
 0.1 s on the simulated arm; a protective stop during one is a typed `safety_stop` through
 the UR driver.
 
-Timing tolerance: the path is planned once at 1 ms (`PATH_RATE_HZ`) and stretched to a whole
-number of periods by each player, by less than one period (1/240 s in the simulator, 1/500 s
-on the controller); the controller's start and end are read from its published samples, each
-within one tick (1/500 s). So the two durations agree within 1/240 + 2/500 s.
+Timing tolerance: the path is planned once at the controller's 500 Hz (`PATH_RATE_HZ`) and
+stretched to a whole number of periods by the simulator, by less than one step (1/240 s); the
+controller's start and end are read from its published samples, each within one tick
+(1/500 s). So the two durations agree within 1/240 + 2/500 s.
 """
 
 from __future__ import annotations
