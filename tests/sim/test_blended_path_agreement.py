@@ -14,11 +14,8 @@ controller's start and end are read from its published samples, each within one 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,11 +27,10 @@ from omnisort_hw.core.kinematics import forward
 from sim_backend.sim_arm import SimArm
 from sim_backend.sim_cell import SimCell
 from sim_backend.virtual_cell.controller import MOVEL_JOINT_CAPS
-from tests.sim.virtual_cell_fixture import virtual_cell
+from tests.sim.virtual_cell_fixture import run_client, virtual_cell
 
 pytest.importorskip("rtde_control", reason="needs ur-rtde")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
-ROOT = Path(__file__).resolve().parents[2]
 
 JOINT_V, JOINT_A = 60.0, 120.0  # deg/s, deg/s^2
 LIN_V, LIN_A = 250.0, 1200.0  # mm/s, mm/s^2
@@ -83,15 +79,7 @@ def _ur_rows(arm: URArm, path: list[Waypoint]) -> list:
 
 
 def _controller_run(host: str, rows: list) -> dict:
-    run = subprocess.run(
-        [sys.executable, "-m", "tests.sim.ur_rtde_path_client", host, json.dumps(rows)],
-        capture_output=True,
-        text=True,
-        timeout=90,
-        cwd=ROOT,
-    )
-    assert run.returncode == 0, run.stderr[-3000:]
-    out = json.loads(run.stdout.strip().splitlines()[-1])
+    out = run_client("tests.sim.ur_rtde_path_client", host, json.dumps(rows))
     assert out["accepted"] and out["start"] is not None and out["end"] is not None, out
     return out
 
@@ -165,22 +153,28 @@ def test_a_blended_path_plays_alike_on_the_sim_arm_and_the_emulated_controller(v
             assert closest <= r + sample_gap, (name, closest, r)
 
 
+def _path_in_thread(arm, path: list[Waypoint]) -> tuple[threading.Thread, dict]:
+    """Run `arm.move_path(path)` on a thread; the box gets the error and when it came."""
+    box: dict = {}
+
+    def run() -> None:
+        try:
+            arm.move_path(path)
+        except Exception as exc:
+            box["error"], box["t"] = exc, time.monotonic()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread, box
+
+
 def test_stop_during_a_blended_path_on_the_sim_arm_ends_it_within_a_tenth() -> None:
     cell, sim = _sim_arm()
     try:
         q0 = sim.joint_positions()
         path = _waypoints(sim, q0, RADII)
         sim.realtime = True
-        box: dict = {}
-
-        def run() -> None:
-            try:
-                sim.move_path(path)
-            except Exception as exc:
-                box["error"], box["t"] = exc, time.monotonic()
-
-        thread = threading.Thread(target=run, daemon=True)
-        thread.start()
+        thread, box = _path_in_thread(sim, path)
         time.sleep(0.6)
         t_stop = time.monotonic()
         sim.stop()
@@ -207,16 +201,7 @@ def test_protective_stop_during_a_blended_path_is_a_typed_safety_stop(vc) -> Non
         finally:
             sim.close()
             cell.close()
-        box: dict = {}
-
-        def run() -> None:
-            try:
-                ur.move_path(path)
-            except Exception as exc:
-                box["error"], box["t"] = exc, time.monotonic()
-
-        thread = threading.Thread(target=run, daemon=True)
-        thread.start()
+        thread, box = _path_in_thread(ur, path)
         time.sleep(0.8)
         assert vc.control("status")["moving"]
         t_stop = time.monotonic()
