@@ -137,6 +137,7 @@ class ControllerEvents:
     scripts: int = 0
     refused_scripts: int = 0
     motions: int = 0
+    last_motion_s: float = 0.0  # the planned duration of the last motion started
 
 
 def _decel(q0: np.ndarray, qd0: np.ndarray, decel: float) -> np.ndarray:
@@ -567,6 +568,7 @@ class URController:
     def _play(self, q: np.ndarray, is_async: bool, what: str) -> None:
         self._motion = _Motion(q, time.monotonic(), is_async, what)
         self.events.motions += 1
+        self.events.last_motion_s = (len(q) - 1) / RATE_HZ
         if is_async:
             self._write_async(0)
         else:

@@ -6,9 +6,12 @@ same path with stops, and take the same time. A stop during a blended path ends 
 the UR driver.
 
 Timing tolerance: the path is planned once at the controller's 500 Hz (`PATH_RATE_HZ`) and
-stretched to a whole number of periods by the simulator, by less than one step (1/240 s); the
-controller's start and end are read from its published samples, each within one tick
-(1/500 s). So the two durations agree within 1/240 + 2/500 s.
+stretched to a whole number of periods by the simulator, by less than one step (1/240 s): the
+controller's planned duration of the motion it started and the simulator's executed one agree
+within 1/240 s. Measured on the controller's clock through ur-rtde, its start and end are read
+from its published samples, each within one tick; the emulator's tick runs on the wall clock
+and is late under load, so each end also carries the largest gap seen between two published
+samples: 1/240 + 2 x (largest gap) s.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 JOINT_V, JOINT_A = 60.0, 120.0  # deg/s, deg/s^2
 LIN_V, LIN_A = 250.0, 1200.0  # mm/s, mm/s^2
 RADII = (60.0, 40.0)
-TOLERANCE_S = 1.0 / 240.0 + 2.0 / 500.0
+SIM_STEP_S = 1.0 / 240.0
 
 
 @pytest.fixture(scope="module")
@@ -117,12 +120,14 @@ def test_a_blended_path_plays_alike_on_the_sim_arm_and_the_emulated_controller(v
         finally:
             ur.close()
         ctl_b = _controller_run(vc.host, rows_blended)
+        planned_b = vc.control("status")["last_motion_s"]
         sim_b, q_sim = _sim_run(sim, blended)
         np.testing.assert_allclose(sim.tcp_pose()[:3, 3], blended[-1].target[:3, 3], atol=1e-6)
         sim.move_joints(q0)
         with URArm(URArmConfig(host=vc.host, connect_timeout_s=10.0)) as ur:
             ur.move_joints(q0)
         ctl_s = _controller_run(vc.host, rows_stopped)
+        planned_s = vc.control("status")["last_motion_s"]
         sim_s, _ = _sim_run(sim, stopped)
     finally:
         sim.close()
@@ -133,9 +138,12 @@ def test_a_blended_path_plays_alike_on_the_sim_arm_and_the_emulated_controller(v
         f"blended path: sim {sim_b:.4f} s, controller {ctl_blend_s:.4f} s; "
         f"with stops: sim {sim_s:.4f} s, controller {ctl_stop_s:.4f} s"
     )
-    # the same time on both, blended and stopped
-    assert abs(sim_b - ctl_blend_s) <= TOLERANCE_S
-    assert abs(sim_s - ctl_stop_s) <= TOLERANCE_S
+    print(f"planned on the controller: blended {planned_b:.4f} s, with stops {planned_s:.4f} s")
+    # the same plan on both, blended and stopped
+    assert 0.0 <= sim_b - planned_b < SIM_STEP_S and 0.0 <= sim_s - planned_s < SIM_STEP_S
+    # the same time on the controller's clock, through ur-rtde
+    for measured, sim_time, run in ((ctl_blend_s, sim_b, ctl_b), (ctl_stop_s, sim_s, ctl_s)):
+        assert abs(sim_time - measured) <= SIM_STEP_S + 2.0 * run["max_tick_gap"], run
     # quicker than stopping, on both
     assert sim_b < sim_s - 0.1 and ctl_blend_s < ctl_stop_s - 0.1
     # ends on its target (the controller: ur-rtde's 6-digit script text)
@@ -190,6 +198,33 @@ def test_stop_during_a_blended_path_on_the_sim_arm_ends_it_within_a_tenth() -> N
     finally:
         sim.close()
         cell.close()
+
+
+def test_stop_during_a_blended_path_through_the_ur_driver_brakes_the_controller(vc) -> None:
+    with URArm(URArmConfig(host=vc.host, poll_period_s=0.01, connect_timeout_s=10.0)) as ur:
+        q0 = ur.joint_positions()
+        cell, sim = _sim_arm()
+        try:
+            path = _waypoints(sim, q0, RADII)
+        finally:
+            sim.close()
+            cell.close()
+        thread, box = _path_in_thread(ur, path)
+        time.sleep(0.8)
+        assert vc.control("status")["moving"]
+        t_stop = time.monotonic()
+        ur.stop()  # returns once the controller has braked (ur-rtde's stopJ waits for it)
+        thread.join(10.0)
+        assert isinstance(box.get("error"), DeviceError), box
+        assert "interrupted by stop" in str(box["error"])
+        # braking from at most 60 deg/s at the driver's 300 deg/s^2: 0.2 s, plus 0.1 s
+        brake_s = JOINT_V / ur.config.stop_decel_deg_s2
+        assert box["t"] - t_stop <= brake_s + 0.1, box["t"] - t_stop
+        deadline = t_stop + brake_s + 0.1
+        while vc.control("status")["moving"] and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not vc.control("status")["moving"]
+        ur.move_joints(q0)
 
 
 def test_protective_stop_during_a_blended_path_is_a_typed_safety_stop(vc) -> None:

@@ -54,9 +54,12 @@ def main(host: str, rows: list) -> dict:
             break
     # the last sample before rest may have been missed by polling: the end is the first
     # sample seen at rest; its uncertainty is one controller tick
+    stamps = np.array([s[0] for s in samples])
+    during = stamps[(stamps >= (start or 0.0)) & (stamps <= (end or np.inf))]
     out.update(
         start=start,
         end=end,
+        max_tick_gap=float(np.max(np.diff(during))) if during.size > 1 else None,
         q=[s[1] for s in samples],
         final_q=list(rcv.getActualQ()),
     )
