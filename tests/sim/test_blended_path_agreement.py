@@ -200,18 +200,24 @@ def test_stop_during_a_blended_path_on_the_sim_arm_ends_it_within_a_tenth() -> N
         cell.close()
 
 
+def _ur_path_under_way(vc, ur: URArm) -> tuple[np.ndarray, threading.Thread, dict]:
+    """The test path started through the UR driver on a thread, 0.8 s into its motion."""
+    q0 = ur.joint_positions()
+    cell, sim = _sim_arm()
+    try:
+        path = _waypoints(sim, q0, RADII)
+    finally:
+        sim.close()
+        cell.close()
+    thread, box = _path_in_thread(ur, path)
+    time.sleep(0.8)
+    assert vc.control("status")["moving"]
+    return q0, thread, box
+
+
 def test_stop_during_a_blended_path_through_the_ur_driver_brakes_the_controller(vc) -> None:
     with URArm(URArmConfig(host=vc.host, poll_period_s=0.01, connect_timeout_s=10.0)) as ur:
-        q0 = ur.joint_positions()
-        cell, sim = _sim_arm()
-        try:
-            path = _waypoints(sim, q0, RADII)
-        finally:
-            sim.close()
-            cell.close()
-        thread, box = _path_in_thread(ur, path)
-        time.sleep(0.8)
-        assert vc.control("status")["moving"]
+        q0, thread, box = _ur_path_under_way(vc, ur)
         t_stop = time.monotonic()
         ur.stop()  # returns once the controller has braked (ur-rtde's stopJ waits for it)
         thread.join(10.0)
@@ -229,16 +235,7 @@ def test_stop_during_a_blended_path_through_the_ur_driver_brakes_the_controller(
 
 def test_protective_stop_during_a_blended_path_is_a_typed_safety_stop(vc) -> None:
     with URArm(URArmConfig(host=vc.host, poll_period_s=0.01, connect_timeout_s=10.0)) as ur:
-        q0 = ur.joint_positions()
-        cell, sim = _sim_arm()
-        try:
-            path = _waypoints(sim, q0, RADII)
-        finally:
-            sim.close()
-            cell.close()
-        thread, box = _path_in_thread(ur, path)
-        time.sleep(0.8)
-        assert vc.control("status")["moving"]
+        _, thread, box = _ur_path_under_way(vc, ur)
         t_stop = time.monotonic()
         vc.control("protective_stop")
         thread.join(10.0)
