@@ -356,6 +356,55 @@ class Gripper(ABC):
         """True/False when the gripper can sense an object, None when it cannot tell."""
 
 
+# The largest blend radius a path may ask for (UR's, 2 m).
+MAX_BLEND_MM = 2000.0
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """One row of a blended path, as UR's `moveJ(path)` / `moveL(path)` rows [target, speed,
+    acceleration, blend]: "joint" to `target` (6,) deg at deg/s, deg/s^2, or "linear" to the
+    TCP pose `target` (4x4 `T_base_tcp`, mm) at mm/s, mm/s^2 (None: the configured defaults).
+    The arm passes within `blend_mm` of the target without stopping there (0: it stops); the
+    last waypoint of a path always stops."""
+
+    kind: str
+    target: object
+    speed: float | None = None
+    accel: float | None = None
+    blend_mm: float = 0.0
+
+
+def check_path(limits: MotionLimits, path: object) -> list[Waypoint]:
+    """The waypoints of `path`, each target checked (`check_joints` / `check_pose`) and each
+    blend radius in [0, MAX_BLEND_MM], else `MotionLimitError` naming the waypoint."""
+    points = list(path)  # type: ignore[call-overload]
+    if not points:
+        raise MotionLimitError("a path needs at least one waypoint; nothing sent")
+    out = []
+    for i, w in enumerate(points):
+        if not isinstance(w, Waypoint) or w.kind not in ("joint", "linear"):
+            raise MotionLimitError(
+                f"path waypoint {i}: not a joint or linear Waypoint; nothing sent"
+            )
+        blend = float(w.blend_mm)
+        if not (np.isfinite(blend) and 0.0 <= blend <= MAX_BLEND_MM):
+            raise MotionLimitError(
+                f"path waypoint {i}: blend radius {w.blend_mm} mm is not in [0, {MAX_BLEND_MM:g}]"
+                " mm; nothing sent"
+            )
+        try:
+            target = (
+                limits.check_joints(w.target) if w.kind == "joint" else limits.check_pose(w.target)
+            )
+        except MotionLimitError as exc:
+            raise MotionLimitError(f"path waypoint {i}: {exc}") from None
+        out.append(
+            Waypoint(w.kind, target, w.speed, w.accel, blend if i < len(points) - 1 else 0.0)
+        )
+    return out
+
+
 @dataclass(frozen=True)
 class ArmState:
     """A snapshot for status displays: joints (deg), TCP pose (4x4, mm) and safety."""
@@ -412,6 +461,19 @@ class Arm(Device):
     ) -> None:
         """Move the TCP in a straight line to `pose` (4x4 `T_base_tcp`, mm)."""
 
+    def move_path(self, path: object, timeout_s: float = DEFAULT_MOVE_TIMEOUT_S) -> None:
+        """Move through `path` (a sequence of `Waypoint`), blending past each waypoint within
+        its blend radius. Nothing is sent unless every waypoint passes the checks. An arm
+        whose controller cannot blend stops at every waypoint (this default)."""
+        points = check_path(self.limits, path)
+        deadline = time.monotonic() + timeout_s
+        for w in points:
+            left = max(deadline - time.monotonic(), 1e-3)
+            if w.kind == "joint":
+                self.move_joints(w.target, w.speed, w.accel, timeout_s=left)
+            else:
+                self.move_linear(w.target, w.speed, w.accel, timeout_s=left)
+
     @abstractmethod
     def stop(self) -> None:
         """Decelerate and stop any motion now. Never refused."""
@@ -430,6 +492,7 @@ __all__ = [
     "DEFAULT_GRIPPER_TIMEOUT_S",
     "DEFAULT_MOVE_TIMEOUT_S",
     "DEFAULT_SWITCH_TIMEOUT_S",
+    "MAX_BLEND_MM",
     "RATES",
     "UNCOMPRESSED_FORMATS",
     "Arm",
@@ -441,7 +504,9 @@ __all__ = [
     "LaserSwitch",
     "MotionLimits",
     "SafetyStatus",
+    "Waypoint",
     "as_pose_matrix",
+    "check_path",
     "pose_matrix",
     "pose_vector",
 ]

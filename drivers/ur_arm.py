@@ -37,6 +37,7 @@ from drivers.base import (
     Gripper,
     MotionLimits,
     SafetyStatus,
+    check_path,
     pose_matrix,
     pose_vector,
 )
@@ -414,6 +415,40 @@ class URArm(Arm):
                 cfg.position_tolerance_mm,
                 "mm",
             )
+
+    def move_path(self, path: object, timeout_s: float = DEFAULT_MOVE_TIMEOUT_S) -> None:
+        """ur-rtde's path call (`movePath`: movej/movel rows with their blend radii, run by
+        the controller as one program); followed as a single move to the last waypoint."""
+        cfg = self.config
+        lim = self._limits
+        rows: list[tuple[str, list[float]]] = []
+        points = check_path(lim, path)
+        for w in points:
+            blend = w.blend_mm / 1000.0
+            if w.kind == "joint":
+                v = lim.check_rate("joint_speed_deg_s", w.speed, cfg.joint_speed_deg_s)
+                a = lim.check_rate("joint_accel_deg_s2", w.accel, cfg.joint_accel_deg_s2)
+                q = list(np.deg2rad(np.asarray(w.target, float)))
+                rows.append(("joint", [*q, float(np.deg2rad(v)), float(np.deg2rad(a)), blend]))
+            else:
+                v = lim.check_rate("linear_speed_mm_s", w.speed, cfg.linear_speed_mm_s)
+                a = lim.check_rate("linear_accel_mm_s2", w.accel, cfg.linear_accel_mm_s2)
+                pose = ur_pose_from_matrix(np.asarray(w.target, float))
+                rows.append(("linear", [*pose, v / 1000.0, a / 1000.0, blend]))
+        last = points[-1]
+        if last.kind == "joint":
+            q_end = np.asarray(last.target, float)
+            error_fn = lambda: float(np.max(np.abs(self.joint_positions() - q_end)))  # noqa: E731
+            tolerance, unit = cfg.joint_tolerance_deg, "deg"
+        else:
+            p_end = np.asarray(last.target, float)[:3, 3]
+            error_fn = lambda: float(np.linalg.norm(self.tcp_pose()[:3, 3] - p_end))  # noqa: E731
+            tolerance, unit = cfg.position_tolerance_mm, "mm"
+        with self._lock:
+            self._check_ready()
+            self._stop_requested.clear()
+            self._link.move_path(rows)
+            self._follow(timeout_s, "blended path", error_fn, tolerance, unit)
 
     def _follow(
         self,

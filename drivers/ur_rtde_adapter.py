@@ -61,6 +61,10 @@ class URLink(Protocol):
     def move_l(self, pose: list[float], speed: float, accel: float) -> None:
         """Start an asynchronous linear move (m + rotvec rad, m/s, m/s^2)."""
 
+    def move_path(self, rows: list[tuple[str, list[float]]]) -> None:
+        """Start an asynchronous blended path: ("joint" | "linear", [q rad or pose m + rotvec,
+        speed, accel, blend m]) rows, as ur-rtde's moveJ/moveL path rows."""
+
     def is_moving(self) -> bool:
         """True while an asynchronous move is running."""
 
@@ -183,6 +187,10 @@ class RTDELink:
     def move_l(self, pose: list[float], speed: float, accel: float) -> None:
         if not self._call("move_l", pose, speed, accel):
             raise self._rejected("moveL")
+
+    def move_path(self, rows: list[tuple[str, list[float]]]) -> None:
+        if not self._call("move_path", rows):
+            raise self._rejected("movePath")
 
     def _rejected(self, what: str) -> DeviceError:
         robot, safety = self._call("modes")

@@ -116,6 +116,12 @@ class _Session:
                     "dropped connection); the command was not carried out"
                 )
             return accepted
+        if name == "move_path":
+            self.ensure_program()
+            accepted = bool(ctl.movePath(_ur_path(args[0]), True))
+            if not accepted and not ctl.isProgramRunning() and rcv.getSafetyMode() == 1:
+                raise _LostError("the control script stopped during the path; nothing carried out")
+            return accepted
         if name == "is_moving":
             return bool(ctl.getAsyncOperationProgressEx().isAsyncOperationRunning())
         if name == "set_output":
@@ -130,6 +136,23 @@ class _Session:
             )
             return bool((int(bits) >> (_IO_BIT_OFFSET[kind] + int(pin))) & 1)
         raise ValueError(f"unknown worker request {name!r}")
+
+
+def _ur_path(rows: list[tuple[str, list[float]]]) -> Any:
+    """ur-rtde's Path of (kind, [6 values, speed, acceleration, blend]) rows: a movej to joints
+    or a movel to a pose each (sent as the control script with the path injected, then the
+    path command: ur-rtde's `movePath`)."""
+    from rtde_control import Path as URPath
+    from rtde_control import PathEntry
+
+    path = URPath()
+    for kind, row in rows:
+        if kind == "linear":
+            entry = PathEntry(PathEntry.MoveL, PathEntry.PositionTcpPose, list(row))
+        else:
+            entry = PathEntry(PathEntry.MoveJ, PathEntry.PositionJoints, list(row))
+        path.addEntry(entry)
+    return path
 
 
 def _quiet_disconnect(iface: Any) -> None:

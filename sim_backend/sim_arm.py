@@ -19,12 +19,15 @@ from drivers.base import (
     Gripper,
     MotionLimits,
     SafetyStatus,
+    Waypoint,
+    check_path,
 )
 from drivers.errors import (
     DeviceError,
     DeviceTimeoutError,
     MotionLimitError,
 )
+from omnisort_hw.core.blended_path import PATH_RATE_HZ, Segment, plan_blended_path, resample
 from omnisort_hw.core.frames import invert_pose
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import Trajectory, plan_joint_move, plan_linear_move
@@ -275,6 +278,35 @@ class SimArm(_Connectable, Arm):
         except (MotionRefusedError, ValueError) as exc:
             raise MotionLimitError(f"{self.name}: linear move refused: {exc}") from None
         self._execute(traj, timeout_s, "linear move")
+
+    def segment(self, w: Waypoint) -> Segment:
+        """The core's segment for a checked waypoint: the limits `move_joints` or
+        `move_linear` would plan that move with (a linear move: the joints' maxima)."""
+        lim = self._limits
+        if w.kind == "joint":
+            v = lim.check_rate("joint_speed_deg_s", w.speed, self.joint_speed)
+            a = lim.check_rate("joint_accel_deg_s2", w.accel, self.joint_accel)
+            limits = self._plan_limits(v, a, self.linear_speed, self.linear_accel)
+        else:
+            v = lim.check_rate("linear_speed_mm_s", w.speed, self.linear_speed)
+            a = lim.check_rate("linear_accel_mm_s2", w.accel, self.linear_accel)
+            limits = self._plan_limits(lim.max_joint_speed_deg_s, lim.max_joint_accel_deg_s2, v, a)
+        return Segment(w.kind, np.asarray(w.target, float), limits, w.blend_mm)
+
+    def move_path(self, path: object, timeout_s: float = DEFAULT_MOVE_TIMEOUT_S) -> None:
+        """The core's blended path (`core.blended_path`, planned at its own rate and played
+        one physics step per sample), as the emulated controller plays a ur-rtde path."""
+        self._require()
+        segments = [self.segment(w) for w in check_path(self._limits, path)]
+        self.safety_status().raise_if_stopped(self.name)
+        try:
+            planned = plan_blended_path(
+                self.model, self.joint_positions(), segments, tool=self.tool, rate_hz=PATH_RATE_HZ
+            )
+        except (MotionRefusedError, ValueError) as exc:
+            raise MotionLimitError(f"{self.name}: path refused: {exc}") from None
+        traj = resample(planned.trajectory, 1.0 / self.cell.world.time_step)
+        self._execute(traj, timeout_s, "blended path")
 
     def _execute(self, traj: Trajectory, timeout_s: float, what: str) -> None:
         """Step the trajectory through the physics; honour stop(), stops and the timeout."""

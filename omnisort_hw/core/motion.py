@@ -43,6 +43,7 @@ __all__ = [
     "Trajectory",
     "arm_capsules",
     "check_collisions",
+    "clearance",
     "collision_mask",
     "concatenate",
     "find_collision",
@@ -684,6 +685,30 @@ def collision_mask(
     """(M,) True where the arm at joints q (M, 6) deg touches an obstacle (within margin_mm)."""
     q = np.asarray(q_deg, dtype=float).reshape(-1, 6)
     return _hits(model, q, obstacles, (*arm_capsules(model), *tool_capsules), margin_mm)[0]
+
+
+def clearance(
+    model: URModel,
+    q_deg: np.ndarray,
+    obstacles: Sequence[Box | FloorPlane],
+    *,
+    tool_capsules: Sequence[Capsule] = (),
+) -> float:
+    """The margin (mm) at which the arm at joints q (6,) deg first touches an obstacle, as
+    `collision_mask` sees it (negative when it already does; inf without obstacles)."""
+    sp = _cover((*arm_capsules(model), *tool_capsules))
+    F = joint_frames(model, np.asarray(q_deg, dtype=float).reshape(1, 6))[0][sp.frame]
+    pts = (F[:, :3, :3] @ sp.centre[:, :, None])[:, :, 0] + F[:, :3, 3]
+    gaps = [np.inf]
+    for o in obstacles:
+        if isinstance(o, Box):
+            gap = np.maximum(o.lo_mm - pts, 0.0) + np.maximum(pts - o.hi_mm, 0.0)
+            gaps.append(float(np.min(np.linalg.norm(gap, axis=1) - sp.radius)))
+        elif (~sp.static).any():
+            n = o.T_BF[:3, 2]
+            height = pts[~sp.static] @ n - n @ o.T_BF[:3, 3]
+            gaps.append(float(np.min(height - sp.radius[~sp.static])))
+    return min(gaps)
 
 
 def find_collision(

@@ -36,6 +36,7 @@ from omnisort_hw.core.motion import (
     plan_joint_move,
     plan_linear_move,
 )
+from omnisort_hw.core.pick_blending import MoveChecks, blend_moves
 from omnisort_hw.errors import MotionRefusedError
 
 # A refusal that starts with this may clear once another cube has been picked.
@@ -151,6 +152,7 @@ class Move:
     T_target: np.ndarray | None
     traj: Trajectory
     tcp_path_B: np.ndarray = field(default_factory=lambda: np.empty((0, 3)), repr=False)
+    blend_mm: float = 0.0  # the arm passes within this of the target into the next move
 
 
 @dataclass
@@ -167,6 +169,7 @@ class PickPlan:
     back: list[Move] = field(default_factory=list)
     refused: str | None = None
     grasp_yaw_B_deg: float = 0.0
+    paths_s: dict[str, float] = field(default_factory=dict)
 
     @property
     def moves(self) -> list[Move]:
@@ -174,7 +177,18 @@ class PickPlan:
         return [*self.approach, *mid, *self.carry, *self.back]
 
     @property
+    def paths(self) -> dict[str, list[Move]]:
+        """The blended paths of the pick: to the grasp, to the release, back home (each
+        starts and ends at rest; the moves inside one blend by their `blend_mm`)."""
+        reach = [*self.approach, *([self.descend] if self.descend is not None else [])]
+        carry = [*([self.lift] if self.lift is not None else []), *self.carry]
+        return {k: v for k, v in (("reach", reach), ("carry", carry), ("back", self.back)) if v}
+
+    @property
     def duration_s(self) -> float:
+        """The planned motion time: the blended paths' (or the moves' with stops)."""
+        if self.paths_s:
+            return float(sum(self.paths_s.values()))
         return float(sum(m.traj.duration for m in self.moves))
 
     @property
@@ -358,6 +372,10 @@ class Planner:
                     f"mm of {hit.obstacle!r}"
                 )
 
+    def tool_capsules(self, holding: bool) -> tuple[Capsule, ...]:
+        """The gripper, and the held cube when holding."""
+        return (*self.gripper, self.held) if holding else self.gripper
+
     def plan_joint(
         self,
         q0: np.ndarray,
@@ -499,6 +517,7 @@ class Planner:
                 errors.append(str(exc))
                 continue
             plan.grasp_yaw_B_deg = _wrap180(yaw)
+            self._blend(plan, q_start, free, with_target)
             return plan
         plan.approach, plan.descend, plan.lift, plan.carry, plan.back = [], None, None, [], []
         kind = (
@@ -506,6 +525,34 @@ class Planner:
         )
         plan.refused = f"{kind}: {errors[0]}" if errors else kind
         return plan
+
+    def _blend(
+        self,
+        plan: PickPlan,
+        q_start: np.ndarray,
+        free: list[Box | FloorPlane],
+        with_target: list[Box | FloorPlane],
+    ) -> None:
+        """Blend radii of the pick's paths from the clearance, and their blended durations
+        (see `core.pick_blending`)."""
+        assert plan.descend is not None and plan.lift is not None
+        reach = [MoveChecks(with_target)] * len(plan.approach) + [MoveChecks(free)]
+        carry = [MoveChecks(free, True)] * (1 + len(plan.carry))
+        checks = {"reach": reach, "carry": carry, "back": [MoveChecks(free)] * len(plan.back)}
+        q0 = q_start
+        for name, moves in plan.paths.items():
+            try:
+                blended = blend_moves(self, q0, moves, checks[name])
+            except MotionRefusedError:  # not blendable: the checked moves, with stops
+                blended = None
+            for k, m in enumerate(moves):
+                m.blend_mm = blended.blends_mm[k] if blended is not None else 0.0
+            plan.paths_s[name] = (
+                blended.duration_s
+                if blended is not None
+                else float(sum(m.traj.duration for m in moves))
+            )
+            q0 = moves[-1].q_target
 
     def path_to_any(
         self,

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from drivers.base import Waypoint
 from omnisort_hw.compute_worker import InCaller
 from omnisort_hw.config.sorting import RegistrationConfig, SortSection
 from omnisort_hw.core.cube_location import Cube
@@ -521,6 +522,45 @@ class Sorter:
         self._executed.append(tcp[:3, 3])
         self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
 
+    def _send_path(self, moves: list[Move], planned_s: float | None) -> None:
+        """Execute planned moves as one blended path (each move blends into the next within
+        its `blend_mm`, as planned and checked); the arm plans the same path again."""
+        if all(m.blend_mm <= 0.0 for m in moves[:-1]):  # nothing to blend: single moves
+            for move in moves:
+                self._send(move)
+            return
+        arm = self._require_arm()
+        if self.cancel.is_set():
+            raise MotionRefusedError("sort cancelled")
+        cur = np.asarray(arm.joint_positions(), float)
+        off = float(np.max(np.abs(cur - moves[0].traj.q[0])))
+        if off > JOINT_AT_TOLERANCE_DEG:
+            raise MotionRefusedError(
+                f"{moves[0].what}: the arm is not where the plan starts (off by {off:.2f} deg); "
+                "nothing sent"
+            )
+        cfg = self.cfg
+        path = []
+        for move in moves:
+            log_trajectory(self.log, "sorting/planned", move)
+            if move.kind == "joint":
+                target: object = move.q_target
+                speed, accel = cfg.joint_speed_deg_s, cfg.joint_accel_deg_s2
+            else:
+                target, speed, accel = move.T_target, cfg.linear_speed_mm_s, cfg.linear_accel_mm_s2
+            path.append(Waypoint(move.kind, target, speed, accel, move.blend_mm))
+        t0 = self.clock()
+        arm.move_path(path)
+        if self.cycle is not None:
+            self.cycle.motion_s += self.clock() - t0
+            self.cycle.planned_s += (
+                planned_s if planned_s is not None else sum(m.traj.duration for m in moves)
+            )
+        tcp = np.asarray(arm.tcp_pose(), float)
+        self.log.pose("sorting/executed/tcp", tcp)
+        self._executed.append(tcp[:3, 3])
+        self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
+
     def _grip(self, close: bool) -> None:
         """Close or open the gripper, timed on the arm's clock (an open gripper is not
         opened again)."""
@@ -541,8 +581,8 @@ class Sorter:
         phase = self.on_pick or (lambda _phase, _out: None)
         try:
             self._grip(False)
-            for move in [*plan.approach, plan.descend]:
-                self._send(move)
+            paths = plan.paths
+            self._send_path(paths["reach"], plan.paths_s.get("reach"))
             phase("grasping", out)
             self._grip(True)
             if grip.holding is False:
@@ -553,11 +593,9 @@ class Sorter:
                 self._go_home(planner)
                 return
             phase("holding", out)
-            self._send(plan.lift)
-            if self._watch is not None:  # the check capture overlaps the carry
+            if self._watch is not None:  # the check capture overlaps the lift and carry
                 self._watch.capture_now()
-            for move in plan.carry:
-                self._send(move)
+            self._send_path(paths["carry"], plan.paths_s.get("carry"))
             if grip.holding is False:
                 out.status, out.reason = "failed", "the cube was lost on the way to its bin"
                 self._grip(False)
@@ -566,8 +604,8 @@ class Sorter:
                 return
             self._grip(False)
             phase("released", out)
-            for move in plan.back:
-                self._send(move)
+            if "back" in paths:
+                self._send_path(paths["back"], plan.paths_s.get("back"))
             out.status = "sorted"
             out.motion_s = plan.duration_s
         except Exception as exc:

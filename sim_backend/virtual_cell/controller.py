@@ -8,8 +8,11 @@ simulated gripper from the configured digital output, steps the physics and publ
 snapshot of every RTDE output field.
 
 Units are the controller's: radians, metres, rotation vectors. Moves are planned by the core
-(`omnisort_hw.core.motion`) at the controller's 500 Hz and played back against the wall clock;
-UR's trapezoidal timing, blending and speed scaling are not modelled (see docs/virtual_cell.md).
+(`omnisort_hw.core.motion`) at the controller's 500 Hz and played back against the wall clock.
+A path (ur-rtde's `moveJ(path)`, `moveL(path)`, `movePath`: the control script re-uploaded with
+the path's `movej`/`movel` lines injected, then command 45) is planned by the core's blended
+path (`omnisort_hw.core.blended_path`), the same model the simulated arm plays. UR's own
+trapezoidal timing, blend shapes and speed scaling are not modelled (see docs/virtual_cell.md).
 """
 
 from __future__ import annotations
@@ -18,11 +21,12 @@ import logging
 import re
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from omnisort_hw.core.blended_path import Segment, plan_blended_path, resample
 from omnisort_hw.core.frames import pose_from_xyz_rotvec, xyz_rotvec_from_pose
 from omnisort_hw.core.kinematics import forward, nearest_solution
 from omnisort_hw.core.motion import MotionLimits, plan_joint_move, plan_linear_move
@@ -46,6 +50,7 @@ SAFETY_MODE_NAMES = {
 
 # ur-rtde's RobotCommand numbers the native script machine carries out.
 MOVEJ, MOVEJ_IK, MOVEL, MOVEL_FK = 1, 2, 3, 4
+MOVE_PATH = 45
 SET_PAYLOAD, SET_TCP, PROTECTIVE_STOP_CMD = 17, 29, 31
 STOPL, STOPJ, SET_WATCHDOG = 33, 34, 35
 GET_TCP_OFFSET, FK_DEFAULT, IS_STEADY = 40, 43, 47
@@ -57,6 +62,39 @@ STOP_DECEL_RAD_S2 = 10.0  # how hard a protective or emergency stop brakes (cate
 
 CONTROL_SCRIPT_MARKER = "RTDE Control Script"
 _OFFSET_RE = re.compile(r"# int register offset\n\s*(\d+)")
+# A waypoint line ur-rtde's Path::toScriptCode injects: movej([q],a=,v=,r=) / movel(p[x],...).
+_PATH_RE = re.compile(
+    r"^\s*(movej|movel)\((p?)\[([^\]]*)\],a=([^,]+),v=([^,]+),r=([^)]+)\)\s*$", re.M
+)
+# The joints' speed and acceleration a movel may use (deg/s, deg/s^2; the hardware's).
+MOVEL_JOINT_CAPS = (180.0, 800.0)
+
+
+@dataclass(frozen=True)
+class PathRow:
+    """One injected path waypoint: movej or movel, pose (p[...]) or joints, UR units."""
+
+    move: str
+    is_pose: bool
+    values: np.ndarray
+    accel: float
+    speed: float
+    blend_m: float
+
+
+def parse_path(text: str) -> list[PathRow]:
+    """The path waypoints injected into the control script (empty when there are none)."""
+    return [
+        PathRow(
+            move,
+            p == "p",
+            np.array([float(v) for v in vals.split(",")]),
+            float(a),
+            float(v),
+            float(r),
+        )
+        for move, p, vals, a, v, r in _PATH_RE.findall(text)
+    ]
 
 
 @dataclass
@@ -99,6 +137,7 @@ class ControllerEvents:
     scripts: int = 0
     refused_scripts: int = 0
     motions: int = 0
+    last_motion_s: float = 0.0  # the planned duration of the last motion started
 
 
 def _decel(q0: np.ndarray, qd0: np.ndarray, decel: float) -> np.ndarray:
@@ -155,6 +194,8 @@ class URController:
         self.speed_slider = 1.0
         self.events = ControllerEvents()
         self._motion: _Motion | None = None
+        self._path: list[PathRow] = []
+        self._stale_cmd = 0
         self._script = False
         self._executing = False
         self._sync_wait = False
@@ -277,6 +318,10 @@ class URController:
             self._halt_motion(STOP_DECEL_RAD_S2)
             found = _OFFSET_RE.search(text)
             self._reg = int(found.group(1)) if found else 0
+            self._path = parse_path(text)
+            # A command left in the register by the previous program (ur-rtde's stop before a
+            # re-upload) is not acted on: a real script starts too slowly to see it.
+            self._stale_cmd = self.in_int[self._reg]
             self._script = True
             self._executing = False
             self._sync_wait = False
@@ -394,6 +439,10 @@ class URController:
                 self.out_int[reg] = 2
             return
         cmd = self.in_int[reg]
+        if cmd != self._stale_cmd:
+            self._stale_cmd = 0
+        elif cmd:
+            return
         if cmd in REALTIME:
             self._process(cmd)
             self.out_int[reg] = 1
@@ -418,6 +467,8 @@ class URController:
         try:
             if cmd in (MOVEJ, MOVEJ_IK, MOVEL, MOVEL_FK):
                 self._start_move(cmd, np.asarray(d[:6], float), d[6], d[7], is_async)
+            elif cmd == MOVE_PATH:
+                self._start_path(is_async)
             elif cmd in (STOPJ, STOPL, SPEED_STOP, SERVO_STOP):
                 self._stop_async_move()
                 decel = d[0] if cmd in (STOPJ, STOPL) else 10.0
@@ -472,21 +523,52 @@ class URController:
                 if cmd == MOVEL
                 else forward(self.model, np.rad2deg(target), tool)
             )
-            limits = MotionLimits(
-                joint_speed_deg_s=180.0,
-                joint_acc_deg_s2=800.0,
-                linear_speed_mm_s=float(speed * 1000.0),
-                linear_acc_mm_s2=float(accel * 1000.0),
-                angular_speed_deg_s=180.0,
-                angular_acc_deg_s2=720.0,
-                rate_hz=RATE_HZ,
-            )
+            limits = replace(_movel_limits(speed, accel), rate_hz=RATE_HZ)
             traj = plan_linear_move(self.model, q0, T, limits, tool=tool)
         q = np.deg2rad(traj.q)
         if cmd == MOVEJ:
             q[-1] = target
-        self._motion = _Motion(q, time.monotonic(), is_async, "movej" if cmd < 3 else "movel")
+        self._play(q, is_async, "movej" if cmd < 3 else "movel")
+
+    def _start_path(self, is_async: bool) -> None:
+        """Play the injected path as one blended motion (exec_move_path of the script)."""
+        self._stop_async_move()
+        self._halt_motion(STOP_DECEL_RAD_S2)
+        if not self._path:
+            log.warning("move_path without an injected path: nothing to do")
+            return
+        q_prev = np.rad2deg(self.q)
+        tool = self.tool_matrix()
+        segments = []
+        for row in self._path:
+            if row.move == "movej":
+                q1 = (
+                    nearest_solution(self.model, _pose_matrix(row.values), q_prev, tool=tool)
+                    if row.is_pose
+                    else np.rad2deg(row.values)
+                )
+                lim = MotionLimits(
+                    joint_speed_deg_s=float(np.rad2deg(row.speed)),
+                    joint_acc_deg_s2=float(np.rad2deg(row.accel)),
+                )
+                segments.append(Segment("joint", np.asarray(q1, float), lim, row.blend_m * 1e3))
+                q_prev = np.asarray(q1, float)
+            else:
+                T = (
+                    _pose_matrix(row.values)
+                    if row.is_pose
+                    else forward(self.model, np.rad2deg(row.values), tool)
+                )
+                lim = _movel_limits(row.speed, row.accel)
+                segments.append(Segment("linear", T, lim, row.blend_m * 1e3))
+        path = plan_blended_path(self.model, np.rad2deg(self.q), segments, tool=tool)
+        q = np.deg2rad(resample(path.trajectory, RATE_HZ).q)
+        self._play(q, is_async, "move_path")
+
+    def _play(self, q: np.ndarray, is_async: bool, what: str) -> None:
+        self._motion = _Motion(q, time.monotonic(), is_async, what)
         self.events.motions += 1
+        self.events.last_motion_s = (len(q) - 1) / RATE_HZ
         if is_async:
             self._write_async(0)
         else:
@@ -531,6 +613,18 @@ class URController:
     @property
     def moving(self) -> bool:
         return self._motion is not None
+
+
+def _movel_limits(speed: float, accel: float) -> MotionLimits:
+    """A movel's limits: the tool's speed and acceleration (m/s, m/s^2), the joints' maxima."""
+    return MotionLimits(
+        joint_speed_deg_s=MOVEL_JOINT_CAPS[0],
+        joint_acc_deg_s2=MOVEL_JOINT_CAPS[1],
+        linear_speed_mm_s=float(speed * 1000.0),
+        linear_acc_mm_s2=float(accel * 1000.0),
+        angular_speed_deg_s=180.0,
+        angular_acc_deg_s2=720.0,
+    )
 
 
 def _pose_matrix(pose: np.ndarray) -> np.ndarray:

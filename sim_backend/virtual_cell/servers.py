@@ -461,6 +461,7 @@ def all_status(ctl: URController) -> dict[str, Any]:
             "digital_output_bits": ctl.outputs.bits,
             "commands": list(ctl.events.commands),
             "motions": ctl.events.motions,
+            "last_motion_s": ctl.events.last_motion_s,
             "scripts": ctl.events.scripts,
             "refused_scripts": ctl.events.refused_scripts,
         }

@@ -36,6 +36,7 @@ from drivers.base import (
     LaserSwitch,
     MotionLimits,
     SafetyStatus,
+    Waypoint,
 )
 from drivers.errors import DeviceError, MotionLimitError
 
@@ -287,6 +288,34 @@ class ArmContract:
                     arm.move_linear(self.linear_target(arm), **{arg: value})
             assert info.value.code == "motion_refused"
             assert f"[arm].max_{name}" in str(info.value), str(info.value)
+        np.testing.assert_allclose(arm.joint_positions(), before, atol=1e-6)
+
+    def test_move_path_ends_on_its_last_waypoint(self, arm: Arm) -> None:
+        via = self.joint_target(arm)
+        T = arm.tcp_pose().copy()
+        end = self.joint_target(arm) + np.array([5.0, 0.0, -5.0, 0.0, 0.0, 0.0])
+        path = [Waypoint("joint", via, blend_mm=10.0), Waypoint("joint", end)]
+        arm.move_path(path, timeout_s=30.0)
+        np.testing.assert_allclose(arm.joint_positions(), end, atol=self.joint_tolerance_deg)
+        T[:3, 3] += np.array([0.0, 20.0, 10.0])
+        arm.move_path([Waypoint("linear", T)], timeout_s=30.0)
+        np.testing.assert_allclose(arm.tcp_pose()[:3, 3], T[:3, 3], atol=self.position_tolerance_mm)
+
+    def test_path_with_a_bad_waypoint_is_refused_without_moving(self, arm: Arm) -> None:
+        before = arm.joint_positions()
+        bad = before.copy()
+        bad[0] = arm.limits.joint_max_deg[0] + 10.0
+        good = self.joint_target(arm)
+        for path in (
+            [Waypoint("joint", good, blend_mm=10.0), Waypoint("joint", bad)],
+            [Waypoint("joint", good, blend_mm=-1.0), Waypoint("joint", before)],
+            [Waypoint("joint", good, blend_mm=float("nan")), Waypoint("joint", before)],
+            [Waypoint("joint", good, speed=arm.limits.max_joint_speed_deg_s * 2.0)],
+            [],
+        ):
+            with pytest.raises(MotionLimitError) as info:
+                arm.move_path(path)
+            assert info.value.code == "motion_refused"
         np.testing.assert_allclose(arm.joint_positions(), before, atol=1e-6)
 
     def test_stop_when_idle_is_harmless(self, arm: Arm) -> None:

@@ -120,6 +120,14 @@ class RecordingURLink:
         self._moving = self.move_polls
         self._polls = 0
 
+    def move_path(self, rows: list[tuple[str, list[float]]]) -> None:
+        self._rec("move_path", [(kind, list(row)) for kind, row in rows])
+        self._need()
+        kind, row = rows[-1]
+        self._target = ("pose" if kind == "linear" else "q", list(row[:6]))
+        self._moving = self.move_polls
+        self._polls = 0
+
     def is_moving(self) -> bool:
         self._need()
         self._polls += 1

@@ -41,3 +41,23 @@ def truth_payload(cell: Any, robot_base: bool = True) -> dict[str, Any]:
     if not robot_base:
         truth["robot_base"] = None
     return truth
+
+
+def spy_linear_targets(arm: Any) -> list[np.ndarray]:
+    """The TCP positions of every straight-line target the arm is sent (single moves and the
+    linear waypoints of paths), filled in as the arm runs."""
+    targets: list[np.ndarray] = []
+    orig_linear, orig_path = arm.move_linear, arm.move_path
+
+    def move_linear(pose: Any, *a: Any, **k: Any) -> None:
+        targets.append(np.asarray(pose, float)[:3, 3].copy())
+        orig_linear(pose, *a, **k)
+
+    def move_path(path: Any, *a: Any, **k: Any) -> None:
+        targets.extend(
+            np.asarray(w.target, float)[:3, 3].copy() for w in path if w.kind == "linear"
+        )
+        orig_path(path, *a, **k)
+
+    arm.move_linear, arm.move_path = move_linear, move_path
+    return targets

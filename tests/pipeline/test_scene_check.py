@@ -19,7 +19,7 @@ from omnisort_hw.pipeline.calibration_source import MemoryCalibration
 from omnisort_hw.pipeline.scene_check import keep_fraction
 from omnisort_hw.pipeline.sort import Sorter
 from sim_backend.sort_harness import SimVerifier, sim_registration_config, sim_sort_config
-from tests.pipeline.sorting_scene import sorting_scene
+from tests.pipeline.sorting_scene import sorting_scene, spy_linear_targets
 
 
 def _sort(change: str) -> dict[str, Any]:
@@ -37,14 +37,7 @@ def _sort(change: str) -> dict[str, Any]:
         cam.grab(with_truth=True)
         calib = SystemCalibration.from_json(cam.last_truth, source="truth")
         verifier = SimVerifier(arm)
-        targets: list[np.ndarray] = []
-        orig_linear = arm.move_linear
-
-        def move_linear(pose: Any, *a: Any, **k: Any) -> None:
-            targets.append(np.asarray(pose, float)[:3, 3].copy())
-            orig_linear(pose, *a, **k)
-
-        arm.move_linear = move_linear  # type: ignore[method-assign]
+        targets = spy_linear_targets(arm)
         changed: dict[str, Any] = {}
         if change == "add":  # out of the cell during the first capture, put down later
             last = max(verifier.true_cubes(), key=lambda t: float(t.center_S[1]))

@@ -24,7 +24,13 @@ from omnisort_hw.pipeline.calibration_source import (
 from omnisort_hw.pipeline.sort import Sorter
 from omnisort_hw.runlog import RunLog, entity_paths
 from sim_backend.sort_harness import SimScene, SimVerifier, sim_registration_config, sim_sort_config
-from tests.pipeline.sorting_scene import WIDTH, T_SB_of, sorting_scene, truth_payload
+from tests.pipeline.sorting_scene import (
+    WIDTH,
+    T_SB_of,
+    sorting_scene,
+    spy_linear_targets,
+    truth_payload,
+)
 
 # ---- the calibration gate: no motion at all ------------------------------------------------
 
@@ -118,14 +124,7 @@ def test_sort_a_small_scene_end_to_end(tmp_path: Path) -> None:
     for d in (cam, laser, arm):
         d.connect()
     try:
-        targets: list[np.ndarray] = []
-        orig_linear = arm.move_linear
-
-        def move_linear(pose: Any, *a: Any, **k: Any) -> None:
-            targets.append(np.asarray(pose, float)[:3, 3].copy())
-            orig_linear(pose, *a, **k)
-
-        arm.move_linear = move_linear  # type: ignore[method-assign]
+        targets = spy_linear_targets(arm)
         cam.grab(with_truth=True)
         from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 

@@ -7,18 +7,12 @@ commands until unlocked and the control script re-uploaded.
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-from pathlib import Path
-
 import pytest
 
-from tests.sim.virtual_cell_fixture import virtual_cell
+from tests.sim.virtual_cell_fixture import run_client, virtual_cell
 
 pytest.importorskip("rtde_control", reason="needs ur-rtde")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
-ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -28,15 +22,7 @@ def vc():
 
 
 def test_plain_ur_rtde_client_behaves_as_on_a_controller(vc) -> None:
-    run = subprocess.run(
-        [sys.executable, "-m", "tests.sim.ur_rtde_client", vc.host],
-        capture_output=True,
-        text=True,
-        timeout=90,
-        cwd=ROOT,
-    )
-    assert run.returncode == 0, run.stderr[-3000:]
-    out = json.loads(run.stdout.strip().splitlines()[-1])
+    out = run_client("tests.sim.ur_rtde_client", vc.host)
     checks = {
         "polyscope 5.x": out["polyscope"].startswith("5."),
         "robot mode": out["robotmode"] == "Robotmode: RUNNING",

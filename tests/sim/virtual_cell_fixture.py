@@ -3,8 +3,13 @@ HOST` once every port accepts), ordered teardown (SIGTERM, wait, then kill)."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -25,3 +30,17 @@ def virtual_cell(
     finally:
         code = vc.stop()
         assert code in (0, None, -9), f"virtual cell exited with {code}: {vc.log_tail()}"
+
+
+def run_client(module: str, *args: str, timeout_s: float = 90.0) -> Any:
+    """Run a client module (`python -m MODULE ARGS`) in its own process, bounded by
+    `timeout_s`; the JSON object on its last line of output."""
+    run = subprocess.run(
+        [sys.executable, "-m", module, *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        cwd=Path(__file__).resolve().parents[2],
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    return json.loads(run.stdout.strip().splitlines()[-1])
