@@ -112,11 +112,11 @@ def blend_moves(
 
 def _segments(planner: Any, moves: Sequence[Any], blends: Sequence[float]) -> list[Segment]:
     """The moves as the arm plans them: joint moves at the joint limits, linear moves at the
-    tool's limits with the joints' maxima."""
+    tool's limits with the joints' maxima; each brings its trajectory as planned and checked."""
     return [
-        Segment("joint", m.q_target, planner.limits, r)
+        Segment("joint", m.q_target, planner.limits, r, m.traj)
         if m.kind == "joint"
-        else Segment("linear", m.T_target, planner.linear_limits, r)
+        else Segment("linear", m.T_target, planner.linear_limits, r, m.traj)
         for m, r in zip(moves, blends, strict=True)
     ]
 

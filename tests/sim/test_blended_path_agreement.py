@@ -5,7 +5,7 @@ same path with stops, and take the same time. A stop during a blended path ends 
 0.1 s on the simulated arm; a protective stop during one is a typed `safety_stop` through
 the UR driver.
 
-Timing tolerance: the path is planned once at the controller's 500 Hz (`PATH_RATE_HZ`) and
+Timing tolerance: the path is planned once at `PATH_RATE_HZ` (the planner's 125 Hz) and
 stretched to a whole number of periods by the simulator, by less than one step (1/240 s): the
 controller's planned duration of the motion it started and the simulator's executed one agree
 within 1/240 s. Measured on the controller's clock through ur-rtde, its start and end are read
