@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from drivers.base import Arm, Camera, Device, LaserSwitch
+from drivers.errors import DeviceError
 from omnisort_hw.config.devices import (
     CellDeviceConfig,
     DeviceSection,
@@ -51,6 +52,21 @@ class Devices:
 
     def items(self) -> list[tuple[str, Device | None]]:
         return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
+
+    def reconnect_lost(self) -> dict[str, Any]:
+        """Connect again every device that is no longer connected (the operator's reset after
+        a fault): the ones that came back, and the ones still lost with their typed error."""
+        back: list[str] = []
+        lost: dict[str, dict[str, str]] = {}
+        for kind, dev in self.items():
+            if dev is None or dev.is_connected:
+                continue
+            try:
+                dev.connect()
+                back.append(kind)
+            except DeviceError as exc:
+                lost[kind] = {"error": str(exc), "code": exc.code}
+        return {"reconnected": back, "lost": lost}
 
 
 def _open_sim(

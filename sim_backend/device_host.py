@@ -16,6 +16,9 @@ call over a pipe. `SimHost` is the caller's end:
   (to every call in flight and every later one), a child that does not answer in time
   `DeviceTimeoutError`, both naming the device; a hung child is ended, since nothing it does
   can be observed any more;
+- a device connected again after such a loss (the service's `reset`) starts a fresh child, a
+  new simulated cell from the same settings (`restart_if_lost`), as a real device comes back
+  when it is reconnected;
 - `close()` asks the child to close its devices and exit, waits `CLOSE_TIMEOUT_S`, then ends it.
 
 Exceptions travel as their class, message and attributes (a typed error stays typed even when
@@ -267,23 +270,28 @@ class SimHost:
     ) -> None:
         self.call_timeout_s = float(call_timeout_s)
         self.reply_margin_s = float(reply_margin_s)
+        self._spawn_args = (sections, str(base_dir) if base_dir else None)
+        self._send_lock = threading.Lock()
+        self._pending: dict[int, _Pending] = {}
+        self._pending_lock = threading.Lock()
+        self._life_lock = threading.Lock()
+        self._ids = itertools.count()
+        self._closed = False
+        self.users = 0  # proxies that have not been closed yet
+        self.starts = 0  # child processes started (1 + the fresh ones after a loss)
+        self._start()
+
+    def _start(self) -> None:
+        """Spawn a child, wait for its devices, and read its replies from now on."""
         ctx = mp.get_context("spawn")
         parent, child = ctx.Pipe()
         self._proc = ctx.Process(
-            target=serve,
-            args=(child, sections, str(base_dir) if base_dir else None),
-            name="omnisort-sim-host",
-            daemon=True,
+            target=serve, args=(child, *self._spawn_args), name="omnisort-sim-host", daemon=True
         )
         self._proc.start()
         child.close()
         self._conn = parent
-        self._send_lock = threading.Lock()
-        self._pending: dict[int, _Pending] = {}
-        self._pending_lock = threading.Lock()
-        self._ids = itertools.count()
         self._dead: str | None = None  # why calls can no longer be made
-        self.users = 0  # proxies that have not been closed yet
         hello = self._await_hello()
         self.pid: int = hello["pid"]
         self.kinds: list[str] = hello["kinds"]
@@ -291,9 +299,26 @@ class SimHost:
         self.cell_name: str = hello["cell_name"]
         self.names: dict[str, str] = hello["names"]
         self.shapes: dict[str, dict[str, list[str]]] = hello["shapes"]
-        self._reader = threading.Thread(target=self._read, name="simhost-reader", daemon=True)
+        self._reader = threading.Thread(
+            target=self._read, args=(self._conn, self._proc), name="simhost-reader", daemon=True
+        )
         self._reader.start()
         self._finalizer = weakref.finalize(self, _end_process, self._proc, self._conn)
+        self.starts += 1
+
+    def restart_if_lost(self) -> bool:
+        """A fresh child (a new simulated cell from the same settings) in place of one that
+        died or hung, as a real device comes back when it is connected again; True if one was
+        started. Calls in flight at the loss have had their typed error already."""
+        with self._life_lock:
+            if self._dead is None or self._closed:
+                return False
+            lost = self._dead
+            self._finalizer()
+            self._reader.join(CLOSE_TIMEOUT_S)
+            self._start()
+        log.warning("sim host: a fresh simulated cell (pid %d) after: %s", self.pid, lost)
+        return True
 
     def _await_hello(self) -> dict[str, Any]:
         deadline = time.monotonic() + START_TIMEOUT_S
@@ -329,10 +354,10 @@ class SimHost:
         """The child's `multiprocessing.Process` (its pid, exit code)."""
         return self._proc
 
-    def _read(self) -> None:
+    def _read(self, conn: Connection, proc: Any) -> None:
         while True:
             try:
-                rid, status, value = self._conn.recv()
+                rid, status, value = conn.recv()
             except (EOFError, OSError, ValueError):
                 break
             with self._pending_lock:
@@ -340,8 +365,9 @@ class SimHost:
             if waiter is not None:
                 waiter.outcome = (status, value)
                 waiter.event.set()
-        self._proc.join(1.0)
-        self._fail_all(f"the simulated cell's process ended (exit code {self._proc.exitcode})")
+        proc.join(1.0)
+        if conn is self._conn:  # not a child replaced by a fresh one meanwhile
+            self._fail_all(f"the simulated cell's process ended (exit code {proc.exitcode})")
 
     def _fail_all(self, why: str) -> None:
         if self._dead is None:
@@ -415,6 +441,7 @@ class SimHost:
                     self._conn.send((rid, "close"))
                 waiter.event.wait(timeout_s)
             self._proc.join(timeout_s)
+        self._closed = True
         self._dead = self._dead or "the simulated cell's process was closed"
         self._finalizer()
         self._reader.join(timeout_s)

@@ -152,7 +152,7 @@ class _HostedDevice(_Remote):
     def __init__(self, host: SimHost, kind: str) -> None:
         super().__init__(host, host.names[kind])
         object.__setattr__(self, "_target", kind)
-        object.__setattr__(self, "_connected", False)
+        object.__setattr__(self, "_connected", 0)  # the host's start it connected in
         object.__setattr__(self, "_open", True)
         object.__setattr__(self, "_statics", {})
         host.users += 1
@@ -163,7 +163,8 @@ class _HostedDevice(_Remote):
 
     @property
     def is_connected(self) -> bool:
-        return self._connected and self._host.alive
+        """Connected in the child that runs now (not in one that was lost)."""
+        return self._connected == self._host.starts and self._host.alive
 
     @property
     def cell(self) -> HostCell:
@@ -182,13 +183,14 @@ class _HostedDevice(_Remote):
                 "devices again",
                 device=self._device,
             )
+        self._host.restart_if_lost()
         self._call("connect")
-        object.__setattr__(self, "_connected", True)
+        object.__setattr__(self, "_connected", self._host.starts)
 
     def close(self) -> None:
         if not self._open:
             return
-        object.__setattr__(self, "_connected", False)
+        object.__setattr__(self, "_connected", 0)
         object.__setattr__(self, "_open", False)
         host = self._host
         if host.alive:

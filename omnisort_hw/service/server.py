@@ -581,12 +581,13 @@ class Service:
                 raise proto.ProtocolError(
                     proto.BUSY, f"{self._job.cmd} is running; send stop first"
                 )
+            devices = self.cell.devices.reconnect_lost()
             safety = self.cell.check_safe_to_resume()
             if gripper_empty:
                 self.cell.confirm_gripper_empty()
             old = self.states.state
             self.states.set(State.IDLE, f"reset from {old.value}")
-        return {"state": State.IDLE.value, "previous": old.value, **safety}
+        return {"state": State.IDLE.value, "previous": old.value, **safety, **devices}
 
     async def _run_job(self, req: proto.Request) -> dict[str, Any]:
         spec = req.command

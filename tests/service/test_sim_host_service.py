@@ -107,11 +107,19 @@ def test_killing_the_child_mid_sort_gives_a_typed_error_and_the_service_stays_up
                 time.sleep(0.1)
                 st = other.call("status")
             assert st["result"]["devices"]["arm"]["connected"] is False, st
-            assert other.call("reset")["ok"]  # accepted: the lost devices stay reported
             t0 = time.monotonic()
-            again = c.call("capture")
+            again = c.call("capture")  # refused at once, not hung on a dead process
             assert again["error"]["device_code"] == "device_disconnected", again
             assert time.monotonic() - t0 < 10
+            # reset connects the lost devices again: a fresh child takes the dead one's place
+            reset = other.call("reset")
+            assert reset["ok"], reset
+            assert sorted(reset["result"]["reconnected"]) == ["arm", "camera", "laser"], reset
+            assert reset["result"]["lost"] == {}, reset
+            fresh = arm.host_pid  # type: ignore[union-attr]
+            assert fresh != pid and process_gone(pid)
+            assert c.call("capture")["ok"]
+            assert other.call("status")["result"]["devices"]["arm"]["connected"] is True
     finally:
         running.stop()
-    assert process_gone(pid)
+    assert process_gone(pid) and process_gone(fresh)

@@ -153,9 +153,15 @@ def test_a_killed_child_is_a_typed_error_naming_the_device_never_a_hang() -> Non
             cam.grab()
         assert not arm.is_connected and not cam.is_connected
         arm.stop()  # never refused: nothing moves in a process that is gone
+        arm.connect()  # connected again: a fresh child, a new cell from the same settings
+        fresh = arm.host_pid
+        assert fresh != pid and arm.is_connected and not cam.is_connected
+        assert np.asarray(arm.joint_positions()).shape == (6,)
+        cam.connect()
+        assert cam.grab().image.ndim == 3
     finally:
         _close(made)
-    assert process_gone(pid)
+    assert process_gone(pid) and process_gone(fresh)
 
 
 def test_a_hung_child_is_a_device_timeout_and_is_ended() -> None:
