@@ -91,10 +91,15 @@ def _crop(img: np.ndarray, bbox: tuple[int, int, int, int]) -> np.ndarray:
     return img[max(0, y) : y + h, max(0, x) : x + w]
 
 
-def colour_mask(cfg: SortConfig, img: np.ndarray, color: str) -> np.ndarray:
-    """The pixels of `img` (BGR) in `color` of the colour table (bool)."""
-    masks, _ = cfg.colors.masks(img)
-    return masks[color] > 0 if color in masks else np.zeros(img.shape[:2], bool)
+def colour_in_box(
+    masks: Mapping[str, np.ndarray], color: str, bbox: tuple[int, int, int, int]
+) -> np.ndarray:
+    """The pixels in `bbox` of `color` (bool), from an image's colour masks (none for a colour
+    the table does not have)."""
+    some = next(iter(masks.values()))
+    return (
+        _crop(masks[color], bbox) > 0 if color in masks else np.zeros_like(_crop(some, bbox), bool)
+    )
 
 
 def colour_masks(cfg: SortConfig, img: np.ndarray) -> dict[str, np.ndarray]:
@@ -170,15 +175,20 @@ class SceneCheck:
         self.settings = settings or cfg.locate_settings()
         self.keep = keep_fraction(cfg)
         self.ref: dict[int, tuple[str, tuple[int, int, int, int], np.ndarray, np.ndarray]] = {}
+        masks = colour_masks(cfg, image)
         for k, cube in enumerate(cubes):
-            self._set_ref(k, cube, image)
-        self.seen = {c: _grown(m) for c, m in colour_masks(cfg, image).items()}
+            self._set_ref(k, cube, masks)
+        self.seen = {c: _grown(m) for c, m in masks.items()}
 
-    def _set_ref(self, k: int, cube: Cube, image: np.ndarray) -> None:
+    def _set_ref(self, k: int, cube: Cube, masks: Mapping[str, np.ndarray]) -> None:
         x, y, w, h = (int(v) for v in cube.bbox)
         bbox = (x, y, w, h)
-        mask = colour_mask(self.cfg, _crop(image, bbox), cube.color)
-        self.ref[k] = (cube.color, bbox, mask, cube.center_B.copy())
+        self.ref[k] = (
+            cube.color,
+            bbox,
+            colour_in_box(masks, cube.color, bbox),
+            cube.center_B.copy(),
+        )
 
     def check(
         self,
@@ -192,6 +202,7 @@ class SceneCheck:
         and look for cubes put down since; `relocate(image)` locates every cube of the image
         (called only after a change). `masks` are the image's colour masks if known."""
         out = CheckResult()
+        masks = dict(masks) if masks is not None else colour_masks(self.cfg, image)
         todo = [k for k in indices if k in self.ref]
         arm_px = arm_pixels(self.planner, self.calib, self.T_SB, list(q_deg))
         covered_by_arm = _boxes_hit({k: self.ref[k][1] for k in todo}, arm_px)
@@ -201,12 +212,11 @@ class SceneCheck:
                 out.hidden.append(k)
                 continue
             color, bbox, ref, _ = self.ref[k]
-            now = colour_mask(self.cfg, _crop(image, bbox), color)
+            now = colour_in_box(masks, color, bbox)
             n = int(ref.sum())
             frac = float((ref & now).sum()) / n if n else 0.0
             out.covered[k] = frac
             (out.still if frac >= self.keep else changed).append(k)
-        masks = dict(masks) if masks is not None else colour_masks(self.cfg, image)
         new_boxes = self._new_blobs(masks, arm_px)
         if not changed and not new_boxes:
             return out
@@ -223,7 +233,7 @@ class SceneCheck:
             if best is not None:
                 taken.add(best)
                 out.moved[k] = found[best]
-                self._set_ref(k, found[best], image)
+                self._set_ref(k, found[best], masks)
             else:
                 out.gone.append(k)
                 del self.ref[k]
@@ -236,9 +246,9 @@ class SceneCheck:
             self.seen[c][y : y + h, x : x + w] |= _grown(_crop(masks[c], (x, y, w, h)))
         return out
 
-    def add(self, k: int, cube: Cube, image: np.ndarray) -> None:
-        """Keep cube `k` (an added one) in the reference."""
-        self._set_ref(k, cube, image)
+    def add(self, k: int, cube: Cube, masks: Mapping[str, np.ndarray]) -> None:
+        """Keep cube `k` (an added one) in the reference (`masks`: its image's colours)."""
+        self._set_ref(k, cube, masks)
 
     def _new_blobs(
         self, masks: Mapping[str, np.ndarray], arm_px: np.ndarray
@@ -357,7 +367,7 @@ class ChangeWatch:
         for cube in res.added:
             k = len(queue.cubes)
             queue.cubes.append(cube)
-            self.check.add(k, cube, image)
+            self.check.add(k, cube, masks)
             out, to_pick = self.new_outcome(k, cube)
             outcomes.append(out)
             if to_pick:
