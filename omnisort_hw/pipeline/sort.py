@@ -488,17 +488,35 @@ class Sorter:
         for move in planner.plan_joint_via(q, planner.home, planner.static, "move home"):
             self._send(move)
 
-    def _send(self, move: Move) -> None:
-        """Execute one planned move (the arm plans the same path again and checks its limits)."""
+    def _arm_at_start(self, move: Move) -> Arm:
+        """The arm, if the sort goes on and the arm is where `move` starts (else nothing is
+        sent: `MotionRefusedError`)."""
         arm = self._require_arm()
         if self.cancel.is_set():
             raise MotionRefusedError("sort cancelled")
         cur = np.asarray(arm.joint_positions(), float)
-        if np.max(np.abs(cur - move.traj.q[0])) > JOINT_AT_TOLERANCE_DEG:
+        off = float(np.max(np.abs(cur - move.traj.q[0])))
+        if off > JOINT_AT_TOLERANCE_DEG:
             raise MotionRefusedError(
-                f"{move.what}: the arm is not where the plan starts (off by "
-                f"{np.max(np.abs(cur - move.traj.q[0])):.2f} deg); nothing sent"
+                f"{move.what}: the arm is not where the plan starts (off by {off:.2f} deg); "
+                "nothing sent"
             )
+        return arm
+
+    def _moved(self, arm: Arm, t0: float, planned_s: float) -> None:
+        """Count a motion begun at `t0` (arm clock) against its planned time, and log where
+        the tool ended."""
+        if self.cycle is not None:
+            self.cycle.motion_s += self.clock() - t0
+            self.cycle.planned_s += planned_s
+        tcp = np.asarray(arm.tcp_pose(), float)
+        self.log.pose("sorting/executed/tcp", tcp)
+        self._executed.append(tcp[:3, 3])
+        self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
+
+    def _send(self, move: Move) -> None:
+        """Execute one planned move (the arm plans the same path again and checks its limits)."""
+        arm = self._arm_at_start(move)
         log_trajectory(self.log, "sorting/planned", move)
         t0 = self.clock()
         if move.kind == "joint":
@@ -514,13 +532,7 @@ class Sorter:
                 speed_mm_s=self.cfg.linear_speed_mm_s,
                 accel_mm_s2=self.cfg.linear_accel_mm_s2,
             )
-        if self.cycle is not None:
-            self.cycle.motion_s += self.clock() - t0
-            self.cycle.planned_s += move.traj.duration
-        tcp = np.asarray(arm.tcp_pose(), float)
-        self.log.pose("sorting/executed/tcp", tcp)
-        self._executed.append(tcp[:3, 3])
-        self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
+        self._moved(arm, t0, move.traj.duration)
 
     def _send_path(self, moves: list[Move], planned_s: float | None) -> None:
         """Execute planned moves as one blended path (each move blends into the next within
@@ -529,16 +541,7 @@ class Sorter:
             for move in moves:
                 self._send(move)
             return
-        arm = self._require_arm()
-        if self.cancel.is_set():
-            raise MotionRefusedError("sort cancelled")
-        cur = np.asarray(arm.joint_positions(), float)
-        off = float(np.max(np.abs(cur - moves[0].traj.q[0])))
-        if off > JOINT_AT_TOLERANCE_DEG:
-            raise MotionRefusedError(
-                f"{moves[0].what}: the arm is not where the plan starts (off by {off:.2f} deg); "
-                "nothing sent"
-            )
+        arm = self._arm_at_start(moves[0])
         cfg = self.cfg
         path = []
         for move in moves:
@@ -551,15 +554,9 @@ class Sorter:
             path.append(Waypoint(move.kind, target, speed, accel, move.blend_mm))
         t0 = self.clock()
         arm.move_path(path)
-        if self.cycle is not None:
-            self.cycle.motion_s += self.clock() - t0
-            self.cycle.planned_s += (
-                planned_s if planned_s is not None else sum(m.traj.duration for m in moves)
-            )
-        tcp = np.asarray(arm.tcp_pose(), float)
-        self.log.pose("sorting/executed/tcp", tcp)
-        self._executed.append(tcp[:3, 3])
-        self.log.points3d("sorting/executed/tcp_B", np.array(self._executed), radius=5.0)
+        self._moved(
+            arm, t0, planned_s if planned_s is not None else sum(m.traj.duration for m in moves)
+        )
 
     def _grip(self, close: bool) -> None:
         """Close or open the gripper, timed on the arm's clock (an open gripper is not
