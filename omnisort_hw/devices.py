@@ -34,6 +34,7 @@ from omnisort_hw.config.devices import (
     config_error,
     parse_device_config,
 )
+from omnisort_hw.device_status import error_text
 
 if TYPE_CHECKING:
     from omnisort_hw.pipeline.sort import SceneLayout
@@ -65,7 +66,7 @@ class Devices:
                 dev.connect()
                 back.append(kind)
             except DeviceError as exc:
-                lost[kind] = {"error": str(exc), "code": exc.code}
+                lost[kind] = error_text(exc)
         return {"reconnected": back, "lost": lost}
 
 
