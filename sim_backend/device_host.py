@@ -135,6 +135,7 @@ class _Served:
         self._ids = itertools.count()
         self._trace: dict[str, Any] | None = None
         self.pool = ThreadPoolExecutor(max_workers=16, thread_name_prefix="simhost")
+        self.closed = False
 
     def hello(self) -> dict[str, Any]:
         kinds = [k for k in ("camera", "laser", "arm") if k in self.targets]
@@ -200,6 +201,11 @@ class _Served:
                 self.conn.send((rid, "raised", encode_exception(DeviceError(str(exc)))))
 
     def close(self) -> None:
+        """Stop the arm, close the devices and the cell, once (the "close" request, then the
+        serve loop's end)."""
+        if self.closed:
+            return
+        self.closed = True
         arm = self.targets.get("arm")
         if arm is not None:
             arm.stop()  # a move still stepping on a pool thread ends before the process does
