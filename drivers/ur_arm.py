@@ -384,13 +384,7 @@ class URArm(Arm):
             self._check_ready()
             self._stop_requested.clear()
             self._link.move_j(list(np.deg2rad(q)), float(np.deg2rad(v)), float(np.deg2rad(a)))
-            self._follow(
-                timeout_s,
-                "joint move",
-                lambda: float(np.max(np.abs(self.joint_positions() - q))),
-                cfg.joint_tolerance_deg,
-                "deg",
-            )
+            self._follow(timeout_s, "joint move", *self._arrival("joint", q))
 
     def move_linear(
         self,
@@ -403,18 +397,11 @@ class URArm(Arm):
         T = self._limits.check_pose(pose)
         v = self._limits.check_rate("linear_speed_mm_s", speed_mm_s, cfg.linear_speed_mm_s)
         a = self._limits.check_rate("linear_accel_mm_s2", accel_mm_s2, cfg.linear_accel_mm_s2)
-        target = T[:3, 3]
         with self._lock:
             self._check_ready()
             self._stop_requested.clear()
             self._link.move_l(ur_pose_from_matrix(T), v / 1000.0, a / 1000.0)
-            self._follow(
-                timeout_s,
-                "linear move",
-                lambda: float(np.linalg.norm(self.tcp_pose()[:3, 3] - target)),
-                cfg.position_tolerance_mm,
-                "mm",
-            )
+            self._follow(timeout_s, "linear move", *self._arrival("linear", T))
 
     def move_path(self, path: object, timeout_s: float = DEFAULT_MOVE_TIMEOUT_S) -> None:
         """ur-rtde's path call (`movePath`: movej/movel rows with their blend radii, run by
@@ -436,19 +423,29 @@ class URArm(Arm):
                 pose = ur_pose_from_matrix(np.asarray(w.target, float))
                 rows.append(("linear", [*pose, v / 1000.0, a / 1000.0, blend]))
         last = points[-1]
-        if last.kind == "joint":
-            q_end = np.asarray(last.target, float)
-            error_fn = lambda: float(np.max(np.abs(self.joint_positions() - q_end)))  # noqa: E731
-            tolerance, unit = cfg.joint_tolerance_deg, "deg"
-        else:
-            p_end = np.asarray(last.target, float)[:3, 3]
-            error_fn = lambda: float(np.linalg.norm(self.tcp_pose()[:3, 3] - p_end))  # noqa: E731
-            tolerance, unit = cfg.position_tolerance_mm, "mm"
         with self._lock:
             self._check_ready()
             self._stop_requested.clear()
             self._link.move_path(rows)
-            self._follow(timeout_s, "blended path", error_fn, tolerance, unit)
+            self._follow(timeout_s, "blended path", *self._arrival(last.kind, last.target))
+
+    def _arrival(self, kind: str, target: object) -> tuple[Callable[[], float], float, str]:
+        """How far the arm is from a checked joint ("joint", deg) or pose ("linear", mm)
+        target, the tolerance that counts as arrived there, and its unit (for `_follow`)."""
+        cfg = self.config
+        if kind == "joint":
+            q = np.asarray(target, float)
+            return (
+                lambda: float(np.max(np.abs(self.joint_positions() - q))),
+                cfg.joint_tolerance_deg,
+                "deg",
+            )
+        p = np.asarray(target, float)[:3, 3]
+        return (
+            lambda: float(np.linalg.norm(self.tcp_pose()[:3, 3] - p)),
+            cfg.position_tolerance_mm,
+            "mm",
+        )
 
     def _follow(
         self,
