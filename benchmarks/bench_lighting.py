@@ -3,7 +3,9 @@ capture's cost (`omnisort evaluate lighting`).
 
 Environment: OMNISORT_BENCH_LIGHT_SEED (default 0), OMNISORT_BENCH_LIGHT_WIDTH (camera size,
 default 1920), OMNISORT_BENCH_LIGHT_FRAMES (default 8), OMNISORT_BENCH_LIGHT_CHECK_SEEDS (more
-seeds, comma separated, default "5": the same run on a seed nothing was tuned on, summarised).
+seeds, comma separated, default "5": the same run on a seed nothing was tuned on, summarised),
+OMNISORT_BENCH_LIGHT_SMALL_SEEDS (default "11,97,131") at OMNISORT_BENCH_LIGHT_SMALL_WIDTH
+(default 1280, the CLI's default camera, where a cube's corner spans fewer pixels), summarised.
 """
 
 from __future__ import annotations
@@ -55,6 +57,12 @@ def run(shared: Path) -> dict[str, Any]:
     for other in [int(x) for x in checks.split(",") if x.strip()]:
         res = evaluate_lighting(other, frames, width, progress=True)
         figures["check_seeds"][str(other)] = _summary(res)
+    small = int(os.environ.get("OMNISORT_BENCH_LIGHT_SMALL_WIDTH", "1280"))
+    seeds = os.environ.get("OMNISORT_BENCH_LIGHT_SMALL_SEEDS", "11,97,131")
+    figures["small_width"] = {"width": small, "seeds": {}}
+    for other in [int(x) for x in seeds.split(",") if x.strip()]:
+        res = evaluate_lighting(other, frames, small, progress=True)
+        figures["small_width"]["seeds"][str(other)] = _summary(res)
     return figures
 
 

@@ -122,11 +122,17 @@ def reference_errors(r: dict[str, Any]) -> str:
         out = [f"{p[k]:+.3f}".replace("-", "−") for k in ANGLES]
         return [*out, f"{p['laser_distance_mm']:+.2f}".replace("-", "−")]
 
+    def unsigned(p: dict[str, float]) -> list[str]:
+        return [*(f"{p[k]:.3f}" for k in ANGLES), f"{p['laser_distance_mm']:.2f}"]
+
+    std = after.get("reported_std", {})
     rows = []
     for key, label in names.items():
         if key in before and key in after:
             rows.append([label, "before", *signed(before[key])])
             rows.append(["", "after", *signed(after[key])])
+            if key in std:
+                rows.append(["", "its own σ (after)", *unsigned(std[key])])
     return _table(["method (image)", "", *PARAM_HEADS.split(" | ")], rows)
 
 
@@ -549,6 +555,15 @@ def lighting(r: dict[str, Any]) -> str:
             f"error {num(cap['mapping_max_rel_error_pct'], '.3f')} %; single frame "
             f"{one['spurious_points']} of {one['laser_points']}, "
             f"{num(one['mapping_max_rel_error_pct'], '.3f')} %.\n"
+        )
+    small = li.get("small_width", {})
+    if small.get("seeds"):
+        worst = [s["capture"]["mapping_max_rel_error_pct"] for s in small["seeds"].values()]
+        spurious = sum(s["capture"]["spurious_points"] for s in small["seeds"].values())
+        note = note.rstrip("\n") + (
+            f" At {small['width']} px (the CLI's default), seeds "
+            f"{', '.join(small['seeds'])}: capture {spurious} spurious points, worst map "
+            f"error {num(max(w for w in worst if w is not None), '.3f')} %.\n"
         )
     return _table([*head, "capture time"], rows) + note
 

@@ -180,6 +180,56 @@ def _red_channel(bgr: np.ndarray) -> np.ndarray:
     return bgr[..., 2].astype(np.float32)
 
 
+_KINK_SIGMAS = 4.0  # half-window slopes this many standard deviations apart: a kink
+
+
+def _one_sided_at_kinks(
+    k: np.ndarray, pos: np.ndarray, wt: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> np.ndarray:
+    """The centre on each window's own line, from the straight side where the window holds a
+    kink. Near a cube's corner the lines past the corner (and those the blur rounds) lie on
+    the other face; within the 1 px tolerance they pull the straight-line fit off the point's
+    own face by up to half a pixel. Each half-window (its own line and the _ALONG lines on one
+    side) is fitted alone; where their slopes differ by more than _KINK_SIGMAS of their noise,
+    the half that is straighter gives the centre; elsewhere the whole window's fit stands. The
+    noise is measured from this image: the per-line scatter of all windows about their fits,
+    or, where larger (correlated errors such as JPEG's chroma bend straight windows as well),
+    the spread of all windows' slope differences, most of which are straight."""
+    left = wt * (k <= 0)
+    right = wt * (k >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a_l, b_l, det_l = _weighted_line(k, pos, left)
+        a_r, b_r, det_r = _weighted_line(k, pos, right)
+        bend = np.abs(b_l - b_r)
+    seen = wt > 0
+    with np.errstate(invalid="ignore"):
+        dev = np.abs(pos - (a[:, None] + b[:, None] * k))
+    scatter = dev[seen & np.isfinite(dev)]
+    if scatter.size < 20:
+        return a
+    sigma = max(1.4826 * float(np.median(scatter)), 0.02)
+    n_half = _ALONG + 1
+    slope_sd = sigma * np.sqrt(2.0 / float(((np.arange(n_half) - _ALONG / 2) ** 2).sum()))
+    both = (
+        ((left > 0).sum(axis=1) >= 3) & ((right > 0).sum(axis=1) >= 3) & (det_l > 0) & (det_r > 0)
+    )
+    if both.sum() >= 20:  # correlated noise (JPEG chroma) bends straight windows too
+        slope_sd = max(slope_sd, 1.4826 * float(np.median(bend[both])))
+    with np.errstate(invalid="ignore"):
+        kink = both & (bend > _KINK_SIGMAS * slope_sd)
+        res_l = _rms_about(k, pos, left, a_l, b_l)
+        res_r = _rms_about(k, pos, right, a_r, b_r)
+    return np.where(kink, np.where(res_l <= res_r, a_l, a_r), a)
+
+
+def _rms_about(
+    k: np.ndarray, pos: np.ndarray, wt: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> np.ndarray:
+    """Weighted RMS of each window's centres about its line a + b k."""
+    r2 = np.where(wt > 0, (pos - (a[:, None] + b[:, None] * k)) ** 2, 0.0)
+    return np.sqrt(r2.sum(axis=1) / np.maximum((wt > 0).sum(axis=1), 1))
+
+
 def _fit_windows(
     bgr: np.ndarray, centres: np.ndarray, across_u: bool, threshold: float, light_only: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -220,6 +270,7 @@ def _fit_windows(
         resid = np.abs(pos - (a[:, None] + b[:, None] * k))
     wt = np.where(resid <= 1.0, wt, 0.0)
     a, b, det = _weighted_line(k, pos, wt)
+    a = _one_sided_at_kinks(k, pos, wt, a, b)
     centre_h = height[:, _ALONG]
     # windows cut by the image border would be padded: no measurement there
     lines_at, samples_at = (v0, u0) if across_u else (u0, v0)

@@ -171,3 +171,31 @@ def test_in_laser_light_alone_the_centre_is_fitted_on_the_red_channel() -> None:
     rms = {k: float(np.sqrt(np.mean(e**2))) for k, e in inner.items()}
     assert rms[True] < 0.02, rms
     assert rms[True] < 0.7 * rms[False], rms
+
+
+@pytest.mark.parametrize("stride", [3, 4], ids=["1280px", "1920px"])
+@pytest.mark.parametrize(
+    "arms",
+    [
+        (((120.0, 100.3), (240.0, 300.0)), ((240.0, 300.0), (380.0, 160.6))),  # 90 degrees
+        (((100.0, 250.3), (240.0, 300.0)), ((240.0, 300.0), (380.0, 250.6))),  # shallow V
+    ],
+    ids=["square", "shallow"],
+)
+def test_points_near_a_kink_lie_on_their_own_arm(arms: tuple, stride: int) -> None:
+    """A cube's corner: the nearest distance of an obstacle is often there, so the points
+    kept next to it must be on their own face. A window holding the corner is fitted on its
+    straight side: kept points farther than 3 px from the vertex (outside the blur's overlap
+    of the two arms) are within 0.1 px of their arm; a straight-line fit over the whole
+    window puts them up to 0.3-0.5 px off."""
+    from omnisort_hw.core.laser_stripe import stripe_interior
+
+    img = background(4)
+    for seg in arms:
+        img = draw_line(img, *seg)
+    pts, stats = laser_stripe_points_stats(to_u8(img), stride=stride)
+    keep = stripe_interior(stats)
+    err = np.minimum(distance_to_line(pts, *arms[0]), distance_to_line(pts, *arms[1]))
+    off_vertex = np.hypot(pts[:, 0] - 240.0, pts[:, 1] - 300.0) > 3.0
+    assert (keep & off_vertex).sum() > 60
+    assert err[keep & off_vertex].max() < 0.1, err[keep & off_vertex].max()
