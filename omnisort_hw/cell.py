@@ -640,7 +640,9 @@ class Cell:
         acq = self.measure(image, board=False)
         _raise_if_cancelled(cancel, "mapping")
         floor = floor_plane_S(calib, self.sort_config)  # the floor's mirror images go
-        laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog, floor)
+        laser_map = map_laser(
+            acq.stripe, calib, acq.source, self.runlog, floor, acq.stripe_px is not None
+        )
         return {"image": acq.record, **laser_map.summary(with_points)}
 
     def measure(self, image: str | None, board: bool = True) -> Any:

@@ -190,36 +190,44 @@ def _one_sided_at_kinks(
     kink. Near a cube's corner the lines past the corner (and those the blur rounds) lie on
     the other face; within the 1 px tolerance they pull the straight-line fit off the point's
     own face by up to half a pixel. Each half-window (its own line and the _ALONG lines on one
-    side) is fitted alone; where their slopes differ by more than _KINK_SIGMAS of their noise,
-    the half that is straighter gives the centre; elsewhere the whole window's fit stands. The
-    noise is measured from this image: the per-line scatter of all windows about their fits,
-    or, where larger (correlated errors such as JPEG's chroma bend straight windows as well),
-    the spread of all windows' slope differences, most of which are straight."""
+    side) is fitted alone; where the two slopes differ by more than _KINK_SIGMAS standard
+    deviations (each half's from the lines it saw), the half that saw more lines, or on a tie
+    the straighter one, gives the centre: past a corner or a fading end lines drop out or
+    bend. Elsewhere the whole window's fit stands. The per-line noise is measured from this
+    image: the lines' scatter about their fits, or, where larger (correlated errors such as
+    JPEG's chroma bend straight windows as well), what the spread of all windows' slope
+    differences implies, most windows being straight."""
     left = wt * (k <= 0)
     right = wt * (k >= 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         a_l, b_l, det_l = _weighted_line(k, pos, left)
         a_r, b_r, det_r = _weighted_line(k, pos, right)
-        bend = np.abs(b_l - b_r)
-    seen = wt > 0
-    with np.errstate(invalid="ignore"):
         dev = np.abs(pos - (a[:, None] + b[:, None] * k))
+    seen = wt > 0
     scatter = dev[seen & np.isfinite(dev)]
     if scatter.size < 20:
         return a
+    n_l, n_r = (left > 0).sum(axis=1), (right > 0).sum(axis=1)
+    both = (n_l >= 3) & (n_r >= 3) & (det_l > 0) & (det_r > 0)
+    # slope variance of a half = sigma^2 / S_kk over the lines it saw
+    s_l, s_r = _spread(k, left > 0), _spread(k, right > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.abs(b_l - b_r) / np.sqrt(1.0 / s_l + 1.0 / s_r)
     sigma = max(1.4826 * float(np.median(scatter)), 0.02)
-    n_half = _ALONG + 1
-    slope_sd = sigma * np.sqrt(2.0 / float(((np.arange(n_half) - _ALONG / 2) ** 2).sum()))
-    both = (
-        ((left > 0).sum(axis=1) >= 3) & ((right > 0).sum(axis=1) >= 3) & (det_l > 0) & (det_r > 0)
-    )
-    if both.sum() >= 20:  # correlated noise (JPEG chroma) bends straight windows too
-        slope_sd = max(slope_sd, 1.4826 * float(np.median(bend[both])))
+    if both.sum() >= 20:
+        sigma = max(sigma, 1.4826 * float(np.median(z[both])))
     with np.errstate(invalid="ignore"):
-        kink = both & (bend > _KINK_SIGMAS * slope_sd)
-        res_l = _rms_about(k, pos, left, a_l, b_l)
-        res_r = _rms_about(k, pos, right, a_r, b_r)
-    return np.where(kink, np.where(res_l <= res_r, a_l, a_r), a)
+        kink = both & (z > _KINK_SIGMAS * sigma)
+        straighter_l = _rms_about(k, pos, left, a_l, b_l) <= _rms_about(k, pos, right, a_r, b_r)
+    use_l = (n_l > n_r) | ((n_l == n_r) & straighter_l)
+    return np.where(kink, np.where(use_l, a_l, a_r), a)
+
+
+def _spread(k: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """Sum of squared deviations of the seen lines' offsets k about their mean, per window."""
+    n = np.maximum(seen.sum(axis=1), 1)
+    mean = (seen * k).sum(axis=1) / n
+    return np.maximum((seen * (k - mean[:, None]) ** 2).sum(axis=1), 1e-9)
 
 
 def _rms_about(

@@ -180,7 +180,9 @@ def run_scenario(
                     result[key] = {"error": f"{exc.code}: {exc}"}
                     continue
                 floor = (np.array([0.0, 0.0, 1.0]), float(truth["target"]["floor_z_mm"]))
-                lmap = map_laser(acq.stripe_image, true_calib, floor_S=floor)
+                lmap = map_laser(
+                    acq.stripe_image, true_calib, floor_S=floor, light_only=key == "capture"
+                )
                 entry = score_points(lmap.pixels, truth, direct)
                 entry["echoes_dropped"] = lmap.echoes
                 entry["capture_s"] = acq.record.get("capture_s")

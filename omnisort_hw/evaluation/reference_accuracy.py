@@ -9,7 +9,7 @@ is fitted to them. Used by the extrinsics benchmark and the reference-accuracy t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -42,10 +42,12 @@ RUNS: dict[str, tuple[str, str, str]] = {
 
 @dataclass
 class ReferenceRun:
-    """Parameters and signed errors (result - authors' settings) of one method on one image."""
+    """Parameters and signed errors (result - authors' settings) of one method on one image,
+    with the standard deviations the method reports for its own result (where it does)."""
 
     parameters: dict[str, float]
     errors: dict[str, float]
+    std: dict[str, float] = field(default_factory=dict)
 
 
 def intrinsics_model(ref_dir: Path) -> OcamModel:
@@ -80,7 +82,8 @@ def run_reference(
             tone=tone,
         )
         p = calib.parameters()
-        out[row] = ReferenceRun(p, {k: p[k] - v for k, v in AUTHORS_SETTINGS.items()})
+        std = {k: v for k, v in (calib.std or {}).items() if k in AUTHORS_SETTINGS}
+        out[row] = ReferenceRun(p, {k: p[k] - v for k, v in AUTHORS_SETTINGS.items()}, std)
     return out
 
 
@@ -98,6 +101,7 @@ def summary(runs: dict[str, ReferenceRun]) -> dict[str, object]:
     """JSON-ready signed errors per method and the cross-target difference."""
     out: dict[str, object] = {row: rounded(r.errors) for row, r in runs.items()}
     out["two_minus_three_sided_joint"] = rounded(cross_target(runs))
+    out["reported_std"] = {row: rounded(r.std) for row, r in runs.items() if r.std}
     return out
 
 
@@ -108,11 +112,21 @@ def worst(runs: dict[str, ReferenceRun], row: str) -> tuple[float, float]:
     return float(np.max(angles)), abs(e["laser_distance_mm"])
 
 
+def _slope_deg(along: np.ndarray, height: np.ndarray) -> float:
+    """Angle (deg) of the least-squares line height = a + b * along."""
+    return float(np.degrees(np.arctan(np.polyfit(along, height, 1)[0])))
+
+
 def scene_check(ref_dir: Path, model: OcamModel, tone: ToneCurve = SRGB) -> dict[str, object]:
     """What the images say about the scene when the authors' camera and laser are taken as
-    true: the side walls' inner faces where their laser lines put them (X in S, mm, and the
-    separation) and the height of each border on its wall (mm). With consistent settings
-    the separation is 1292.4 mm and both borders stand at one height."""
+    true. Per side wall: its inner face's X where its laser line puts it (mm, and the
+    separation), its border's height and slope along the wall, and the slope of its laser
+    line along the wall. With consistent settings the separation is 1292.4 mm, both borders
+    stand at one height and are level, and both laser lines, and each half of each, slope as
+    the authors' plane does (`laser_plane_slope_deg`: one plane meets flat parallel walls in
+    parallel straight lines). On the
+    three-sided image the far wall likewise: its Y, the angle of its laser line to X (0 when
+    it is perpendicular to the side walls), and its border's height and slope along X."""
     from omnisort_hw.core.frames import camera_rotation, laser_normal, rays_to_plane
     from omnisort_hw.core.target_features import extract_target_features
 
@@ -120,7 +134,9 @@ def scene_check(ref_dir: Path, model: OcamModel, tone: ToneCurve = SRGB) -> dict
     R = camera_rotation(*np.radians([s["cam_roll_deg"], s["cam_pitch_deg"], s["cam_yaw_deg"]]))
     n = laser_normal(*np.radians([s["laser_roll_deg"], s["laser_pitch_deg"]]))
     offset = -s["laser_distance_mm"] * n[2]
-    out: dict[str, object] = {}
+    out: dict[str, object] = {
+        "laser_plane_slope_deg": round(float(np.degrees(np.arctan(-n[1] / n[2]))), 4)
+    }
     for name, kind in (
         ("two_sided_target.png", "two-sided"),
         ("three_sided_target.png", "three-sided"),
@@ -128,18 +144,42 @@ def scene_check(ref_dir: Path, model: OcamModel, tone: ToneCurve = SRGB) -> dict
         f = extract_target_features(cv2.imread(str(ref_dir / name)), model, kind, tone)
         walls: dict[str, float] = {}
         heights: dict[str, float] = {}
+        slopes: dict[str, float] = {}
+        laser_slopes: dict[str, float] = {}
         for side in ("left", "right"):
             w = f.walls[side]
             P = rays_to_plane(model.pixel_to_ray(w.laser_px) @ R.T, n, offset)
             x = float(np.median(P[:, 0]))
             rb = model.pixel_to_ray(w.border_px) @ R.T
+            B = rb * (x / rb[:, 0])[:, None]
+            L = P * (x / P[:, 0])[:, None]
             walls[side] = x
-            heights[side] = float(np.median(rb[:, 2] * x / rb[:, 0]))
-        out[kind] = {
+            heights[side] = float(np.median(B[:, 2]))
+            slopes[side] = _slope_deg(B[:, 1], B[:, 2])
+            near = L[:, 1] <= np.median(L[:, 1])
+            laser_slopes[side] = _slope_deg(L[:, 1], L[:, 2])
+            laser_slopes[f"{side}_near_half"] = _slope_deg(L[near, 1], L[near, 2])
+            laser_slopes[f"{side}_far_half"] = _slope_deg(L[~near, 1], L[~near, 2])
+        entry: dict[str, object] = {
             "wall_x_mm": {k: round(v, 2) for k, v in walls.items()},
             "separation_mm": round(walls["right"] - walls["left"], 2),
             "border_z_mm": {k: round(v, 2) for k, v in heights.items()},
+            "border_slope_deg": {k: round(v, 4) for k, v in slopes.items()},
+            "laser_slope_deg": {k: round(v, 4) for k, v in laser_slopes.items()},
         }
+        if "far" in f.walls:
+            w = f.walls["far"]
+            P = rays_to_plane(model.pixel_to_ray(w.laser_px) @ R.T, n, offset)
+            y = float(np.median(P[:, 1]))
+            rb = model.pixel_to_ray(w.border_px) @ R.T
+            B = rb * (y / rb[:, 1])[:, None]
+            entry["far_wall"] = {
+                "y_mm": round(y, 2),
+                "laser_angle_to_x_deg": round(_slope_deg(P[:, 0], P[:, 1]), 4),
+                "border_z_mm": round(float(np.median(B[:, 2])), 2),
+                "border_slope_deg": round(_slope_deg(B[:, 0], B[:, 2]), 4),
+            }
+        out[kind] = entry
     return out
 
 

@@ -56,15 +56,17 @@ def map_laser(
     source: str = "image",
     log: RunLog = NullLog,
     floor_S: tuple[np.ndarray, float] | None = None,
+    light_only: bool = False,
 ) -> LaserMap:
     """The laser map of one laser-on image (or a capture's laser-light image; its size must
     match the camera model). Points at the stripe's ends and kinks, where the straight-stripe
     fit is biased, are dropped where their piece has interior points; points that cannot be
     direct hits of the laser (a reflection at the same bearing, weaker, at another range; with
     the floor known, `floor_S` = (unit normal up, k) of n . x = k in S, the floor's mirror image
-    of a stripe point seen) are dropped."""
+    of a stripe point seen) are dropped. `light_only`: the image is a capture's laser light
+    alone (on minus off), whose centres are fitted on the red channel (`laser_stripe_points`)."""
     check_image_size(image, calib.model, source)
-    pixels, stats = laser_stripe_points_stats(image)
+    pixels, stats = laser_stripe_points_stats(image, light_only=light_only)
     interior = stripe_interior(stats)
     assert stats.heights is not None
     every = pixels_to_plane(pixels, calib)

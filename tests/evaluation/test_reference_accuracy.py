@@ -18,6 +18,7 @@ from omnisort_hw.evaluation.reference_accuracy import (
     cross_target,
     intrinsics_model,
     run_reference,
+    scene_check,
     worst,
 )
 
@@ -29,7 +30,12 @@ _SCENE = (
     "with the authors' own camera and laser the laser lines put the walls 1288.5 mm apart, not "
     "1292.4 (laser distance +3 mm on every wall method)"
 )
-_PITCH = "camera/laser pitch: the borders stand 1.1 mm apart in height under the authors' camera"
+_PITCH = "camera/laser pitch: the borders stand 1.0 mm apart in height under the authors' camera"
+_LASER = (
+    "the authors' laser is not one plane on their flat walls: with their camera and laser the "
+    "left wall's stripe slopes -1.07 deg on its near half and -0.13 deg on its far half (their "
+    "plane: -0.50 deg)"
+)
 
 
 @pytest.fixture(scope="module")
@@ -65,19 +71,28 @@ def test_the_tone_curve_removes_most_of_the_shared_camera_roll_bias(
     ("row", "max_deg", "max_mm"),
     [
         pytest.param(
-            "joint", 0.03, 1.5, marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}")
+            "joint",
+            0.03,
+            1.5,
+            marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}; {_LASER}"),
         ),
         pytest.param(
             "joint_three_sided",
             0.03,
             1.5,
-            marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}"),
+            marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}; {_LASER}"),
         ),
         pytest.param(
-            "paper", 0.06, 3.0, marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}")
+            "paper",
+            0.06,
+            3.0,
+            marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}; {_LASER}"),
         ),
         pytest.param(
-            "method1", 0.06, 3.0, marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}")
+            "method1",
+            0.06,
+            3.0,
+            marks=pytest.mark.xfail(strict=True, reason=f"{_SCENE}; {_PITCH}; {_LASER}"),
         ),
         pytest.param(
             "method2",
@@ -96,7 +111,10 @@ def test_each_method_against_the_authors_settings(
     assert angle <= max_deg and distance <= max_mm, (row, after[row].errors)
 
 
-@pytest.mark.xfail(strict=True, reason=f"{_PITCH}; camera yaw and laser roll differ by 0.03-0.05")
+@pytest.mark.xfail(
+    strict=True,
+    reason=f"{_PITCH}; {_LASER}; the three-sided target's far wall is 0.08 deg off square",
+)
 def test_two_sided_and_three_sided_joint_agree(after: dict[str, ReferenceRun]) -> None:
     diff = cross_target(after)
     assert all(abs(v) <= 0.03 for k, v in diff.items() if k.endswith("_deg")), diff
@@ -112,3 +130,20 @@ def test_every_method_stays_within_the_published_method_s_accuracy(
         angle, distance = worst(after, row)
         assert angle < 0.15, (row, run.errors)
         assert distance < 5.0, (row, run.errors)
+
+
+def test_the_images_disagree_with_the_published_scene(
+    reference_dir: Path, model: OcamModel
+) -> None:
+    """The evidence the unmet goals rest on (docs/calibration.md), on both target images. With
+    the authors' own camera and laser taken as true: the side walls' laser lines stand ~1288.5
+    mm apart, not the stated 1292.4 (0.3 %, +2.9 mm of laser distance on any method scaled by
+    the walls; the boards' 116 mm squares give 950.0 mm); and the left wall's stripe bends by
+    ~0.9 deg of slope between its near and far halves, where one plane meets a flat wall in a
+    straight line (the halves' slopes are known to ~0.03 deg from ~40 points at 0.2 px)."""
+    check = scene_check(reference_dir, model)
+    for kind in ("two-sided", "three-sided"):
+        e = check[kind]
+        assert 1292.4 - e["separation_mm"] > 2.5, (kind, e["separation_mm"])
+        slopes = e["laser_slope_deg"]
+        assert abs(slopes["left_near_half"] - slopes["left_far_half"]) > 0.5, (kind, slopes)
