@@ -180,6 +180,40 @@ def _red_channel(bgr: np.ndarray) -> np.ndarray:
     return bgr[..., 2].astype(np.float32)
 
 
+def _clipped_centres(raw: np.ndarray, win: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Profile centres (..., samples) again where the stripe's peak sample is clipped (red at
+    255): the midpoint of the profile's two half-height crossings, interpolated on its
+    flanks. A clipped core carries no position, and the first moment above 30 % of a clipped
+    peak is, on a narrow stripe, that one sample: up to half a pixel off, on the pixel grid
+    (seen at a wall's bright near end in the `saturated` scene, where the capture's
+    re-exposure left 1-2 % of the stripe clipped, as it allows). The flanks keep the position:
+    a symmetric profile crosses any level below the clip at equal distances from its centre."""
+    j = np.argmax(win[..., 1:-1], axis=-1) + 1
+    clipped = np.take_along_axis(raw[..., 2], j[..., None], axis=-1)[..., 0] == 255
+    if not clipped.any():
+        return pos
+    n = win.shape[-1]
+    idx = np.arange(n - 1)
+    base = win.min(axis=-1)
+    half = (0.5 * (base + win.max(axis=-1)))[..., None]
+    above = win >= half
+    rise = ~above[..., :-1] & above[..., 1:]  # crossing between i and i + 1, going up
+    fall = above[..., :-1] & ~above[..., 1:]  # ... going down
+    left = np.where(rise & (idx < j[..., None]), idx, -1).max(axis=-1)
+    right = np.where(fall & (idx >= j[..., None]), idx, n).min(axis=-1)
+    li = np.clip(left, 0, n - 2)[..., None]
+    ri = np.clip(right, 0, n - 2)[..., None]
+    a0 = np.take_along_axis(win, li, -1)[..., 0]
+    a1 = np.take_along_axis(win, li + 1, -1)[..., 0]
+    b0 = np.take_along_axis(win, ri, -1)[..., 0]
+    b1 = np.take_along_axis(win, ri + 1, -1)[..., 0]
+    h = half[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mid = 0.5 * (li[..., 0] + (h - a0) / (a1 - a0) + ri[..., 0] + (b0 - h) / (b0 - b1))
+    ok = clipped & (left >= 0) & (right < n) & np.isfinite(mid)
+    return np.where(ok, mid, pos)
+
+
 _KINK_SIGMAS = 4.0  # half-window slopes this many standard deviations apart: a kink
 
 
@@ -268,9 +302,10 @@ def _fit_windows(
     flat = (vv * w + uu).astype(np.intp)
     # (N, lines, samples): scan lines x across-stripe samples, clipped as in the candidate stage
     measure = _red_channel if light_only else redness
-    win = np.maximum(measure(np.take(bgr.reshape(-1, 3), flat, axis=0)), 0.0)
+    raw = np.take(bgr.reshape(-1, 3), flat, axis=0)
+    win = np.maximum(measure(raw), 0.0)
     pos, height = _peak_centres(win)
-    pos -= reach
+    pos = _clipped_centres(raw, win, pos) - reach
     k = off_t.astype(float)[None, :]
     wt = np.where(height > 0.5 * threshold, height, 0.0)
     a, b, det = _weighted_line(k, pos, wt)
