@@ -181,32 +181,45 @@ def _red_channel(bgr: np.ndarray) -> np.ndarray:
 
 
 def _clipped_centres(raw: np.ndarray, win: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """Profile centres (..., samples) again where the stripe's peak sample is clipped (red at
-    255): the midpoint of the profile's two half-height crossings, interpolated on its
-    flanks. A clipped core carries no position, and the first moment above 30 % of a clipped
-    peak is, on a narrow stripe, that one sample: up to half a pixel off, on the pixel grid
-    (seen at a wall's bright near end in the `saturated` scene, where the capture's
-    re-exposure left 1-2 % of the stripe clipped, as it allows). The flanks keep the position:
-    a symmetric profile crosses any level below the clip at equal distances from its centre."""
+    """Profile centres (..., samples) again where the stripe's core is clipped: the midpoint
+    of the profile's two half-height crossings, interpolated on its flanks. A clipped core is
+    a sample at 255, or, in a capture's laser-light image, a hole (0 in every channel between
+    bright flanks: `core.laser_difference` zeroes what clipped in a frame). It carries no
+    position, and the first moment above 30 % of the profile then leans to the grid or to one
+    flank: up to half a pixel off (seen at a wall's bright near end in the `saturated` scene,
+    where the capture's re-exposure left 1-2 % of the stripe clipped, as it allows). The
+    flanks keep the position: a symmetric profile crosses any level below the clip at equal
+    distances from its centre. Holes are filled at the profile's peak for this."""
+    n = win.shape[-1]
+    top = win.max(axis=-1, keepdims=True)
+    bright = win >= 0.5 * top
+    dark = (raw == 0).all(axis=-1)
+    left_b = np.zeros_like(bright)  # a bright sample within 2 to the left (holes of 1-2 px)
+    right_b = np.zeros_like(bright)
+    for step in (1, 2):
+        left_b[..., step:] |= bright[..., :-step]
+        right_b[..., :-step] |= bright[..., step:]
+    hole = dark & left_b & right_b
+    clipped_sample = (raw[..., 2] == 255) | hole
     j = np.argmax(win[..., 1:-1], axis=-1) + 1
-    clipped = np.take_along_axis(raw[..., 2], j[..., None], axis=-1)[..., 0] == 255
+    near = np.abs(np.arange(n) - j[..., None]) <= 1
+    clipped = (clipped_sample & near).any(axis=-1)
     if not clipped.any():
         return pos
-    n = win.shape[-1]
+    prof = np.where(hole, top, win)
     idx = np.arange(n - 1)
-    base = win.min(axis=-1)
-    half = (0.5 * (base + win.max(axis=-1)))[..., None]
-    above = win >= half
+    half = (0.5 * (prof.min(axis=-1) + prof.max(axis=-1)))[..., None]
+    above = prof >= half
     rise = ~above[..., :-1] & above[..., 1:]  # crossing between i and i + 1, going up
     fall = above[..., :-1] & ~above[..., 1:]  # ... going down
     left = np.where(rise & (idx < j[..., None]), idx, -1).max(axis=-1)
     right = np.where(fall & (idx >= j[..., None]), idx, n).min(axis=-1)
     li = np.clip(left, 0, n - 2)[..., None]
     ri = np.clip(right, 0, n - 2)[..., None]
-    a0 = np.take_along_axis(win, li, -1)[..., 0]
-    a1 = np.take_along_axis(win, li + 1, -1)[..., 0]
-    b0 = np.take_along_axis(win, ri, -1)[..., 0]
-    b1 = np.take_along_axis(win, ri + 1, -1)[..., 0]
+    a0 = np.take_along_axis(prof, li, -1)[..., 0]
+    a1 = np.take_along_axis(prof, li + 1, -1)[..., 0]
+    b0 = np.take_along_axis(prof, ri, -1)[..., 0]
+    b1 = np.take_along_axis(prof, ri + 1, -1)[..., 0]
     h = half[..., 0]
     with np.errstate(divide="ignore", invalid="ignore"):
         mid = 0.5 * (li[..., 0] + (h - a0) / (a1 - a0) + ri[..., 0] + (b0 - h) / (b0 - b1))

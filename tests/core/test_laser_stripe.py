@@ -201,12 +201,15 @@ def test_points_near_a_kink_lie_on_their_own_arm(arms: tuple, stride: int) -> No
     assert err[keep & off_vertex].max() < 0.1, err[keep & off_vertex].max()
 
 
-def test_a_clipped_narrow_stripe_is_centred_from_its_flanks() -> None:
-    """A narrow stripe (sigma 0.6 px) in laser light alone whose core clips at 255 over 15
-    rows (a bright near wall, as a capture may leave 1-2 % of the stripe clipped): its one
-    clipped sample carries no position, and the first moment above 30 % of it sits on the
-    pixel grid, up to ~0.3 px off here. The half-height crossings on the flanks put the
-    centre within 0.15 px; unclipped, the same stripe is found to ~0.01 px."""
+@pytest.mark.parametrize("hole", [False, True], ids=["at-255", "zeroed"])
+def test_a_clipped_narrow_stripe_is_centred_from_its_flanks(hole: bool) -> None:
+    """A narrow stripe in laser light alone whose core clips over 15 rows (a bright near
+    wall, as a capture may leave 1-2 % of the stripe clipped): at 255 (sigma 0.6 px), or
+    zeroed as the capture's laser-light image marks what clipped in a frame (sigma 1 px, as
+    at 1280 px: a zeroed core needs flanks to be found at all). The clipped core carries no
+    position; the first moment above 30 % of the profile sits on the pixel grid or leans to a
+    flank, up to ~0.3 px off here. The half-height crossings on the flanks put the centre
+    within 0.15 px; unclipped, the same stripe is found to ~0.01 px."""
     rng = np.random.default_rng(5)
     line = ((100.3, 40.0), (131.7, 440.0))
     img = rng.normal(2.0, 1.0, (SIZE, SIZE, 3))
@@ -215,7 +218,9 @@ def test_a_clipped_narrow_stripe_is_centred_from_its_flanks() -> None:
     d = (b - a) / np.linalg.norm(b - a)
     across = (u - a[0]) * d[1] - (v - a[1]) * d[0]
     peak = np.where((v > 200) & (v < 215), 600.0, 180.0)
-    img[..., 2] += peak * np.exp(-0.5 * (across / 0.6) ** 2)
+    img[..., 2] += peak * np.exp(-0.5 * (across / (1.0 if hole else 0.6)) ** 2)
+    if hole:
+        img[img[..., 2] > 255.0] = 0.0
     pts, _ = laser_stripe_points_stats(to_u8(img), stride=3, light_only=True)
     err = distance_to_line(pts, *line)
     clipped = (pts[:, 1] > 195) & (pts[:, 1] < 220)
