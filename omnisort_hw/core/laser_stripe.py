@@ -25,7 +25,9 @@ How (all vectorised, no loop over pixels):
    unlike a three-point fit robust to JPEG chroma ringing and speckle); a weighted straight-line
    fit through those centres (peaks more than 1 px off dropped, one refit) gives the centre on
    the candidate's line and the local slope. A point is kept from the scan that cuts the
-   stripe squarely (|slope| <= 1), so each stripe section is measured once.
+   stripe squarely (|slope| <= 1), so each stripe section is measured once. A line whose core
+   clipped is centred on its half-height crossings instead, and a window that holds a kink
+   (a cube's corner) is fitted on its straight half.
 4. Chains: points are linked through a grid of one scan spacing (gaps of a cell bridged, for
    dashed, aliased stripes); chains that fail the tests above are dropped, and with them
    isolated specks of JPEG colour noise.
