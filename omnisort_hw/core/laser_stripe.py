@@ -191,7 +191,24 @@ def _clipped_centres(raw: np.ndarray, win: np.ndarray, pos: np.ndarray) -> np.nd
     flank: up to half a pixel off (seen at a wall's bright near end in the `saturated` scene,
     where the capture's re-exposure left 1-2 % of the stripe clipped, as it allows). The
     flanks keep the position: a symmetric profile crosses any level below the clip at equal
-    distances from its centre. Holes are filled at the profile's peak for this."""
+    distances from its centre. Only profiles with a 255 or an all-zero sample next to their
+    peak are looked at again (a map of an unclipped stripe pays for that test alone)."""
+    n = win.shape[-1]
+    j = np.argmax(win[..., 1:-1], axis=-1) + 1
+    at = np.clip(j[..., None] + np.arange(-1, 2), 0, n - 1)  # the peak and its neighbours
+    around = np.take_along_axis(raw, at[..., None], axis=-2)
+    maybe = ((around[..., 2] == 255) | (around == 0).all(axis=-1)).any(axis=-1)
+    if not maybe.any():
+        return pos
+    out = pos.copy()
+    out[maybe] = _flank_centres(raw[maybe], win[maybe], j[maybe], pos[maybe])
+    return out
+
+
+def _flank_centres(raw: np.ndarray, win: np.ndarray, j: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """`_clipped_centres` for profiles (M, samples) with peak index j (M,): the half-height
+    crossings' midpoint where a sample next to the peak is clipped, holes filled at the
+    profile's peak first; `pos` elsewhere."""
     n = win.shape[-1]
     top = win.max(axis=-1, keepdims=True)
     bright = win >= 0.5 * top
@@ -203,11 +220,8 @@ def _clipped_centres(raw: np.ndarray, win: np.ndarray, pos: np.ndarray) -> np.nd
         right_b[..., :-step] |= bright[..., step:]
     hole = dark & left_b & right_b
     clipped_sample = (raw[..., 2] == 255) | hole
-    j = np.argmax(win[..., 1:-1], axis=-1) + 1
     near = np.abs(np.arange(n) - j[..., None]) <= 1
     clipped = (clipped_sample & near).any(axis=-1)
-    if not clipped.any():
-        return pos
     prof = np.where(hole, top, win)
     idx = np.arange(n - 1)
     half = (0.5 * (prof.min(axis=-1) + prof.max(axis=-1)))[..., None]
