@@ -53,17 +53,19 @@ def run(shared: Path) -> dict[str, Any]:
             }
         figures["scenarios"][name] = row
     checks = os.environ.get("OMNISORT_BENCH_LIGHT_CHECK_SEEDS", "5")
-    figures["check_seeds"] = {}
-    for other in [int(x) for x in checks.split(",") if x.strip()]:
-        res = evaluate_lighting(other, frames, width, progress=True)
-        figures["check_seeds"][str(other)] = _summary(res)
+    figures["check_seeds"] = _summaries(checks, frames, width)
     small = int(os.environ.get("OMNISORT_BENCH_LIGHT_SMALL_WIDTH", "1280"))
     seeds = os.environ.get("OMNISORT_BENCH_LIGHT_SMALL_SEEDS", "11,97,131")
-    figures["small_width"] = {"width": small, "seeds": {}}
-    for other in [int(x) for x in seeds.split(",") if x.strip()]:
-        res = evaluate_lighting(other, frames, small, progress=True)
-        figures["small_width"]["seeds"][str(other)] = _summary(res)
+    figures["small_width"] = {"width": small, "seeds": _summaries(seeds, frames, small)}
     return figures
+
+
+def _summaries(seeds: str, frames: int, width: int) -> dict[str, Any]:
+    """Every scenario on each of the comma-separated `seeds`, summarised per seed."""
+    return {
+        str(seed): _summary(evaluate_lighting(seed, frames, width, progress=True))
+        for seed in (int(x) for x in seeds.split(",") if x.strip())
+    }
 
 
 def _summary(result: dict[str, Any]) -> dict[str, Any]:

@@ -640,9 +640,8 @@ class Cell:
         acq = self.measure(image, board=False)
         _raise_if_cancelled(cancel, "mapping")
         floor = floor_plane_S(calib, self.sort_config)  # the floor's mirror images go
-        laser_map = map_laser(
-            acq.stripe, calib, acq.source, self.runlog, floor, acq.stripe_px is not None
-        )
+        light = acq.stripe_px is not None  # a capture's laser light: red-channel centres
+        laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog, floor, light_only=light)
         return {"image": acq.record, **laser_map.summary(with_points)}
 
     def measure(self, image: str | None, board: bool = True) -> Any:

@@ -124,9 +124,9 @@ def scene_check(ref_dir: Path, model: OcamModel, tone: ToneCurve = SRGB) -> dict
     line along the wall. With consistent settings the separation is 1292.4 mm, both borders
     stand at one height and are level, and both laser lines, and each half of each, slope as
     the authors' plane does (`laser_plane_slope_deg`: one plane meets flat parallel walls in
-    parallel straight lines). On the
-    three-sided image the far wall likewise: its Y, the angle of its laser line to X (0 when
-    it is perpendicular to the side walls), and its border's height and slope along X."""
+    parallel straight lines). On the three-sided image the far wall likewise: its Y, the
+    angle of its laser line to X (0 when it is perpendicular to the side walls), and its
+    border's height and slope along X."""
     from omnisort_hw.core.frames import camera_rotation, laser_normal, rays_to_plane
     from omnisort_hw.core.target_features import extract_target_features
 
