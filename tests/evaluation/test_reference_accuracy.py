@@ -33,7 +33,7 @@ _SCENE = (
 _PITCH = "camera/laser pitch: the borders stand 1.0 mm apart in height under the authors' camera"
 _LASER = (
     "the authors' laser is not one plane on their flat walls: with their camera and laser the "
-    "left wall's stripe slopes -1.07 deg on its near half and -0.13 deg on its far half (their "
+    "left wall's stripe slopes -1.07 deg on its near half and -0.11 deg on its far half (their "
     "plane: -0.50 deg)"
 )
 
