@@ -565,8 +565,8 @@ class Cell:
         capture with the laser on, or `image`), saved as system.json. The previous robot base
         pose is not carried over: it was registered with the previous camera rotation."""
         from omnisort_hw.pipeline.extrinsics import (
-            DEFAULT_SEPARATION_MM,
             calibrate_system,
+            check_separation_mm,
             system_payload,
         )
 
@@ -576,12 +576,17 @@ class Cell:
                 "calibrate what=extrinsics needs target=two-sided|three-sided|checkerboards "
                 "(or kind in the configuration's [target] section)"
             )
+        separation = None
+        if target != "checkerboards":
+            separation = check_separation_mm(
+                separation_mm if separation_mm is not None else self.config.target.separation_mm,
+                "separation_mm (or [target] separation_mm in the cell file)",
+            )
         model = self.store.camera_model()
         tone = self.camera_tone_curve()
         acq = self.measure(image)
         img, record, source, tone = acq.board, acq.record, acq.source, acq.tone or tone
         _raise_if_cancelled(cancel, "calibration")
-        separation = separation_mm or self.config.target.separation_mm or DEFAULT_SEPARATION_MM
         calib = self.compute.call_logged(
             calibrate_system,
             self.runlog,
@@ -589,7 +594,7 @@ class Cell:
             model,
             target,
             method,
-            separation_mm=float(separation),
+            separation_mm=separation,
             board=_board_size(board or "9x6"),
             square_mm=square_mm or 97.0,
             source=source,

@@ -30,7 +30,8 @@ def register(sub: Any) -> None:
         "--separation",
         type=float,
         default=None,
-        help="inner distance between the walls, mm (walls; default 1084.5)",
+        help="measured inner distance between the walls, mm (required for the wall targets, "
+        "or [target] separation_mm of --config)",
     )
     cal.add_argument("--board", default="9x6", help="inner corners COLSxROWS (checkerboards)")
     cal.add_argument("--square", type=float, default=97.0, help="square size mm (checkerboards)")
@@ -111,6 +112,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import (
         calibrate_system,
+        check_separation_mm,
         image_record,
         read_image,
         system_payload,
@@ -119,6 +121,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     if args.separation is not None and args.target == "checkerboards":
         raise InputError("--separation is for the wall targets; boards take --board/--square")
+    separation = None
+    if args.target != "checkerboards":
+        separation = args.separation
+        field = "--separation"
+        if separation is None and args.config is not None:
+            from omnisort_hw.config.cell import load_cell_config
+
+            separation = load_cell_config(args.config).target.separation_mm
+            field = f"--separation (or [target] separation_mm in {args.config})"
+        separation = check_separation_mm(separation, field)
     try:
         cols, rows = (int(v) for v in args.board.lower().split("x"))
     except ValueError as exc:
@@ -138,7 +150,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             model,
             args.target,
             args.method,
-            separation_mm=args.separation if args.separation is not None else 1084.5,
+            separation_mm=separation,
             board=(cols, rows),
             square_mm=args.square,
             source=source,

@@ -31,7 +31,7 @@ from omnisort_hw.config.sorting import (
 )
 from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
 from omnisort_hw.errors import ConfigError
-from omnisort_hw.pipeline.extrinsics import TARGETS
+from omnisort_hw.pipeline.extrinsics import TARGETS, separation_problem
 from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_settings
 from omnisort_hw.storage import StorageConfig
 
@@ -68,10 +68,9 @@ class TargetConfig:
         if kind is not None and kind not in TARGETS:
             raise ConfigError(f"[target].kind: one of {', '.join(TARGETS)}, got {kind!r}")
         sep = section.get("separation_mm")
-        if sep is not None and (
-            isinstance(sep, bool) or not isinstance(sep, int | float) or not sep > 0
-        ):
-            raise ConfigError(f"[target].separation_mm: expected a positive number, got {sep!r}")
+        problem = separation_problem(sep) if sep is not None else None
+        if problem:
+            raise ConfigError(f"[target].separation_mm: {problem}")
         return cls(kind, float(sep) if sep is not None else None)
 
 

@@ -9,6 +9,7 @@ checks the image against the camera model, and logs what it saw and produced.
 from __future__ import annotations
 
 import hashlib
+import math
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,37 @@ METHODS_FOR = {
     "three-sided": ("joint", "method1"),
     "checkerboards": ("method2",),
 }
-DEFAULT_SEPARATION_MM = 1084.5
+SEPARATION_RANGE_MM = (100.0, 10000.0)
+"""Inner wall distances a wall target can have, mm: a value below is a typo or metres."""
+
+
+def separation_problem(value: Any) -> str | None:
+    """What is wrong with a measured inner wall distance `value` (mm), or None. The distance
+    sets the scale of every extrinsic result, so there is no default and no unit guessing."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return f"expected a number of millimetres, got {value!r}"
+    lo, hi = SEPARATION_RANGE_MM
+    if 0 < value < 10:
+        return (
+            f"{value:g} looks like metres; give the inner distance between the walls in mm "
+            f"(e.g. {value * 1000:g})"
+        )
+    if not lo <= value <= hi:
+        return f"{value:g} mm is outside the plausible {lo:g}-{hi:g} mm of a wall target"
+    return None
+
+
+def check_separation_mm(value: float | None, field: str) -> float:
+    """`value` as a measured wall distance in mm, or an InputError naming `field`."""
+    if value is None:
+        raise InputError(
+            f"{field}: required for the wall targets: the measured inner distance between "
+            "the walls, in mm"
+        )
+    problem = separation_problem(value)
+    if problem:
+        raise InputError(f"{field}: {problem}")
+    return float(value)
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -59,7 +90,7 @@ def calibrate_system(
     model: OcamModel,
     target: str,
     method: str | None = None,
-    separation_mm: float = DEFAULT_SEPARATION_MM,
+    separation_mm: float | None = None,
     board: tuple[int, int] = (9, 6),
     square_mm: float = 97.0,
     source: str = "image",
@@ -84,8 +115,8 @@ def calibrate_system(
             f"--method {method} does not work with the {target} target "
             f"(use {' or '.join(METHODS_FOR[target])})"
         )
-    if separation_mm <= 0:
-        raise InputError(f"--separation must be positive, got {separation_mm}")
+    if target != "checkerboards":
+        separation_mm = check_separation_mm(separation_mm, "separation_mm")
     check_image_size(image, model, source)
     log.image("extrinsics/image", image)
     if target == "checkerboards":
@@ -116,7 +147,7 @@ def calibrate_system(
         solver = {"joint": calibrate_joint, "paper": calibrate_paper, "method1": calibrate_method1}[
             method
         ]
-        calib = solver(features, model, separation_mm)
+        calib = solver(features, model, float(separation_mm))
     _log_calibration(log, calib)
     return calib
 

@@ -22,18 +22,22 @@ SCENE = "sorting"
 
 
 def write_config(out: Path, width: int) -> Path:
-    """A cell configuration for the simulated scene; [registration] as an installer measures
-    it (here read from the scene file), [sorting] bins and obstacles from the scene."""
+    """A cell configuration for the simulated scene; [target] and [registration] as an
+    installer measures them (here read from the scene file), [sorting] bins and obstacles
+    from the scene."""
     from sim_backend.scene import load_scene
     from sim_backend.sort_harness import sim_registration_config
 
-    reg = sim_registration_config(load_scene(SCENE))
+    scene = load_scene(SCENE)
+    reg = sim_registration_config(scene)
+    assert scene.target is not None
     sim = f'backend = "sim"\nscene = "{SCENE}"\n'
     text = (
         f"[camera]\n{sim}width = {width}\nheight = {width}\n"
         f"[laser]\n{sim}[arm]\n{sim}"
         '[storage]\nstate_dir = "state"\n'
         '[logging]\nlog_dir = "logs"\n'
+        f'[target]\nkind = "two-sided"\nseparation_mm = {scene.target.separation_mm}\n'
         "[sorting]\nfrom_scene = true\n"
         f'[registration]\nboard = "{reg.board.cols}x{reg.board.rows}"\n'
         f"square_mm = {reg.board.square_mm}\noffset = {list(reg.offset)}\n"

@@ -35,6 +35,7 @@ def cell_file_text(
     scene = load_scene(scene_name)
     robot = scene.robot
     assert robot is not None
+    assert scene.target is not None
     sort = sim_sort_config(scene)
     reg = sim_registration_config(scene)
     reach = get_model(robot.model).reach_mm + robot.gripper.tcp_offset_mm
@@ -56,6 +57,11 @@ def cell_file_text(
         "open_timeout_s = 20.0",
         "reconnect_attempts = 3",
         f'tone_curve = "{scene.render.tone_curve}"  # the curve the virtual cell renders with',
+        "",
+        "[target]",
+        "# The two-sided target as measured on site: here the scene's inner wall distance.",
+        'kind = "two-sided"',
+        f"separation_mm = {scene.target.separation_mm:.1f}",
         "",
         "[laser]",
         'backend = "modbus"',

@@ -62,6 +62,8 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
         str(d / "camera.json"),
         "--target",
         "two-sided",
+        "--separation",
+        str(json.loads(rendered["truth"].read_text())["target"]["separation_mm"]),
         "--out",
         str(out),
         "--json",
@@ -95,6 +97,10 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
         ("on.png", ["--target", "checkerboards"], "checkerboard"),
         ("on.png", ["--method", "method2"], "does not work with the two-sided target"),
         ("missing.png", [], "no such image file"),
+        # The wall distance sets the laser plane's scale: never a default, never metres.
+        ("on.png", ["--separation", "1.0845"], "looks like metres"),
+        ("on.png", ["--separation", "52000"], "outside the plausible"),
+        ("on.png", ["--separation", "nan"], "expected a number of millimetres"),
     ],
 )
 def test_bad_input_fails_clearly_and_writes_nothing(
@@ -113,9 +119,33 @@ def test_bad_input_fails_clearly_and_writes_nothing(
     ]
     if "--target" not in extra:
         args += ["--target", "two-sided"]
+        if "--separation" not in extra:
+            args += ["--separation", "1084.5"]
     proc = run_cli(*args, *extra)
     assert proc.returncode != 0
     assert message.lower() in proc.stderr.lower(), proc.stderr
+    assert not out.exists()
+
+
+def test_a_wall_target_without_its_measured_separation_is_refused(
+    rendered: dict[str, Path],
+) -> None:
+    """No default wall distance: a forgotten `--separation` once gave a laser plane 16 % short."""
+    d = rendered["dir"]
+    out = d / "no-separation.json"
+    proc = run_cli(
+        "extrinsics",
+        "calibrate",
+        str(d / "on.png"),
+        "--camera",
+        str(d / "camera.json"),
+        "--target",
+        "two-sided",
+        "--out",
+        str(out),
+    )
+    assert proc.returncode != 0
+    assert "--separation: required for the wall targets" in proc.stderr, proc.stderr
     assert not out.exists()
 
 

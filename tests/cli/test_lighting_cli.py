@@ -114,6 +114,7 @@ def test_extrinsics_calibrate_without_an_image_measures_with_the_configured_cell
         '[camera]\nbackend = "sim"\nscene = "sorting"\nwidth = 1280\nheight = 1280\n'
         'degraded = true\n[laser]\nbackend = "sim"\nscene = "sorting"\n'
         "[capture]\nframes = 8\n"
+        f'[target]\nkind = "two-sided"\nseparation_mm = {truth["target"]["separation_mm"]}\n'
     )
     out = tmp_path / "system.json"
     args = ["extrinsics", "calibrate", "--config", str(cell), "--camera", str(camera)]

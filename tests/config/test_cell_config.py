@@ -30,6 +30,7 @@ def test_the_example_file_loads_into_every_section() -> None:
     assert cfg.devices.camera is not None and cfg.devices.arm is not None
     assert cfg.sorting is not None and cfg.sorting.config.bins
     assert cfg.registration is not None and cfg.registration.board.cols == 9
+    assert cfg.target.kind == "two-sided" and cfg.target.separation_mm is not None
 
 
 @pytest.mark.parametrize(
@@ -45,6 +46,9 @@ def test_the_example_file_loads_into_every_section() -> None:
             "[registration].fit",
         ),
         ("[target]\nkind = 'round'\n", "[target].kind"),
+        ("[target]\nseparation_mm = 1.2924\n", "[target].separation_mm"),
+        ("[target]\nseparation_mm = 'wide'\n", "[target].separation_mm"),
+        ("[target]\nseperation_mm = 1292.4\n", "[target].seperation_mm"),
         ("[plc]\nport = 502\n", "[plc]"),
         ("[service]\nport = -1\n", "[service]"),
     ],

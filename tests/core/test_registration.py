@@ -116,7 +116,9 @@ def test_registration_with_the_joint_calibration_of_the_same_image(parked: tuple
 
     image, truth, scene = parked
     true_calib = SystemCalibration.from_json(truth)
-    calib = calibrate_system(image, true_calib.model, "two-sided")
+    calib = calibrate_system(
+        image, true_calib.model, "two-sided", separation_mm=truth["target"]["separation_mm"]
+    )
     R_err = Rotation.from_matrix(calib.R_SC @ true_calib.R_SC.T).magnitude()
     rc = sim_registration_config(scene)
     reg = register_robot(

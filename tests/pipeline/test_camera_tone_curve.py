@@ -32,7 +32,11 @@ def test_the_simulated_cell_calibrates_with_its_cameras_own_curve(tmp_path: Path
         assert cv2.imwrite(str(image), frame.image)
         want = truth_parameters(truth)
 
-        result = cell.calibrate_extrinsics(image=str(image), target="two-sided")
+        result = cell.calibrate_extrinsics(
+            image=str(image),
+            target="two-sided",
+            separation_mm=truth["target"]["separation_mm"],
+        )
         assert result["tone_curve"] == "linear"
         roll_err = result["parameters"]["cam_roll_deg"] - want["cam_roll_deg"]
         roll_std = result["std"]["cam_roll_deg"]

@@ -133,6 +133,7 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
         f'[registration]\nboard = "{reg.board.cols}x{reg.board.rows}"\n'
         f"square_mm = {reg.board.square_mm}\noffset = {list(reg.offset)}\n"
         f"camera_height_mm = {reg.camera_height_mm}\n"
+        f'[target]\nkind = "two-sided"\nseparation_mm = {truth["target"]["separation_mm"]}\n'
     )
     ran: dict[str, str] = {}
     figures: dict[str, float] = {}

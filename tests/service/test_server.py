@@ -318,6 +318,15 @@ def test_extrinsics_and_map_need_their_inputs(service: Harness) -> None:
     with service.client() as c:
         r = c.call("calibrate", {"what": "extrinsics"})
         assert r["error"]["code"] == "bad_input" and "needs target" in r["error"]["message"]
+        # A wall target's scale is its measured separation: refused before any frame is taken.
+        grabs = service.devices.camera._seq
+        r = c.call("calibrate", {"what": "extrinsics", "target": "two-sided"})
+        assert r["error"]["code"] == "bad_input" and "separation_mm" in r["error"]["message"], r
+        r = c.call(
+            "calibrate", {"what": "extrinsics", "target": "two-sided", "separation_mm": 1.2924}
+        )
+        assert r["error"]["code"] == "bad_input" and "looks like metres" in r["error"]["message"]
+        assert service.devices.camera._seq == grabs
         # The in-memory cell's system.json is a stand-in without a camera rotation matrix.
         r = c.call("map")
         assert r["error"]["code"] == "bad_calibration_file", r
