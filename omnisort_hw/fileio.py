@@ -36,6 +36,22 @@ def check_writable(directory: str | os.PathLike[str], what: str) -> Path:
     return folder
 
 
+def output_file_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why a file cannot be written at `path`, or None: checked before long work starts, so a
+    calibration does not run for minutes and then fail on its output name."""
+    target = Path(path)
+    if target.is_dir():
+        return f"{target} is a folder; give a file name inside it"
+    ancestor = target.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        return f"{ancestor} is not a folder, so {target} cannot be created"
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        return f"{ancestor} is not writable"
+    return None
+
+
 def _fsync_dir(directory: Path) -> None:
     fd = os.open(directory, os.O_RDONLY)
     try:

@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.arg_types import output_file
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
@@ -26,7 +28,7 @@ def register(sub: Any) -> None:
         "--config", type=Path, default=None, help="cell file: [registration], [watchdog]"
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--log", type=Path, default=None, help="write a rerun .rrd")
+    p.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd")
     p.set_defaults(func=cmd_check)
 
 
@@ -37,7 +39,7 @@ def add_drift_evaluation(esub: Any) -> None:
     ev.add_argument("--scenes", type=int, default=2, help="random scenes (default 2)")
     ev.add_argument("--unmoved", type=int, default=200, help="captures with the camera unmoved")
     ev.add_argument("--width", type=int, default=960, help="render size (default 960)")
-    ev.add_argument("--out", type=Path, default=None, help="also write the result JSON here")
+    ev.add_argument("--out", type=output_file, default=None, help="also write the result JSON here")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     ev.set_defaults(func=cmd_evaluate_drift)
 

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.errors import InputError
 
 
@@ -47,9 +48,9 @@ def register(sub: Any) -> None:
         help="the camera's tone curve: srgb (default, 8-bit cameras), linear, gamma:G, or a "
         "JSON table of 256 light values (measured)",
     )
-    cal.add_argument("--out", type=Path, required=True, help="system.json to write")
+    cal.add_argument("--out", type=output_file, required=True, help="system.json to write")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    cal.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     cal.set_defaults(func=cmd_calibrate)
 
     mp = sub.add_parser("map", help="laser pixels -> points on the laser plane (mm)")
@@ -67,7 +68,7 @@ def register(sub: Any) -> None:
         action="store_true",
         help="with --json: every laser point in S (mm) and its pixel (points_S, pixels)",
     )
-    mp.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    mp.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     mp.set_defaults(func=cmd_map)
 
 

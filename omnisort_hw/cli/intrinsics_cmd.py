@@ -9,6 +9,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.errors import InputError
 
 
@@ -20,10 +21,10 @@ def register(sub: Any) -> None:
     cal.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
     cal.add_argument("--board", default="9x6", help="inner corners, COLSxROWS (default 9x6)")
     cal.add_argument("--square", type=float, required=True, help="square size in mm")
-    cal.add_argument("--out", type=Path, required=True, help="camera.json to write")
+    cal.add_argument("--out", type=output_file, required=True, help="camera.json to write")
     cal.add_argument("--degree", type=int, default=None, help="polynomial degree (default: auto)")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    cal.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    cal.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     cal.add_argument(
         "--refinement",
         choices=("auto", "saddle", "plane"),
@@ -35,12 +36,12 @@ def register(sub: Any) -> None:
 
     exp = isub.add_parser("export", help="camera.json -> OCamCalib calib_results.txt")
     exp.add_argument("camera", type=Path)
-    exp.add_argument("--out", type=Path, required=True)
+    exp.add_argument("--out", type=output_file, required=True)
     exp.set_defaults(func=cmd_export)
 
     imp = isub.add_parser("import", help="OCamCalib calib_results.txt -> camera.json")
     imp.add_argument("ocam_txt", type=Path)
-    imp.add_argument("--out", type=Path, required=True)
+    imp.add_argument("--out", type=output_file, required=True)
     imp.set_defaults(func=cmd_import)
 
 

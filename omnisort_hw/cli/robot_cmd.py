@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.pipeline.sort import resolve_sorting
 
@@ -50,7 +51,7 @@ def register(sub: Any) -> None:
     reg.add_argument("--model", default=None, help="robot model to note in robot_base (UR5e...)")
     reg.add_argument("--dry-run", action="store_true", help="do not write system.json")
     reg.add_argument("--json", action="store_true", help="print the result as one JSON object")
-    reg.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    reg.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     reg.set_defaults(func=cmd_register)
 
     loc = sub.add_parser("locate", help="find the cubes: colour, centre and yaw in S and B")
@@ -71,7 +72,7 @@ def register(sub: Any) -> None:
         "--region", default=None, help="xmin,xmax,ymin,ymax in S, mm (default: between walls)"
     )
     loc.add_argument("--json", action="store_true")
-    loc.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    loc.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     loc.set_defaults(func=cmd_locate)
 
     srt = sub.add_parser("sort", help="locate the cubes and put each in the bin of its colour")
@@ -88,7 +89,7 @@ def register(sub: Any) -> None:
     srt.add_argument("--max", type=int, default=None, help="pick at most this many cubes")
     srt.add_argument("--colors", default=None, help="only these colours, comma separated")
     srt.add_argument("--json", action="store_true")
-    srt.add_argument("--log", type=Path, default=None, help="write a rerun .rrd of the run")
+    srt.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     srt.set_defaults(func=cmd_sort)
 
 
@@ -107,7 +108,7 @@ def add_sorting_evaluation(esub: Any) -> None:
         help="true camera/laser calibration, or one with the joint method's typical errors",
     )
     ev.add_argument("--max-angle", type=float, default=10.0, help="camera angles, +-deg")
-    ev.add_argument("--out", type=Path, default=None, help="also write the result JSON here")
+    ev.add_argument("--out", type=output_file, default=None, help="also write the result JSON here")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     ev.set_defaults(func=cmd_evaluate_sorting)
 

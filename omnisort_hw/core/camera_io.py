@@ -133,7 +133,10 @@ def import_ocamcalib(path: str | Path) -> OcamModel:
     row_c, col_c = numbers(2, 2)
     c, d, e = numbers(3, 3)
     height, width = numbers(4, 2)
-    model = OcamModel.create(ss, (col_c, row_c), (c, d, e), (int(width), int(height)))
+    try:
+        model = OcamModel.create(ss, (col_c, row_c), (c, d, e), (width, height))
+    except InputError as exc:
+        raise InputError(f"{p}: {str(exc).removeprefix('camera model: ')}") from exc
     theta = np.linspace(0.0, model.theta_max, 2001)
     file_rho = np.polynomial.polynomial.polyval(theta - np.pi / 2, invpol)
     model_rho = np.polynomial.polynomial.polyval(theta, model.inv_poly)

@@ -111,6 +111,19 @@ class OcamModel:
         poly_arr = np.asarray(poly, dtype=float).copy()
         if poly_arr.ndim != 1 or poly_arr.size < 2:
             raise InputError("camera model: 'poly' needs at least a0 and a1")
+        for name, values in (("poly", poly_arr), ("center_uv", center_uv), ("stretch", stretch)):
+            if not np.all(np.isfinite(np.asarray(values, dtype=float))):
+                raise InputError(f"camera model: {name!r} holds a NaN or infinite value")
+        if any(int(n) != n or n < 1 for n in image_size):
+            raise InputError(
+                f"camera model: 'image_size' must be two positive whole pixel counts, "
+                f"got {list(image_size)}"
+            )
+        if not all(0 <= float(c) < int(n) for c, n in zip(center_uv, image_size, strict=True)):
+            raise InputError(
+                f"camera model: 'center_uv' {list(center_uv)} lies outside the "
+                f"{int(image_size[0])}x{int(image_size[1])} image"
+            )
         if poly_arr[0] >= 0:
             raise InputError(
                 f"camera model: a0 must be negative (OCamCalib sign), got {poly_arr[0]}"
@@ -342,11 +355,19 @@ class OcamModel:
             st = data["stretch"]
             stretch = (float(st["c"]), float(st["d"]), float(st["e"]))
             size = (int(data["image_size"][0]), int(data["image_size"][1]))
+            size_raw = (float(data["image_size"][0]), float(data["image_size"][1]))
         except KeyError as exc:
             raise InputError(f"{source}: missing key {exc.args[0]!r} in the camera model") from exc
-        except (TypeError, ValueError, IndexError) as exc:
+        except (TypeError, ValueError, IndexError, OverflowError) as exc:
             raise InputError(f"{source}: malformed camera model ({exc})") from exc
-        return cls.create(poly, centre, stretch, size)
+        if size_raw != size:
+            raise InputError(
+                f"{source}: 'image_size' must be two whole pixel counts, got {list(size_raw)}"
+            )
+        try:
+            return cls.create(poly, centre, stretch, size)
+        except InputError as exc:
+            raise InputError(f"{source}: {str(exc).removeprefix('camera model: ')}") from exc
 
     def ocam_inverse_for_export(self, tol_px: float = INVERSE_TOLERANCE_PX) -> np.ndarray:
         """OCamCalib's `invpol`: rho as a polynomial of t = atan(z_o / |xy|) = theta - pi/2."""

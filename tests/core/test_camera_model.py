@@ -203,6 +203,44 @@ def test_camera_json_round_trip_and_errors(tmp_path: Path, fisheye: OcamModel) -
         load_camera_json(tmp_path / "missing.json")
 
 
+@pytest.mark.parametrize(
+    ("key", "value", "field"),
+    [
+        ("poly", [float("nan"), 0.0, 1e-4], "'poly'"),
+        ("center_uv", [float("nan"), 10.0], "'center_uv'"),
+        ("center_uv", [5000.0, 10.0], "outside"),
+        ("stretch", {"c": float("inf"), "d": 0.0, "e": 0.0}, "'stretch'"),
+        ("image_size", [1920.5, 1920], "'image_size'"),
+        ("image_size", [0, 1920], "'image_size'"),
+        ("image_size", [float("inf"), 1920], "camera model"),
+        ("poly", "abc", "camera model"),
+    ],
+)
+def test_a_corrupt_camera_json_names_the_file_and_field(
+    tmp_path: Path, fisheye: OcamModel, key: str, value: object, field: str
+) -> None:
+    """NaN, infinite, fractional or out-of-image values (Python's json writes and reads NaN)
+    are refused with the file and the field, never fitted into a model that maps to NaN."""
+    path = save_camera_json(tmp_path / "camera.json", fisheye)
+    data = json.loads(path.read_text())
+    data[key] = value
+    path.write_text(json.dumps(data))
+    with pytest.raises(CalibrationFileError) as info:
+        load_camera_json(path)
+    assert str(path) in str(info.value) and field in str(info.value), str(info.value)
+
+
+def test_an_ocamcalib_file_with_nan_names_the_file(tmp_path: Path) -> None:
+    bad = tmp_path / "calib_results.txt"
+    lines = OCAM_TXT.split("\n")
+    row = next(i for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#"))
+    first = lines[row].split()
+    lines[row] = " ".join([first[0], "nan", *first[2:]])
+    bad.write_text("\n".join(lines))
+    with pytest.raises(InputError, match=r"calib_results\.txt: 'poly' holds a NaN"):
+        import_ocamcalib(bad)
+
+
 def test_invalid_models_are_refused() -> None:
     with pytest.raises(InputError, match="a0 must be negative"):
         OcamModel.create([300.0, 0.0, -1e-3], (10, 10), image_size=(20, 20))

@@ -247,3 +247,36 @@ def test_floor_lines_used_when_consistent_and_refused_when_off_the_wall_plane() 
     assert calib.residuals["floor_lines"].startswith("not used")
     # Used, it would put ~0.7 deg into pitch; without it the markers give the usual accuracy.
     assert np.all(np.abs(errors(calib, sc.angles_deg)[:5]) < 0.1)
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "field"),
+    [
+        (("camera_rotation", "matrix"), [[float("nan")] * 3] * 3, "camera_rotation.matrix"),
+        (("laser_plane", "normal"), [0.0, float("nan"), 1.0], "laser_plane.normal"),
+        (("laser_plane", "normal"), [0.0, 0.0, 0.0], "laser_plane.normal"),
+        (("laser_plane", "distance_mm"), float("nan"), "laser_plane.distance_mm"),
+        (("laser_plane", "distance_mm"), -950.0, "laser_plane.distance_mm"),
+        (("camera", "poly"), [float("nan"), 0.0, 1e-4], "'poly'"),
+    ],
+)
+def test_a_corrupt_system_json_names_the_file_and_field(
+    tmp_path, path: tuple[str, str], value: object, field: str
+) -> None:
+    """A system.json whose plane or rotation holds NaN (json reads it) would map every laser
+    pixel to NaN millimetres; it is refused with the file and field instead."""
+    import json
+
+    from omnisort_hw.core.extrinsics.system_calibration import load_system_json
+    from omnisort_hw.errors import CalibrationFileError
+
+    calib = SystemCalibration.from_angles(
+        OcamModel.equidistant(640, 640, 185.0), random_angles(np.random.default_rng(0)), "truth"
+    )
+    data = calib.to_json()
+    data[path[0]][path[1]] = value
+    file = tmp_path / "system.json"
+    file.write_text(json.dumps(data))
+    with pytest.raises(CalibrationFileError) as info:
+        load_system_json(file)
+    assert str(file) in str(info.value) and field in str(info.value), str(info.value)

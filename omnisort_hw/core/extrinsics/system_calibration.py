@@ -107,8 +107,18 @@ class SystemCalibration:
             raise CalibrationFileError(f"{source}: missing key {exc.args[0]!r}") from exc
         except (TypeError, ValueError, InputError) as exc:
             raise CalibrationFileError(f"{source}: malformed system calibration ({exc})") from exc
-        if R.shape != (3, 3) or n.shape != (3,) or not np.isfinite(d) or d <= 0:
-            raise CalibrationFileError(f"{source}: camera_rotation/laser_plane have wrong shapes")
+        if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+            raise CalibrationFileError(
+                f"{source}: camera_rotation.matrix must be a 3x3 matrix of finite numbers"
+            )
+        if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
+            raise CalibrationFileError(
+                f"{source}: laser_plane.normal must be three finite numbers, not all zero"
+            )
+        if not np.isfinite(d) or d <= 0:
+            raise CalibrationFileError(
+                f"{source}: laser_plane.distance_mm must be a positive number of mm, got {d}"
+            )
         if abs(np.linalg.det(R) - 1.0) > 1e-6 or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
             raise CalibrationFileError(f"{source}: camera_rotation.matrix is not a rotation")
         return cls(

@@ -1,0 +1,17 @@
+"""argparse types shared by the command modules: inputs checked when the command line is
+parsed, before any device opens or any long computation starts."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from omnisort_hw.fileio import output_file_problem
+
+
+def output_file(text: str) -> Path:
+    """A file the command will write: not a folder, and in a folder that can be written."""
+    problem = output_file_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return Path(text)

@@ -1,0 +1,67 @@
+"""Bad input at the command line: refused with a typed, named error before any work starts,
+and as JSON on stdout for `--json` commands. In process (`main(argv)`), so each case is cheap."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from omnisort_hw.cli import main
+from omnisort_hw.core.camera_io import save_camera_json
+from omnisort_hw.core.camera_model import OcamModel
+
+
+def test_an_output_that_is_a_folder_is_refused_before_the_calibration_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """argparse checks `--out` while parsing: no image is read (the images do not even
+    exist), so the refusal cannot come after minutes of work."""
+    folder = tmp_path / "calib"
+    folder.mkdir()
+    argv = ["intrinsics", "calibrate", str(tmp_path / "missing.png"), "--out", str(folder)]
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and f"{folder} is a folder" in err, err
+    assert list(folder.iterdir()) == []
+
+
+def test_an_output_under_a_file_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blocker = tmp_path / "notes.txt"
+    blocker.write_text("x")
+    argv = ["extrinsics", "calibrate", "x.png", "--camera", "c.json", "--separation", "1292.4"]
+    with pytest.raises(SystemExit):
+        main([*argv, "--out", str(blocker / "system.json")])
+    assert f"{blocker} is not a folder" in capsys.readouterr().err
+
+
+def test_a_json_command_reports_its_failure_as_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A NaN in camera.json (Python's json reads it) is a typed error naming the file and
+    the field, on stderr and, because of `--json`, as the service's error shape on stdout."""
+    camera = save_camera_json(tmp_path / "camera.json", OcamModel.equidistant(640, 640, 185.0))
+    data = json.loads(camera.read_text())
+    data["poly"][1] = float("nan")
+    camera.write_text(json.dumps(data))
+    image = tmp_path / "target.png"
+    import cv2
+
+    assert cv2.imwrite(str(image), np.zeros((640, 640, 3), np.uint8))
+    argv = ["extrinsics", "calibrate", str(image), "--camera", str(camera)]
+    argv += ["--target", "two-sided", "--separation", "1292.4"]
+    argv += ["--out", str(tmp_path / "system.json"), "--json"]
+    code = main(argv)
+    out = capsys.readouterr()
+    assert code != 0
+    doc = json.loads(out.out)
+    assert doc["ok"] is False and doc["error"]["code"] == "bad_calibration_file", doc
+    assert str(camera) in doc["error"]["message"] and "'poly'" in doc["error"]["message"]
+    assert doc["error"]["message"] in out.err
+    assert not (tmp_path / "system.json").exists()
