@@ -17,9 +17,12 @@ class InputError(OmnisortError):
 
 
 class ConfigError(OmnisortError):
-    """A configuration or scene file is wrong; the message names the key."""
+    """A configuration or scene file is wrong; the message names the key. Exit status 78
+    (sysexits' EX_CONFIG): the unit's RestartPreventExitStatus keeps systemd from restarting a
+    cell whose configuration cannot work."""
 
     code = "bad_config"
+    exit_code = 78
 
 
 class CalibrationError(OmnisortError):

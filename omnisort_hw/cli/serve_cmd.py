@@ -27,7 +27,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.service.server import serve
+    from omnisort_hw.service.entry import serve
 
     settings = load_cell_config(args.config)
     logging.basicConfig(

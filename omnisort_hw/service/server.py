@@ -17,25 +17,21 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
-import faulthandler
 import hmac
 import logging
 import os
 import signal
-import sys
+import socket
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from omnisort_hw import __version__, fileio
+from omnisort_hw import __version__
 from omnisort_hw.cell import Cell
-from omnisort_hw.config.cell import CellConfig
-from omnisort_hw.config.service import ServiceConfig, is_loopback
-from omnisort_hw.errors import ConfigError, MotionRefusedError, OmnisortError
-from omnisort_hw.instance_lock import InstanceLock
+from omnisort_hw.config.service import ServiceConfig
+from omnisort_hw.errors import MotionRefusedError, OmnisortError
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.connection import (
     READ_CHUNK,
@@ -47,8 +43,7 @@ from omnisort_hw.service.connection import (
     peer_host,
 )
 from omnisort_hw.service.handlers import HANDLERS, Context
-from omnisort_hw.service.live_view import start_live_view
-from omnisort_hw.service.plc_face import start_plc_face
+from omnisort_hw.service.listener import bind_listener, check_exposure
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
@@ -96,10 +91,7 @@ class Service:
         config: ServiceConfig,
         notifier: Notifier | None = None,
     ) -> None:
-        if not is_loopback(config.host) and config.token is None:
-            raise ConfigError(
-                f"refusing to listen on {config.host!r} without a token; set [service] token"
-            )
+        check_exposure(config)
         self.cell = cell
         self.config = config
         self.notifier = notifier or Notifier({})
@@ -178,16 +170,13 @@ class Service:
 
     # -- life cycle ------------------------------------------------------------------------
 
-    async def start(self) -> tuple[str, int]:
-        """Bind the listening socket; returns the (host, port) actually bound."""
+    async def start(self, sock: socket.socket | None = None) -> tuple[str, int]:
+        """Listen on `sock` (bound before the devices opened) or bind the configured address;
+        returns the (host, port) actually bound."""
         self._loop = asyncio.get_running_loop()
         self._stop_requested = asyncio.Event()
         self._server = await asyncio.start_server(
-            self._client,
-            host=self.config.host,
-            port=self.config.port,
-            limit=READ_CHUNK,
-            reuse_address=True,
+            self._client, sock=sock or bind_listener(self.config), limit=READ_CHUNK
         )
         sock = self._server.sockets[0].getsockname()
         self.address = (str(sock[0]), int(sock[1]))
@@ -203,10 +192,10 @@ class Service:
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(ev.set)
 
-    async def run(self, install_signals: bool = True) -> int:
+    async def run(self, install_signals: bool = True, sock: socket.socket | None = None) -> int:
         """Serve until shutdown is requested, then stop cleanly; returns the exit code (0)."""
         if self._server is None:
-            await self.start()
+            await self.start(sock)
         assert self._stop_requested is not None and self._loop is not None
         if install_signals:
             for sig in (signal.SIGTERM, signal.SIGINT):
@@ -743,53 +732,3 @@ def start_in_thread(service: Service, timeout_s: float = 10.0) -> RunningService
         raise box["error"]
     host, port = box["addr"]
     return RunningService(service, thread, box["loop"], host, port, exit_code)
-
-
-def check_directories(settings: CellConfig) -> None:
-    """The state and log directories must be writable before anything else happens."""
-    fileio.check_writable(settings.storage.state_dir, "[storage] state_dir")
-    if settings.logging.rerun:
-        fileio.check_writable(settings.logging.log_dir, "[logging] log_dir")
-
-
-def serve(
-    settings: CellConfig,
-    host: str | None = None,
-    port: int | None = None,
-    cell: Cell | None = None,
-) -> int:
-    """`omnisort serve`: open the cell, listen, notify systemd, run until SIGTERM; exit code."""
-    cfg = dataclasses.replace(
-        settings.service,
-        host=host if host is not None else settings.service.host,
-        port=port if port is not None else settings.service.port,
-    )
-    # `kill -USR1 PID` prints every thread's stack to stderr (journald): for a stuck device.
-    with contextlib.suppress(AttributeError, ValueError, OSError):
-        faulthandler.register(signal.SIGUSR1, all_threads=True)
-    # A shorter GIL switch interval keeps the event loop answering while a job computes.
-    sys.setswitchinterval(SWITCH_INTERVAL_S)
-    notifier = Notifier()
-    check_directories(settings)
-    with InstanceLock(settings.storage.state_dir):
-        notifier.status("opening devices")
-        cell = cell or Cell.from_settings(settings, devices_in_child=True)  # no pybullet here
-        try:
-            cell.connect()
-            service = Service(cell, cfg, notifier)
-            plc = start_plc_face(service, settings.plc)
-            live = start_live_view(settings.logging.live, cell.runlog)
-        except BaseException:
-            cell.close()
-            raise
-        try:
-            code = asyncio.run(service.run())
-        finally:
-            notifier.close()
-            if plc is not None:
-                plc.close()
-            if live is not None:
-                live.close()
-    if service.exit_problems:
-        log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
-    return code

@@ -96,7 +96,7 @@ def test_laser_failure_is_a_coded_error_and_exit_two(tmp_path, capsys) -> None:
 
 def test_bad_config_names_the_key(tmp_path, emulator, capsys) -> None:
     cfg = write_config(tmp_path, serial_laser(emulator) + "\nbaudrate = -5")
-    assert main(["devices", "check", "--config", str(cfg)]) == 2
+    assert main(["devices", "check", "--config", str(cfg)]) == 78
     assert "[laser].baudrate" in capsys.readouterr().err
 
 

@@ -67,11 +67,12 @@ def test_review_lists_entities_and_spawns_the_viewer(tmp_path, capsys, monkeypat
 
 
 def test_serve_reports_a_bad_configuration(tmp_path, capsys) -> None:
+    """Exit 78 (EX_CONFIG) for every configuration error: systemd does not restart on it."""
     cfg = tmp_path / "cell.toml"
     cfg.write_text('[service]\nhost = "0.0.0.0"\n')
-    assert main(["serve", "--config", str(cfg)]) == 2
+    assert main(["serve", "--config", str(cfg)]) == 78
     assert "not loopback" in capsys.readouterr().err
-    assert main(["serve", "--config", str(tmp_path / "nope.toml")]) == 2
+    assert main(["serve", "--config", str(tmp_path / "nope.toml")]) == 78
     assert "not found" in capsys.readouterr().err
 
 

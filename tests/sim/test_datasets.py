@@ -144,7 +144,7 @@ def test_cli_bad_scene_is_an_error_naming_the_field(
 ) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text('[scene]\nname = "x"\n[target]\nkind = "two_sided"\nseparation_mm = -3.0\n')
-    assert main(["sim", "render", str(bad), "--out", str(tmp_path)]) == 2
+    assert main(["sim", "render", str(bad), "--out", str(tmp_path)]) == 78
     err = capsys.readouterr().err
     assert "target.separation_mm" in err and "bad_config" in err
     assert not (tmp_path / "x.png").exists()
