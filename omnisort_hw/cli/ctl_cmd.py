@@ -55,6 +55,24 @@ def parse_kv(items: list[str]) -> dict[str, Any]:
     return out
 
 
+def absolute_paths(command: str, args: dict[str, Any], host: str) -> dict[str, Any]:
+    """The command's path arguments made absolute against this shell's folder when the
+    service runs on this machine (loopback): a service under systemd runs in `/`, so a
+    relative `folder=views` would name a different folder there."""
+    from omnisort_hw.config.service import is_loopback
+    from omnisort_hw.service.protocol import COMMANDS
+
+    spec = COMMANDS.get(command)
+    if spec is None or not is_loopback(host):
+        return args
+    out = dict(args)
+    for arg in spec.args:
+        value = out.get(arg.name)
+        if arg.kind == "path" and isinstance(value, str) and value:
+            out[arg.name] = os.path.abspath(os.path.expanduser(value))
+    return out
+
+
 def default_timeout(command: str) -> float:
     """Long commands may take minutes; quick ones answer in seconds."""
     from omnisort_hw.service.protocol import COMMANDS
@@ -77,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     host = args.host or host
     port = args.port if args.port is not None else port
     token = args.token or os.environ.get("OMNISORT_TOKEN") or token
-    cmd_args = parse_kv(args.args)
+    cmd_args = absolute_paths(args.command, parse_kv(args.args), host)
     timeout = args.timeout if args.timeout is not None else default_timeout(args.command)
     try:
         with Client(

@@ -11,8 +11,10 @@ can answer every line with a typed error. Each command's arguments are declared 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -77,7 +79,7 @@ class Arg:
     """One argument of a command: its JSON type and the checks applied to it."""
 
     name: str
-    kind: Literal["bool", "int", "number", "str", "vector", "matrix4", "str_list"]
+    kind: Literal["bool", "int", "number", "str", "path", "vector", "matrix4", "str_list"]
     required: bool = False
     default: Any = None
     choices: tuple[str, ...] = ()
@@ -158,7 +160,9 @@ def _check_calibrate(args: dict[str, Any]) -> None:
         refuse(("separation_mm",), "is for the wall targets")
 
 
-_IMAGE = Arg("image", "str", help="path of an image on the cell PC; omitted: a fresh capture")
+_IMAGE = Arg(
+    "image", "path", help="absolute path of an image on the cell PC; omitted: a fresh capture"
+)
 
 COMMANDS: dict[str, Command] = {
     c.name: c
@@ -185,7 +189,7 @@ COMMANDS: dict[str, Command] = {
             "job",
             (
                 Arg("what", "str", required=True, choices=("intrinsics", "extrinsics")),
-                Arg("folder", "str", help="intrinsics: folder of calibration images"),
+                Arg("folder", "path", help="intrinsics: absolute path of the image folder"),
                 Arg("board", "str", max_chars=16, help="board inner corners COLSxROWS"),
                 Arg("square_mm", "number", lo=0.1, hi=10000.0, help="board square size"),
                 Arg("degree", "int", lo=2, hi=12, help="intrinsics: polynomial degree"),
@@ -331,6 +335,17 @@ def _check_arg(arg: Arg, cmd: str, value: Any) -> Any:
         return value
     if arg.kind == "number":
         return _check_number(arg, cmd, value)
+    if arg.kind == "path":
+        text = _check_arg(dataclasses.replace(arg, kind="str"), cmd, value)
+        if not os.path.isabs(text):
+            raise _bad(
+                arg,
+                cmd,
+                f"must be an absolute path on the cell PC, got {text[:200]!r}: the service "
+                f"does not guess a base folder (its working directory is {os.getcwd()}); "
+                "`omnisort ctl` makes relative paths absolute",
+            )
+        return text
     if arg.kind == "str":
         if not isinstance(value, str):
             raise _bad(arg, cmd, f"must be a string, got {_type_name(value)}")

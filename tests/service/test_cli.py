@@ -46,6 +46,24 @@ def test_ctl_reads_host_port_token_from_the_config(make_service, tmp_path, capsy
     assert Path(json.loads(capsys.readouterr().out)["result"]["path"]).is_file()
 
 
+def test_ctl_sends_paths_made_absolute_where_it_was_typed(
+    make_service, tmp_path, capsys, monkeypatch
+) -> None:
+    """`ctl calibrate folder=views` means ./views of the shell, not of the service (which runs
+    in `/` under systemd); a relative path sent by another client is refused by name."""
+    h: Harness = make_service(token=TOKEN)
+    port = str(h.running.port)
+    monkeypatch.chdir(tmp_path)
+    argv = ["ctl", "--port", port, "--token", TOKEN, "--compact", "calibrate"]
+    assert main([*argv, "what=intrinsics", "folder=views", "square_mm=20"]) == 1
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert err["code"] == "bad_input" and str(tmp_path / "views") in err["message"], err
+    with h.client(token=TOKEN) as c:
+        r = c.call("calibrate", {"what": "intrinsics", "folder": "views", "square_mm": 20})
+    assert r["error"]["code"] == "bad_argument" and "absolute path" in r["error"]["message"]
+    assert "folder" in r["error"]["message"] and str(Path.cwd()) in r["error"]["message"]
+
+
 def test_ctl_unreachable(capsys) -> None:
     assert main(["ctl", "--port", "1", "--connect-timeout", "1", "status"]) == 3
     assert "cannot connect" in capsys.readouterr().err

@@ -47,6 +47,7 @@ def generators(rng: random.Random) -> list[tuple[str, Callable[[], bytes], set[s
         arg = rng.choice(spec.args)
         valid = {
             "str": lambda v: isinstance(v, str),
+            "path": lambda v: False,  # no junk value is an absolute path
             "bool": lambda v: isinstance(v, bool),
             "int": lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1,
             "number": lambda v: False,
