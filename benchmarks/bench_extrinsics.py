@@ -54,13 +54,15 @@ def _reference(shared: Path) -> dict[str, Any]:
     ref = shared / "reference" / "unity"
     if not sorted((ref / "intrinsics").glob("a*.jpg")):
         return {"reference": f"skipped: no reference images under {ref}"}
-    params = {row: r.parameters for row, r in run_reference(ref, intrinsics_model(ref)).items()}
+    runs = run_reference(ref, intrinsics_model(ref))
+    params = {row: r.parameters for row, r in runs.items()}
     out: dict[str, Any] = {
         f"reference_{row}": {k: round(v, 3) for k, v in p.items()} for row, p in params.items()
     }
     keys = [k for k in next(iter(params.values())) if k.endswith("_deg")]
     spread = {k: round(float(np.ptp([p[k] for p in params.values()])), 3) for k in keys}
     out["reference_max_disagreement_deg"] = spread
+    out["reference_floor_lines"] = {row: r.floor_lines for row, r in runs.items() if r.floor_lines}
     return out
 
 

@@ -5,7 +5,10 @@
 
 A block sits between `<!-- figures:NAME -->` and `<!-- /figures -->`; everything between
 the markers is generated, so a table can never drift from the record (`tests/test_figures.py`
-checks every block). Published figures (the paper's Table 3) are constants of the literature.
+checks every block). A single figure in a sentence is `<!-- fig:PATH|FMT -->VALUE<!-- /fig -->`
+(`benchmarks/prose.py`), rewritten by the same `render`. The check also lists every measured
+figure typed by hand (`prose.check`, the rule in `tests/test_prose_figures.py`). Published
+figures (the paper's Table 3) are constants of the literature.
 """
 
 from __future__ import annotations
@@ -18,9 +21,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from benchmarks import prose
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 DOCUMENTS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
+ALLOWLIST = ROOT / "docs" / "figures_allowlist.txt"
 BLOCK = re.compile(r"(<!-- figures:(\w+) -->\n)(.*?)(<!-- /figures -->)", re.S)
 
 ANGLES = ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg")
@@ -619,12 +625,13 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
 
 
 def render(text: str, results: dict[str, Any]) -> str:
-    """`text` with every figures block regenerated (KeyError names an unknown block)."""
+    """`text` with every figures block and inline figure regenerated (KeyError names an
+    unknown block or a path results.json lacks)."""
 
     def one(m: re.Match[str]) -> str:
         return m.group(1) + GENERATORS[m.group(2)](results) + m.group(4)
 
-    return BLOCK.sub(one, text)
+    return prose.render_inline(BLOCK.sub(one, text), results)
 
 
 def blocks(text: str) -> list[str]:
@@ -650,7 +657,12 @@ def main() -> int:
                 path.write_text(new, encoding="utf-8")
     for path in stale:
         print(f"{path.relative_to(ROOT)}: {'rewritten' if args.write else 'stale'}")
-    return 1 if stale and not args.write else 0
+    bare, unused = prose.check(list(DOCUMENTS), ROOT, prose.load_allowlist(ALLOWLIST))
+    for hit in bare:
+        print(f"{hit}\n    measured, not generated: use <!-- fig:PATH|FMT --> or {ALLOWLIST.name}")
+    for entry in unused:
+        print(f"{ALLOWLIST.name}: excuses nothing now: {entry.path} | {entry.text}")
+    return 1 if (stale and not args.write) or bare or unused else 0
 
 
 if __name__ == "__main__":

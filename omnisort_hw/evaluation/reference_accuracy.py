@@ -43,11 +43,13 @@ RUNS: dict[str, tuple[str, str, str]] = {
 @dataclass
 class ReferenceRun:
     """Parameters and signed errors (result - authors' settings) of one method on one image,
-    with the standard deviations the method reports for its own result (where it does)."""
+    with the standard deviations the method reports for its own result (where it does) and
+    what `joint` did with the wall/floor lines (`residuals.floor_lines`; empty for the others)."""
 
     parameters: dict[str, float]
     errors: dict[str, float]
     std: dict[str, float] = field(default_factory=dict)
+    floor_lines: str = ""
 
 
 def intrinsics_model(ref_dir: Path) -> OcamModel:
@@ -83,7 +85,9 @@ def run_reference(
         )
         p = calib.parameters()
         std = {k: v for k, v in (calib.std or {}).items() if k in AUTHORS_SETTINGS}
-        out[row] = ReferenceRun(p, {k: p[k] - v for k, v in AUTHORS_SETTINGS.items()}, std)
+        errors = {k: p[k] - v for k, v in AUTHORS_SETTINGS.items()}
+        floor = str((calib.residuals or {}).get("floor_lines", ""))
+        out[row] = ReferenceRun(p, errors, std, floor)
     return out
 
 
