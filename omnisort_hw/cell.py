@@ -657,7 +657,7 @@ class Cell:
 
     def _image(self, image: str | None, laser: bool) -> np.ndarray:
         """The file `image`, or a capture with the laser switched to `laser` (off after)."""
-        from omnisort_hw.pipeline.extrinsics import read_image
+        from omnisort_hw.pipeline.image_files import read_image
 
         if image is not None:
             return read_image(image)

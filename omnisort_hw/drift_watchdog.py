@@ -139,7 +139,7 @@ class DriftWatchdog:
     def check(self, image: str | None = None) -> dict[str, Any]:
         """Capture (laser off) or read `image`, compare with the calibration, record the result."""
         from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-        from omnisort_hw.pipeline.extrinsics import read_image
+        from omnisort_hw.pipeline.image_files import read_image
 
         cell = self.cell
         rec = cell.store.read("system")

@@ -45,14 +45,13 @@ def add_drift_evaluation(esub: Any) -> None:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    import cv2
 
     from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.config.watchdog import WatchdogConfig
     from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-    from omnisort_hw.errors import CalibrationFileError, InputError
+    from omnisort_hw.errors import CalibrationFileError
     from omnisort_hw.pipeline.drift_check import calibration_key, check_drift, load_reference
-    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.runlog import RunLog
 
     try:
@@ -65,9 +64,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if registration is None and isinstance(payload.get("robot_base"), dict):
         registration = _registration_from_record(payload["robot_base"])
     if args.reference is not None:
-        reference = cv2.imread(str(args.reference), cv2.IMREAD_COLOR)
-        if reference is None:
-            raise InputError(f"{args.reference}: not a readable image")
+        reference = read_image(args.reference)
     else:
         reference = load_reference(args.system.parent, calibration_key(payload))
     image = read_image(args.image)

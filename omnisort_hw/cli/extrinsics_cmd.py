@@ -115,9 +115,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         calibrate_system,
         check_separation_mm,
         image_record,
-        read_image,
         system_payload,
     )
+    from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.runlog import RunLog
 
     if args.separation is not None and args.target == "checkerboards":
@@ -180,7 +180,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.pipeline.laser_map import map_laser
     from omnisort_hw.runlog import RunLog
 

@@ -127,7 +127,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.extrinsics_cmd import load_system
     from omnisort_hw.config.sorting import RegistrationConfig
     from omnisort_hw.core.checkerboard import BoardSpec
-    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.pipeline.registration import (
         register_from_image,
         robot_base_record,
@@ -200,7 +200,7 @@ def _locate_config(args: argparse.Namespace) -> Any:
 def cmd_locate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.extrinsics_cmd import load_system
     from omnisort_hw.pipeline.calibration_source import robot_base_T
-    from omnisort_hw.pipeline.extrinsics import read_image
+    from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.pipeline.locate import locate_in_images
     from omnisort_hw.runlog import RunLog
 

@@ -168,7 +168,8 @@ def _calibrate(
     truth: dict[str, Any],
     tone: ToneCurve,
 ) -> Any:
-    from omnisort_hw.pipeline.extrinsics import calibrate_system, read_image
+    from omnisort_hw.pipeline.extrinsics import calibrate_system
+    from omnisort_hw.pipeline.image_files import read_image
 
     image = read_image(image_path)
     target = TARGET_OF[scene]

@@ -13,7 +13,6 @@ import math
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
@@ -59,16 +58,6 @@ def check_separation_mm(value: float | None, field: str) -> float:
     if problem:
         raise InputError(f"{field}: {problem}")
     return float(value)
-
-
-def read_image(path: str | Path) -> np.ndarray:
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such image file")
-    image = cv2.imread(str(p), cv2.IMREAD_COLOR)
-    if image is None:
-        raise InputError(f"{p}: not a readable image (unknown format or corrupt)")
-    return image
 
 
 def image_record(path: str | Path) -> dict[str, Any]:

@@ -16,7 +16,6 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from omnisort_hw.core.checkerboard import BoardSpec
@@ -30,6 +29,7 @@ from omnisort_hw.core.intrinsics_report import (
 )
 from omnisort_hw.errors import InputError, MotionRefusedError
 from omnisort_hw.fileio import atomic_write_bytes
+from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.runlog import NullLog, RunLog
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -80,12 +80,7 @@ def read_images(
     for path in paths:
         if cancel is not None and cancel.is_set():
             raise MotionRefusedError("calibration cancelled")
-        if not path.is_file():
-            raise InputError(f"{path}: no such image file")
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise InputError(f"{path}: not a readable image (unknown format or corrupt)")
-        images.append((str(path), image))
+        images.append((str(path), read_image(path)))
     return images
 
 

@@ -1,0 +1,45 @@
+"""Image files as the product reads them: decoded once, and refused with the file's name when
+they are missing, unreadable or cut short. A truncated JPEG decodes without an error (libjpeg
+fills the missing rows with grey and warns on stderr), and was then reported as "no board" or
+"found 1 blue marker"; the end-of-image markers are checked here instead."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from omnisort_hw.errors import InputError
+
+JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe"})
+
+
+def truncation_problem(data: bytes) -> str | None:
+    """Why the encoded image `data` is cut short, or None. JPEG: the last start-of-scan must
+    be followed by an end-of-image marker (a thumbnail's EOI comes before the main scan);
+    PNG: the IEND chunk must close the file."""
+    if data[:3] == b"\xff\xd8\xff":
+        if data.rfind(b"\xff\xd9") < data.rfind(b"\xff\xda"):
+            return "truncated JPEG (no end-of-image marker after the last scan)"
+    elif data[:8] == b"\x89PNG\r\n\x1a\n" and b"IEND" not in data[-64:]:
+        return "truncated PNG (no IEND chunk at the end)"
+    return None
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """The colour image at `path` (BGR, uint8), or an InputError naming the file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such image file")
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise InputError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    problem = truncation_problem(data)
+    if problem:
+        raise InputError(f"{p}: {problem}; copy the file again")
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if image is None:
+        raise InputError(f"{p}: not a readable image (unknown format or corrupt)")
+    return image
