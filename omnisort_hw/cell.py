@@ -711,7 +711,7 @@ class Cell:
 
         cfg = self._sorting("the colour-blob location")
         calib = self.system_calibration()
-        T_SB = robot_base_T(calib, str(self.store.path("system")))
+        T_SB = robot_base_T(calib, str(self.store.path("system")), for_motion=False)
         with_laser = image is None and cfg.use_laser and self.devices.laser is not None
         acq = self.measure(image) if with_laser else None
         colour = acq.board if acq is not None else self._image(image, laser=False)

@@ -43,6 +43,13 @@ class CalibrationFileError(OmnisortError):
     code = "bad_calibration_file"
 
 
+class NotRegisteredError(CalibrationFileError):
+    """The system calibration has no robot base yet: cubes cannot be given in the robot's
+    frame until `register_robot` ran (motion is refused separately, as motion_refused)."""
+
+    code = "not_registered"
+
+
 class StorageError(OmnisortError):
     """A file of the state or log directory could not be written (the message names the path
     and the operating system's error); nothing already stored was changed."""

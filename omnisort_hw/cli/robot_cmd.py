@@ -205,7 +205,7 @@ def cmd_locate(args: argparse.Namespace) -> int:
     from omnisort_hw.runlog import RunLog
 
     calib = load_system(args.system)
-    T_SB = robot_base_T(calib, str(args.system))
+    T_SB = robot_base_T(calib, str(args.system), for_motion=False)
     image = read_image(args.image)
     cfg = _locate_config(args)
     laser_image = read_image(args.laser_image) if args.laser_image is not None else None

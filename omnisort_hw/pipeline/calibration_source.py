@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.errors import CalibrationFileError, MotionRefusedError
+from omnisort_hw.errors import CalibrationFileError, MotionRefusedError, NotRegisteredError
 
 
 class CalibrationSource:
@@ -113,15 +113,20 @@ class MemoryCalibration(CalibrationSource):
         return self.calib
 
 
-def robot_base_T(calib: SystemCalibration, source: str = "system.json") -> np.ndarray:
-    """T_SB from the calibration's `robot_base`, or MotionRefusedError if not registered."""
+def robot_base_T(
+    calib: SystemCalibration, source: str = "system.json", for_motion: bool = True
+) -> np.ndarray:
+    """T_SB from the calibration's `robot_base`. Without one: MotionRefusedError before a
+    motion, NotRegisteredError otherwise (locating cubes moves nothing)."""
     rb = calib.robot_base
+    error = MotionRefusedError if for_motion else NotRegisteredError
+    prefix = "motion refused: " if for_motion else ""
     if not isinstance(rb, Mapping) or "matrix" not in rb:
-        raise MotionRefusedError(
-            f"motion refused: {source} has no robot_base: register the robot first "
+        raise error(
+            f"{prefix}{source} has no robot_base: register the robot first "
             "(omnisort register-robot, or the register_robot command)"
         )
     T = np.asarray(rb["matrix"], float)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise MotionRefusedError(f"motion refused: {source}: robot_base.matrix is not a 4x4 pose")
+        raise error(f"{prefix}{source}: robot_base.matrix is not a 4x4 pose")
     return T

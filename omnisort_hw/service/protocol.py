@@ -54,6 +54,7 @@ ERROR_CODES: tuple[str, ...] = (
     "gripper_loaded",
     "instance_locked",
     "calibration_drift",
+    "not_registered",
 )
 
 MAX_ID_CHARS = 128

@@ -65,3 +65,29 @@ def test_a_json_command_reports_its_failure_as_json(
     assert str(camera) in doc["error"]["message"] and "'poly'" in doc["error"]["message"]
     assert doc["error"]["message"] in out.err
     assert not (tmp_path / "system.json").exists()
+
+
+def test_locate_without_a_registration_says_so_not_motion_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Locating moves nothing: a system.json without robot_base is `not_registered`, with
+    the command that fixes it."""
+    import cv2
+
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+
+    angles = dict.fromkeys(
+        ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg"),
+        0.0,
+    )
+    calib = SystemCalibration.from_angles(
+        OcamModel.equidistant(640, 640, 185.0), {**angles, "laser_distance_mm": 950.0}, "truth"
+    )
+    system = tmp_path / "system.json"
+    system.write_text(json.dumps(calib.to_json()))
+    image = tmp_path / "cell.png"
+    assert cv2.imwrite(str(image), np.zeros((640, 640, 3), np.uint8))
+    code = main(["locate", str(image), "--system", str(system), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 2 and doc["error"]["code"] == "not_registered", doc
+    assert "register-robot" in doc["error"]["message"] and str(system) in doc["error"]["message"]
