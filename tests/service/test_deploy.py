@@ -82,3 +82,32 @@ def test_install_script_is_valid_bash() -> None:
             ["shellcheck", str(script)], capture_output=True, text=True, timeout=60
         )
         assert proc.returncode == 0, proc.stdout
+
+
+def test_shipped_sim_cell_file_is_the_generated_one(tmp_path: Path) -> None:
+    """`deploy/cell.sim.toml` is what the generator gives (regenerate it with `python -m
+    sim_backend.virtual_cell.cell_file --sim`), loads, and is the demo's cell at its width."""
+    pytest.importorskip("pybullet")
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.service.demo import write_config
+    from sim_backend.scene import load_scene
+    from sim_backend.virtual_cell.cell_file import sim_cell_file_text
+
+    shipped = DEPLOY / "cell.sim.toml"
+    assert shipped.read_text() == sim_cell_file_text()
+    cell = load_cell_config(shipped)
+    assert {cell.devices.camera.backend, cell.devices.laser.backend, cell.devices.arm.backend} == {
+        "sim"
+    }
+    scene = load_scene("sorting")
+    assert scene.target is not None
+    assert (cell.target.kind, cell.target.separation_mm) == (
+        "two-sided",
+        scene.target.separation_mm,
+    )
+    assert cell.sorting is not None and cell.sorting.from_scene
+    assert cell.registration is not None and cell.registration.board.square_mm == 40.0
+    assert cell.storage.state_dir.resolve() == DEPLOY.parent / "build" / "sim-cell" / "state"
+    assert cell.logging.log_dir.resolve() == DEPLOY.parent / "build" / "sim-cell" / "logs"
+    demo = write_config(tmp_path, 320).read_text()
+    assert demo == sim_cell_file_text(width=320, state_dir="state", log_dir="logs")
