@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SHARED ?= ../shared
 
-.PHONY: demo test bench lint clean venv
+.PHONY: demo test bench lint clean venv wheelhouse
 
 venv: $(STAMP)
 
@@ -25,6 +25,14 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks --shared $(SHARED)
+
+# Every wheel the cell PC needs (this project and its dependencies) for an offline
+# `deploy/install.sh --wheelhouse $(WHEELHOUSE)`; needs the network, and a machine with the
+# cell PC's Python version and architecture (wheels are built or downloaded for this one).
+WHEELHOUSE ?= build/wheelhouse
+wheelhouse: $(STAMP)
+	rm -rf $(WHEELHOUSE)
+	$(BIN)/python -m pip wheel --quiet . -w $(WHEELHOUSE)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -1,7 +1,12 @@
 #!/usr/bin/env bash
 # Install or update the omnisort cell service on the cell PC (Debian/Ubuntu with systemd).
 #
-#   sudo deploy/install.sh [--start]
+#   sudo deploy/install.sh [--start] [--wheelhouse DIR] [--dry-run]
+#
+# --wheelhouse DIR (or --offline DIR) installs without network: pip takes this project and
+# every dependency from the wheels in DIR only (--no-index --find-links DIR); build DIR on a
+# connected machine with `make wheelhouse` (see deploy/README.md). --dry-run prints the pip
+# commands it would run and changes nothing (no root needed).
 #
 # Idempotent: run it again after pulling a new version. It creates the system user `omnisort`
 # (groups video and dialout for the camera and the serial laser), /etc/omnisort (config,
@@ -20,16 +25,58 @@ UNIT_DIR=${UNIT_DIR:-/etc/systemd/system}
 PYTHON=${PYTHON:-python3}
 SERVICE_USER=omnisort
 START=0
+WHEELHOUSE=
+DRY_RUN=0
 
-for arg in "$@"; do
-    case "$arg" in
+while [[ $# -gt 0 ]]; do
+    case "$1" in
         --start) START=1 ;;
-        -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
-        *) echo "install.sh: unknown argument $arg" >&2; exit 2 ;;
+        --dry-run) DRY_RUN=1 ;;
+        --wheelhouse|--offline)
+            if [[ $# -lt 2 || -z $2 ]]; then
+                echo "install.sh: $1 needs a folder of wheels" >&2
+                exit 2
+            fi
+            WHEELHOUSE=$2
+            shift
+            ;;
+        -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+        *) echo "install.sh: unknown argument $1" >&2; exit 2 ;;
     esac
+    shift
 done
 
 log() { printf 'install.sh: %s\n' "$*"; }
+
+# pip's source: the package index, or only the wheels of the wheelhouse (no network at all).
+PIP_SOURCE=()
+if [[ -n $WHEELHOUSE ]]; then
+    if ! compgen -G "$WHEELHOUSE/omnisort_hw-*.whl" >/dev/null; then
+        echo "install.sh: $WHEELHOUSE holds no omnisort_hw wheel (build it with make wheelhouse)" >&2
+        exit 2
+    fi
+    WHEELHOUSE=$(cd "$WHEELHOUSE" && pwd)
+    PIP_SOURCE=(--no-index --find-links "$WHEELHOUSE")
+fi
+PIP=("$PREFIX/venv/bin/python" -m pip install --quiet "${PIP_SOURCE[@]}")
+
+# Online: a newer pip, then this checkout built and installed. Offline: the venv's pip as it is
+# (a newer one is only on the index) and the project's wheel from the wheelhouse (building the
+# checkout would need setuptools from the network), reinstalled even at an unchanged version.
+pip_commands() {
+    if [[ -z $WHEELHOUSE ]]; then
+        "$@" "${PIP[@]}" --upgrade pip
+        "$@" "${PIP[@]}" --upgrade "$SRC"
+    else
+        "$@" "${PIP[@]}" --upgrade omnisort-hw
+        "$@" "${PIP[@]}" --upgrade --force-reinstall --no-deps omnisort-hw
+    fi
+}
+
+if [[ $DRY_RUN -eq 1 ]]; then
+    pip_commands echo
+    exit 0
+fi
 
 if [[ $(id -u) -ne 0 ]]; then
     echo "install.sh: run as root (sudo $0)" >&2
@@ -65,8 +112,7 @@ if [[ ! -x "$PREFIX/venv/bin/python" ]]; then
     "$PYTHON" -m venv "$PREFIX/venv"
     log "created $PREFIX/venv"
 fi
-"$PREFIX/venv/bin/python" -m pip install --quiet --upgrade pip
-"$PREFIX/venv/bin/python" -m pip install --quiet --upgrade "$SRC"
+pip_commands
 "$PREFIX/venv/bin/python" -m compileall -q "$PREFIX/venv" >/dev/null || true
 rm -rf "$PREFIX/share/deploy"
 cp -r "$SRC/deploy" "$PREFIX/share/deploy"

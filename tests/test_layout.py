@@ -6,6 +6,8 @@
 - in `omnisort_hw`, only the device factory, the demos, the CLI's `sim`/`evaluate` commands
   and the evaluation package import `sim_backend`; the core imports nothing of the product
   but the core, its errors and its atomic file writes;
+- the CLI imports `sim_backend` only inside its command functions, never at module level or
+  in a `register()` (every `omnisort` start builds every parser);
 - no code asks whether a device is simulated (`hasattr(x, "cell")` and the like);
 - no product module is over 800 lines (the hard limit of the style guide).
 """
@@ -148,6 +150,33 @@ def test_who_imports_the_simulator(prefix: str) -> None:
         and not n.startswith("omnisort_hw.evaluation")
     )
     assert bad == [], f"{bad} import sim_backend (allowed: {sorted(SIM_IMPORTERS)}, evaluation)"
+
+
+def _sim_imports_at_start(tree: ast.Module) -> list[int]:
+    """Lines importing sim_backend at module level or in `register()`: what runs at start."""
+    starting: list[ast.AST] = [n for n in tree.body if not isinstance(n, ast.FunctionDef)]
+    starting += [n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "register"]
+    lines = []
+    for top in starting:
+        for node in ast.walk(top):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                names = [node.module or ""]
+            if any(n == "sim_backend" or n.startswith("sim_backend.") for n in names):
+                lines.append(node.lineno)
+    return lines
+
+
+def test_the_cli_imports_the_simulator_only_in_its_commands() -> None:
+    found = {
+        name: lines
+        for name, path in MODULES.items()
+        if name.startswith("omnisort_hw.cli")
+        and (lines := _sim_imports_at_start(ast.parse(path.read_text(encoding="utf-8"))))
+    }
+    assert found == {}, f"imported when the parser is built: {found}"
 
 
 def test_the_core_is_pure() -> None:

@@ -74,11 +74,11 @@ def register(sub: Any) -> None:
 
 def _capture(config: Path | None, log: Any) -> tuple[Any, dict[str, Any]]:
     """The laser-light image of a measurement capture with the cell file's camera and laser."""
-    cap = _measure(config, log, board=False)
+    cap = measure(config, log, board=False)
     return cap.stripe_image, cap.record
 
 
-def _measure(config: Path | None, log: Any, board: bool) -> Any:
+def measure(config: Path | None, log: Any, board: bool) -> Any:
     """A measurement capture with the cell file's camera and laser (`MeasurementCapture`)."""
     from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.devices import open_devices
@@ -92,6 +92,24 @@ def _measure(config: Path | None, log: Any, board: bool) -> Any:
         raise InputError(f"{config}: a capture needs the [camera] and [laser] sections")
     with devices.camera as cam, devices.laser as laser:
         return capture_measurement(cam, laser, cell.capture, log, board=board)
+
+
+def laser_off_frame(config: Path | None) -> Any:
+    """One frame of the cell file's camera with its laser switched off (registration, colours)."""
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.devices import open_devices
+
+    if config is None:
+        raise InputError("give an image, or --config CELL.toml to capture with the cell")
+    devices = open_devices(load_cell_config(config).devices)
+    if devices.camera is None:
+        raise InputError(f"{config}: a capture needs the [camera] section")
+    with devices.camera as cam:
+        if devices.laser is None:
+            return cam.grab().image
+        with devices.laser as laser:
+            laser.set(False)
+            return cam.grab().image
 
 
 def load_system(path: Path) -> Any:
@@ -143,7 +161,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         if args.image is not None:
             image, source, record = read_image(args.image), str(args.image), None
         else:
-            cap = _measure(args.config, log, board=True)
+            cap = measure(args.config, log, board=True)
             image, source, record = cap.board_image, "capture", {"capture": cap.record}
             stripe_px, tone = cap.stripe_px, cap.tone or tone
         calib = calibrate_system(

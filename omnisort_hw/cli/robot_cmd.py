@@ -2,7 +2,9 @@
 
     omnisort register-robot IMAGE --system system.json --board 9x6 --square 40 \\
         --offset 200,-180,2,180,0,90
+    omnisort register-robot --config cell.toml --system system.json   # capture, [registration]
     omnisort locate IMAGE --system system.json [--config cell.toml] [--laser-image IMAGE]
+    omnisort locate --config cell.toml --system system.json          # capture
     omnisort sort --config cell.toml [--system system.json] [--register] [--json]
     omnisort evaluate sorting --scenes 50 --seed 0 [--json]
 
@@ -29,25 +31,34 @@ def register(sub: Any) -> None:
     reg = sub.add_parser(
         "register-robot", help="robot base pose T_SB from the floor checkerboard in one image"
     )
-    reg.add_argument("image", type=Path)
+    reg.add_argument(
+        "image", type=Path, nargs="?", help="laser-off image (default: a capture with --config)"
+    )
     reg.add_argument(
         "--system", type=Path, required=True, help="system.json (read, robot_base written)"
     )
-    reg.add_argument("--board", default="9x6", help="inner corners COLSxROWS (default 9x6)")
-    reg.add_argument("--square", type=float, required=True, help="square size, mm")
+    reg.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="cell.toml: without an image, capture with its camera (laser off); its "
+        "[registration] gives the defaults of --board, --square, --offset, --fit, --camera-height",
+    )
+    reg.add_argument("--board", default=None, help="inner corners COLSxROWS (default 9x6)")
+    reg.add_argument("--square", type=float, default=None, help="square size, mm")
     reg.add_argument(
         "--offset",
-        required=True,
+        default=None,
         help="X,Y,Z,RX,RY,RZ: the board frame in the robot base frame (mm, deg, Z-Y-X)",
     )
     reg.add_argument(
         "--fit",
         choices=("auto", "level", "free"),
-        default="auto",
+        default=None,
         help="board on a level floor in S, free 6-DOF, or auto: weighed by the calibration's "
         "camera roll/pitch 1-sigma (default)",
     )
-    reg.add_argument("--camera-height", type=float, default=1200.0, help="nominal, mm")
+    reg.add_argument("--camera-height", type=float, default=None, help="nominal, mm (default 1200)")
     reg.add_argument("--model", default=None, help="robot model to note in robot_base (UR5e...)")
     reg.add_argument("--dry-run", action="store_true", help="do not write system.json")
     reg.add_argument("--json", action="store_true", help="print the result as one JSON object")
@@ -55,14 +66,20 @@ def register(sub: Any) -> None:
     reg.set_defaults(func=cmd_register)
 
     loc = sub.add_parser("locate", help="find the cubes: colour, centre and yaw in S and B")
-    loc.add_argument("image", type=Path, help="colour image (laser off)")
+    loc.add_argument(
+        "image",
+        type=Path,
+        nargs="?",
+        help="colour image, laser off (default: a capture with --config: laser off and on)",
+    )
     loc.add_argument("--system", type=Path, required=True, help="system.json with robot_base")
     loc.add_argument("--laser-image", type=Path, default=None, help="same view, laser on")
     loc.add_argument(
         "--config",
         type=Path,
         default=None,
-        help="cell.toml: locate with its [sorting] section, as the service does",
+        help="cell.toml: locate with its [sorting] section, as the service does; without an "
+        "image, capture with its camera and laser",
     )
     loc.add_argument(
         "--cube-size", type=float, default=None, help="cube edge, mm (default 100 or --config)"
@@ -123,10 +140,35 @@ def _numbers(text: str, n: int, what: str) -> tuple[float, ...]:
     return vals
 
 
-def cmd_register(args: argparse.Namespace) -> int:
-    from omnisort_hw.cli.extrinsics_cmd import load_system
+def _registration(args: argparse.Namespace) -> Any:
+    """The registration settings: the flags, else `[registration]` of --config, else defaults."""
     from omnisort_hw.config.sorting import RegistrationConfig
     from omnisort_hw.core.checkerboard import BoardSpec
+
+    base = None
+    if args.config is not None:
+        cell, _ = load_cell(args.config, devices=False)
+        base = cell.registration
+    if args.square is None and base is None:
+        raise InputError("--square is needed (or a [registration] section in --config)")
+    if args.offset is None and base is None:
+        raise InputError("--offset is needed (or a [registration] section in --config)")
+    square = args.square if args.square is not None else base.board.square_mm
+    board_text = args.board or (f"{base.board.cols}x{base.board.rows}" if base else "9x6")
+    try:
+        board = BoardSpec.parse(board_text, square)
+    except ValueError as exc:
+        raise InputError(f"--board/--square: {exc}") from None
+    offset = _numbers(args.offset, 6, "--offset") if args.offset is not None else base.offset
+    fit = args.fit or (base.fit if base is not None else "auto")
+    height = args.camera_height
+    if height is None:
+        height = base.camera_height_mm if base is not None else 1200.0
+    return RegistrationConfig(board, offset, fit, height)  # type: ignore[arg-type]
+
+
+def cmd_register(args: argparse.Namespace) -> int:
+    from omnisort_hw.cli.extrinsics_cmd import laser_off_frame, load_system
     from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.pipeline.registration import (
         register_from_image,
@@ -135,18 +177,14 @@ def cmd_register(args: argparse.Namespace) -> int:
     )
     from omnisort_hw.runlog import RunLog
 
-    try:
-        board = BoardSpec.parse(args.board, args.square)
-    except ValueError as exc:
-        raise InputError(f"--board/--square: {exc}") from None
-    offset = _numbers(args.offset, 6, "--offset")
-    rc = RegistrationConfig(board, offset, args.fit, args.camera_height)  # type: ignore[arg-type]
+    rc = _registration(args)
     calib = load_system(args.system)
-    image = read_image(args.image)
+    image = read_image(args.image) if args.image else laser_off_frame(args.config)
+    source = str(args.image) if args.image else "capture"
     with RunLog(args.log) as log:
         log.image("registration/image", image)
         reg = register_from_image(image, calib, rc, log)
-    record = robot_base_record(reg, rc, str(args.image), args.model)
+    record = robot_base_record(reg, rc, source, args.model)
     written = None if args.dry_run else write_robot_base(args.system, record)
     if args.json:
         print(json.dumps({**record, "written": str(written) if written else None}))
@@ -198,7 +236,7 @@ def _locate_config(args: argparse.Namespace) -> Any:
 
 
 def cmd_locate(args: argparse.Namespace) -> int:
-    from omnisort_hw.cli.extrinsics_cmd import load_system
+    from omnisort_hw.cli.extrinsics_cmd import laser_off_frame, load_system, measure
     from omnisort_hw.pipeline.calibration_source import robot_base_T
     from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.pipeline.locate import locate_in_images
@@ -206,10 +244,17 @@ def cmd_locate(args: argparse.Namespace) -> int:
 
     calib = load_system(args.system)
     T_SB = robot_base_T(calib, str(args.system), for_motion=False)
-    image = read_image(args.image)
     cfg = _locate_config(args)
     laser_image = read_image(args.laser_image) if args.laser_image is not None else None
     with RunLog(args.log) as log:
+        if args.image is not None:
+            image = read_image(args.image)
+        elif cfg.use_laser and laser_image is None:
+            # As the service: the capture's averaged laser-off image and its laser light.
+            cap = measure(args.config, log, board=True)
+            image, laser_image = cap.board_image, cap.stripe_image
+        else:
+            image = laser_off_frame(args.config)
         log.image("locate/image", image)
         cubes, diag = locate_in_images(
             image, laser_image, calib, cfg, T_SB, calib.robot_base, log, prefix="locate"
@@ -299,6 +344,10 @@ def cmd_sort(args: argparse.Namespace) -> int:
 
 
 def _print_progress(event: dict[str, Any]) -> None:
+    """The sorter's events on stderr: the planned total once, then each cube's outcome."""
+    if "to_pick" in event:
+        print(f"  {event['located']} cubes located, {event['to_pick']} to pick", file=sys.stderr)
+        return
     print(f"  cube {event['cube']} ({event['color']}): {event['status']}", file=sys.stderr)
 
 

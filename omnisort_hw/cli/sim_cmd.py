@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.virtual_cell_args import add_arguments
 from omnisort_hw.errors import InputError
 
 
@@ -51,8 +52,6 @@ def register(sub: Any) -> None:
 
     sc = ssub.add_parser("scenes", help="list the shipped scene files")
     sc.set_defaults(func=cmd_scenes)
-
-    from sim_backend.virtual_cell.run import add_arguments
 
     vc = ssub.add_parser(
         "virtual-cell",

@@ -22,29 +22,12 @@ SCENE = "sorting"
 
 
 def write_config(out: Path, width: int) -> Path:
-    """A cell configuration for the simulated scene; [target] and [registration] as an
-    installer measures them (here read from the scene file), [sorting] bins and obstacles
-    from the scene."""
-    from sim_backend.scene import load_scene
-    from sim_backend.sort_harness import sim_registration_config
+    """`out/cell.toml`: the simulated cell of `deploy/cell.sim.toml` (the same generator) with
+    its camera at `width` px and its state and logs under `out`."""
+    from sim_backend.virtual_cell.cell_file import sim_cell_file_text
 
-    scene = load_scene(SCENE)
-    reg = sim_registration_config(scene)
-    assert scene.target is not None
-    sim = f'backend = "sim"\nscene = "{SCENE}"\n'
-    text = (
-        f"[camera]\n{sim}width = {width}\nheight = {width}\n"
-        f"[laser]\n{sim}[arm]\n{sim}"
-        '[storage]\nstate_dir = "state"\n'
-        '[logging]\nlog_dir = "logs"\n'
-        f'[target]\nkind = "two-sided"\nseparation_mm = {scene.target.separation_mm}\n'
-        "[sorting]\nfrom_scene = true\n"
-        f'[registration]\nboard = "{reg.board.cols}x{reg.board.rows}"\n'
-        f"square_mm = {reg.board.square_mm}\noffset = {list(reg.offset)}\n"
-        f"camera_height_mm = {reg.camera_height_mm}\n"
-    )
     path = out / "cell.toml"
-    path.write_text(text)
+    path.write_text(sim_cell_file_text(SCENE, width, state_dir="state", log_dir="logs"))
     return path
 
 

@@ -9,25 +9,7 @@ import signal
 import sys
 import threading
 
-
-def add_arguments(ap: argparse.ArgumentParser) -> None:
-    ap.add_argument("--scene", default="sorting", help="scene file or shipped scene name")
-    ap.add_argument("--host", default="127.0.0.2", help="address to serve on (default 127.0.0.2)")
-    ap.add_argument("--width", type=int, default=None, help="camera image size (default: scene)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--fps", type=float, default=10.0, help="camera stream frame rate")
-    ap.add_argument("--degraded", action="store_true", help='"real camera" mode for the stream')
-    ap.add_argument(
-        "--unlock-delay",
-        type=float,
-        default=5.0,
-        help="seconds before a protective stop may be unlocked (5 on a real controller)",
-    )
-    ap.add_argument(
-        "--gripper-output",
-        default="tool:0",
-        help="digital output driving the gripper, GROUP:PIN (tool, standard, configurable)",
-    )
+from omnisort_hw.cli.virtual_cell_args import add_arguments
 
 
 def serve(args: argparse.Namespace) -> int:
