@@ -25,6 +25,13 @@ class ConfigError(OmnisortError):
     exit_code = 78
 
 
+class NoDisplayError(OmnisortError):
+    """A command that opens a window was run where there is no display (the message names
+    the alternatives that need none)."""
+
+    code = "no_display"
+
+
 class CalibrationError(OmnisortError):
     """A calibration could not be computed from the data given (the message says why)."""
 

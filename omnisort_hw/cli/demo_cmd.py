@@ -154,13 +154,10 @@ def write_overview(
     """The calibration image with the laser stripe found (green) and each segment's distance,
     and the calibrated parameters against the truth: a picture of one run."""
     import cv2
-    import numpy as np
 
-    from omnisort_hw.fileio import atomic_write_bytes
+    from omnisort_hw.core.overlays import draw_dots, write_png
 
-    canvas = image.copy()
-    for u, v in np.round(laser_map.pixels).astype(int):
-        cv2.circle(canvas, (int(u), int(v)), max(2, canvas.shape[1] // 600), (0, 220, 0), -1)
+    canvas = draw_dots(image.copy(), laser_map.pixels, (0, 220, 0), max(2, image.shape[1] // 600))
     small = cv2.resize(canvas, (800, round(800 * canvas.shape[0] / canvas.shape[1])))
     lines = [f"{k}: {found[k]:.3f} (truth {truth[k]:.3f})" for k in found]
     lines += [f"segment {i}: {s.distance_mm:.0f} mm" for i, s in enumerate(laser_map.segments)]
@@ -170,8 +167,4 @@ def write_overview(
         cv2.putText(
             small, text, org, cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA
         )
-    ok, buf = cv2.imencode(".png", small)
-    if not ok:
-        raise OSError(f"{path}: could not encode the overview image")
-    atomic_write_bytes(path, buf.tobytes(), keep_history=False)
-    return path
+    return write_png(path, small)

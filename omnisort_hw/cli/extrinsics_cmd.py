@@ -48,7 +48,12 @@ def register(sub: Any) -> None:
         help="the camera's tone curve: srgb (default, 8-bit cameras), linear, gamma:G, or a "
         "JSON table of 256 light values (measured)",
     )
-    cal.add_argument("--out", type=output_file, required=True, help="system.json to write")
+    cal.add_argument(
+        "--out",
+        type=output_file,
+        required=True,
+        help="system.json to write (and beside it STEM_overlay.png: what was detected and fitted)",
+    )
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
     cal.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     cal.set_defaults(func=cmd_calibrate)
@@ -67,6 +72,13 @@ def register(sub: Any) -> None:
         "--points",
         action="store_true",
         help="with --json: every laser point in S (mm) and its pixel (points_S, pixels)",
+    )
+    mp.add_argument(
+        "--png",
+        type=output_file,
+        default=None,
+        help="the map's picture (image with its laser points, and their top view in mm); "
+        "default: IMAGE-STEM_map_overlay.png beside --system (capture_map_overlay.png)",
     )
     mp.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     mp.set_defaults(func=cmd_map)
@@ -127,12 +139,13 @@ def load_system(path: Path) -> Any:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.camera_io import load_camera_json
+    from omnisort_hw.core.overlays import overlay_path, write_png
     from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import (
-        calibrate_system,
         check_separation_mm,
         image_record,
+        run_extrinsics,
         system_payload,
     )
     from omnisort_hw.pipeline.image_files import read_image
@@ -164,7 +177,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             cap = measure(args.config, log, board=True)
             image, source, record = cap.board_image, "capture", {"capture": cap.record}
             stripe_px, tone = cap.stripe_px, cap.tone or tone
-        calib = calibrate_system(
+        run = run_extrinsics(
             image,
             model,
             args.target,
@@ -177,11 +190,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             tone=tone,
             stripe_px=stripe_px,
         )
+    calib = run.calib
     image_rec = image_record(args.image) if args.image is not None else record
     atomic_write_json(args.out, system_payload(calib, image_rec))
+    png = write_png(overlay_path(args.out), run.overlay(image, source))
     if args.json:
         out = {
             "out": str(args.out),
+            "overlay_png": str(png),
             "parameters": calib.parameters(),
             "std": calib.std,
             "residuals": calib.residuals,
@@ -194,12 +210,22 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             std = calib.std.get(key)
             extra = f"  +- {std:.4f}" if std is not None else ""
             print(f"  {key:<20} {value:10.4f}{extra}")
+        print(f"picture of what was detected and fitted: {png}")
     return 0
 
 
+def map_png_path(args: argparse.Namespace) -> Path:
+    """The map picture's path: --png, else named after the image, beside system.json."""
+    if args.png is not None:
+        return Path(args.png)
+    stem = args.image.stem if args.image is not None else "capture"
+    return args.system.with_name(f"{stem}_map_overlay.png")
+
+
 def cmd_map(args: argparse.Namespace) -> int:
+    from omnisort_hw.core.overlays import write_png
     from omnisort_hw.pipeline.image_files import read_image
-    from omnisort_hw.pipeline.laser_map import map_laser
+    from omnisort_hw.pipeline.laser_map import map_laser, map_overlay
     from omnisort_hw.runlog import RunLog
 
     calib = load_system(args.system)
@@ -211,8 +237,9 @@ def cmd_map(args: argparse.Namespace) -> int:
             image, record = _capture(args.config, log)
             source = "capture"
         laser_map = map_laser(image, calib, source, log)
+    png = write_png(map_png_path(args), map_overlay(image, laser_map, calib, source))
     if args.json:
-        out = laser_map.summary(with_points=args.points)
+        out = {**laser_map.summary(with_points=args.points), "overlay_png": str(png)}
         print(json.dumps({**out, "capture": record} if record else out))
     else:
         segs = laser_map.segments
@@ -222,4 +249,5 @@ def cmd_map(args: argparse.Namespace) -> int:
                 f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"
                 f"  bearing {s.bearing_deg:7.1f} deg  length {s.length_mm:7.1f} mm"
             )
+        print(f"picture of the points and their top view: {png}")
     return 0

@@ -230,14 +230,6 @@ def _short(name: str) -> str:
     return name.replace("\\", "/").rsplit("/", 1)[-1]
 
 
-def encode_png(image: np.ndarray) -> bytes:
-    """PNG bytes of a BGR picture."""
-    ok, buf = cv2.imencode(".png", image)
-    if not ok:
-        raise ValueError("could not encode the report as PNG")
-    return buf.tobytes()
-
-
 def build_report(
     result: IntrinsicResult, images: list[tuple[str, np.ndarray]]
 ) -> tuple[ReportFigures, np.ndarray]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,8 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
+from omnisort_hw.core.overlays import draw_extrinsics
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.errors import InputError
 from omnisort_hw.runlog import NullLog, RunLog
@@ -74,7 +77,24 @@ def check_image_size(image: np.ndarray, model: OcamModel, source: str) -> None:
         )
 
 
-def calibrate_system(
+@dataclass
+class ExtrinsicsRun:
+    """A calibration and the features it was computed from (what its picture shows)."""
+
+    calib: SystemCalibration
+    features: TargetFeatures | BoardsFeatures
+
+    def overlay(self, image: np.ndarray, title: str = "") -> np.ndarray:
+        """The calibration image with the features and the fitted model reprojected."""
+        return draw_extrinsics(image, self.features, self.calib, title)
+
+
+def calibrate_system(*args: Any, **kwargs: Any) -> SystemCalibration:
+    """`run_extrinsics` (same arguments) for callers that need only the calibration."""
+    return run_extrinsics(*args, **kwargs).calib
+
+
+def run_extrinsics(
     image: np.ndarray,
     model: OcamModel,
     target: str,
@@ -86,10 +106,11 @@ def calibrate_system(
     log: RunLog = NullLog,
     tone: ToneCurve = SRGB,
     stripe_px: np.ndarray | None = None,
-) -> SystemCalibration:
+) -> ExtrinsicsRun:
     """Extract the target's features from one image and run the chosen method on them;
     `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise);
-    `stripe_px` the laser points of a measurement capture (else found in the image)."""
+    `stripe_px` the laser points of a measurement capture (else found in the image). With the
+    log on, the overlay picture (`ExtrinsicsRun.overlay`) goes to it as well."""
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
     from omnisort_hw.core.extrinsics.method2 import calibrate_method2
@@ -113,7 +134,7 @@ def calibrate_system(
         for name, b in boards.boards.items():
             log.points2d(f"extrinsics/image/{name}_corners", b.corners_px, color=(0, 200, 0))
             log.points2d(f"extrinsics/image/{name}_laser", b.laser_px, color=(255, 0, 0), radius=1)
-        calib = calibrate_method2(boards, model)
+        run = ExtrinsicsRun(calibrate_method2(boards, model), boards)
     else:
         features = extract_target_features(
             image, model, kind=target, tone=tone, stripe_px=stripe_px
@@ -136,9 +157,11 @@ def calibrate_system(
         solver = {"joint": calibrate_joint, "paper": calibrate_paper, "method1": calibrate_method1}[
             method
         ]
-        calib = solver(features, model, float(separation_mm))
-    _log_calibration(log, calib)
-    return calib
+        run = ExtrinsicsRun(solver(features, model, float(separation_mm)), features)
+    _log_calibration(log, run.calib)
+    if log.enabled:
+        log.image("extrinsics/overlay", run.overlay(image, source))
+    return run
 
 
 def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> dict[str, Any]:

@@ -24,11 +24,10 @@ from omnisort_hw.core.intrinsics_report import (
     OUTER_BAND,
     ReportFigures,
     build_report,
-    encode_png,
     log_report,
 )
+from omnisort_hw.core.overlays import write_png
 from omnisort_hw.errors import InputError, MotionRefusedError
-from omnisort_hw.fileio import atomic_write_bytes
 from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -47,8 +46,7 @@ class IntrinsicCalibration:
     def write_report(self, camera_json: str | Path) -> Path:
         """Write the report picture beside `camera_json` (atomically); its path."""
         path = report_png_path(Path(camera_json))
-        atomic_write_bytes(path, encode_png(self.picture), keep_history=False)
-        return path
+        return write_png(path, self.picture)
 
 
 def report_png_path(camera_json: Path) -> Path:

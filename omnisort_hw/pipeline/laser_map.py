@@ -14,6 +14,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_echoes import direct_hits, floor_echoes
 from omnisort_hw.core.laser_stripe import laser_stripe_points_stats, stripe_interior
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
+from omnisort_hw.core.overlays import draw_map
 from omnisort_hw.pipeline.extrinsics import check_image_size
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -89,6 +90,14 @@ def map_laser(
     for i, seg in enumerate(result.segments):
         log.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
     return result
+
+
+def map_overlay(
+    image: np.ndarray, laser_map: LaserMap, calib: SystemCalibration, title: str = ""
+) -> np.ndarray:
+    """The map's picture: the image with its laser points beside their top view on the laser
+    plane (mm), segments in matching colours. Drawn only when asked: `map_laser` stays fast."""
+    return draw_map(image, laser_map.pixels, laser_map.points_S, laser_map.segments, calib, title)
 
 
 def floor_plane_S(

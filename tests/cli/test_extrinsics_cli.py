@@ -77,8 +77,19 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
     assert got["laser_pitch_deg"] == pytest.approx(truth["laser_plane"]["pitch_deg"], abs=0.05)
     system = json.loads(out.read_text())
     assert system["image"]["sha256"] and system["laser_plane"]["distance_mm"] > 0
+    # The picture beside system.json: the image with what was detected and fitted drawn over
+    # it (the image's pixel coordinates kept), then the legend column.
+    assert result["overlay_png"] == str(d / "system_overlay.png")
+    source, pic = cv2.imread(str(d / "on.png")), cv2.imread(result["overlay_png"])
+    assert pic is not None and pic.shape[0] == source.shape[0] and pic.shape[1] > source.shape[1]
+    changed = np.any(pic[:, : source.shape[1]] != source, axis=2)
+    assert 0.002 < changed.mean() < 0.2  # features and lines drawn, the image still there
     proc = run_cli("map", str(d / "on.png"), "--system", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["overlay_png"] == str(d / "on_map_overlay.png")
+    map_pic = cv2.imread(str(d / "on_map_overlay.png"))
+    # image | square top view | legend, the image's height
+    assert map_pic.shape[0] == source.shape[0] and map_pic.shape[1] > 2 * source.shape[1]
     segs = json.loads(proc.stdout)["segments"]
     # The two walls' laser lines; their nearest points are the walls' near ends.
     target = truth["target"]
@@ -125,6 +136,7 @@ def test_bad_input_fails_clearly_and_writes_nothing(
     assert proc.returncode != 0
     assert message.lower() in proc.stderr.lower(), proc.stderr
     assert not out.exists()
+    assert not out.with_name(out.stem + "_overlay.png").exists()
 
 
 def test_a_wall_target_without_its_measured_separation_is_refused(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -64,6 +65,25 @@ def test_a_jump_in_depth_still_splits() -> None:
     assert sorted(round(s.distance_mm) for s in got) == [1200, 1500]
 
 
+def _check_map_picture(res: dict, png: Path, image: np.ndarray) -> None:
+    """The map's picture at --png: the image with every mapped point drawn in its segment's
+    colour (or grey), and a top view whose points wear the same colours."""
+    from omnisort_hw.core.overlays import PALETTE
+
+    assert res["overlay_png"] == str(png)
+    pic = cv2.imread(str(png))
+    h, w = image.shape[:2]
+    assert pic.shape[0] == h and pic.shape[1] > w + h
+    px = np.round(np.asarray(res["pixels"])).astype(int)
+    drawn = pic[px[:, 1], px[:, 0]]
+    colours = np.array([*PALETTE, (150, 150, 150)])
+    on_palette = np.any(np.all(drawn[:, None, :] == colours[None], axis=2), axis=1)
+    assert on_palette.all()
+    top = pic[:, w : w + h]
+    for i in range(len(res["segments"])):
+        assert np.any(np.all(top == PALETTE[i % len(PALETTE)], axis=2)), i
+
+
 @pytest.mark.reference
 def test_map_cli_prints_every_point_with_its_pixel_and_keeps_the_dashed_stripe(
     reference_dir: Path, tmp_path: Path
@@ -93,10 +113,13 @@ def test_map_cli_prints_every_point_with_its_pixel_and_keeps_the_dashed_stripe(
         str(system),
     )
     assert cal.returncode == 0, cal.stderr
+    assert (tmp_path / "system_overlay.png").is_file()
     image = str(reference_dir / "mapping_cubes.jpg")
-    proc = cli("map", image, "--system", str(system), "--json", "--points")
+    png = tmp_path / "pictures" / "cubes.png"
+    proc = cli("map", image, "--system", str(system), "--json", "--points", "--png", str(png))
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
+    _check_map_picture(res, png, cv2.imread(image))
     pts, px = np.asarray(res["points_S"]), np.asarray(res["pixels"])
     assert pts.shape == (res["points_on_plane"], 3) and px.shape == (res["points_on_plane"], 2)
     dashed = (px[:, 0] > 1040) & (px[:, 0] < 1180) & (px[:, 1] > 385) & (px[:, 1] < 405)

@@ -29,9 +29,9 @@ from omnisort_hw.core.features import MARKER_NAMES, BoardsFeatures, TargetFeatur
 from omnisort_hw.core.great_circles import fit_great_circle, great_circle_residuals_px
 from omnisort_hw.core.intrinsics import calibrate_images
 from omnisort_hw.core.laser_stripe import laser_stripe_points, laser_stripe_points_stats
+from omnisort_hw.core.overlays import draw_target_features
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.core.target_features import (
-    draw_target_features,
     extract_board_features,
     extract_target_features,
 )
