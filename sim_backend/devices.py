@@ -35,6 +35,7 @@ from drivers.errors import (
     DeviceError,
     DeviceTimeoutError,
 )
+from omnisort_hw.config.devices import check_sim_settings
 from omnisort_hw.core.frames import homogeneous
 from omnisort_hw.errors import ConfigError
 from sim_backend.exposed_frames import ExposedFrames, world_state_key
@@ -234,59 +235,13 @@ class SimLaserSwitch(_Connectable, LaserSwitch):
         return bool(self.cell.world.laser_on)
 
 
-_KEYS: dict[str, dict[str, type]] = {
-    "camera": {
-        "scene": str,
-        "seed": int,
-        "degraded": bool,
-        "width": int,
-        "height": int,
-        "model_file": str,
-        "exposure_ms": float,
-        "gain": float,
-        "grab_timeout_s": float,
-        "bump_deg": float,
-        "bump_axis": str,
-        "bump_after_grabs": int,
-        "pixel_format": str,
-        "lighting": str,
-    },
-    "laser": {"scene": str, "seed": int},
-    "arm": {
-        "scene": str,
-        "seed": int,
-        "joint_speed_deg_s": float,
-        "joint_accel_deg_s2": float,
-        "linear_speed_mm_s": float,
-        "linear_accel_mm_s2": float,
-        "max_joint_speed_deg_s": float,
-        "max_joint_accel_deg_s2": float,
-        "max_linear_speed_mm_s": float,
-        "max_linear_accel_mm_s2": float,
-        "realtime": bool,
-    },
-}
-
-
 def _check_settings(kind: str, settings: dict[str, Any]) -> dict[str, Any]:
-    allowed = _KEYS.get(kind)
-    if allowed is None:
-        raise _sim_device_error(f"[{kind}].backend", f'no simulated "{kind}" device')
-    out: dict[str, Any] = {}
-    for key, value in settings.items():
-        if key not in allowed:
-            raise _sim_device_error(
-                f"[{kind}].{key}",
-                f"unknown key for the simulated {kind} (known: {', '.join(sorted(allowed))})",
-            )
-        tp = allowed[key]
-        ok = isinstance(value, tp) and not (tp is int and isinstance(value, bool))
-        if tp is float and isinstance(value, int) and not isinstance(value, bool):
-            value, ok = float(value), True
-        if not ok:
-            raise _sim_device_error(f"[{kind}].{key}", f"expected {tp.__name__}, got {value!r}")
-        out[key] = value
-    return out
+    """The section's settings checked against the schema the cell file was loaded with."""
+    try:
+        return check_sim_settings(kind, settings)
+    except ConfigError as exc:
+        key = getattr(exc, "key", f"[{kind}]")
+        raise _sim_device_error(key, str(exc).removeprefix(f"{key}: ")) from None
 
 
 def open_devices(

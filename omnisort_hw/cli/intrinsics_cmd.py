@@ -78,6 +78,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     report_path = cal.write_report(args.out)
     summary = {"out": str(args.out), "report": str(report_path), **record}
     summary["model"] = result.model.to_dict()
+    summary["field_of_view_deg"] = {
+        "image_circle": figures.circle_field_deg,
+        "corners_seen": figures.corners_field_deg,
+    }
     if args.json:
         print(json.dumps(summary))
     else:
@@ -86,7 +90,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"  RMS reprojection error  {result.rms_px:.3f} px, {len(result.images_used)} images")
         print(f"  centre (u, v)           {model.center_uv[0]:.2f}, {model.center_uv[1]:.2f}")
         print(f"  polynomial degree       {result.degree}")
-        print(f"  horizontal field        {horizontal_fov_deg(model):.1f} deg")
+        print(
+            f"  field of view           {figures.circle_field_deg:.1f} deg across the image "
+            f"circle (r = {figures.circle_radius_px:.0f} px); corners seen out to "
+            f"{figures.corners_field_deg:.1f} deg"
+        )
         for name, rms in result.per_image_rms_px.items():
             print(f"    {rms:6.3f} px  {name}")
         for rej in result.images_rejected:
@@ -98,15 +106,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"  WARNING: {figures.warning}")
         print(f"  report                  {report_path}")
     return 0
-
-
-def horizontal_fov_deg(model: Any) -> float:
-    """Angle spanned by the leftmost and rightmost pixels of the centre row (may exceed 180)."""
-    import numpy as np
-
-    w = model.image_size[0]
-    rays = model.pixel_to_ray(np.array([[0.0, model.center_uv[1]], [w - 1.0, model.center_uv[1]]]))
-    return float(np.degrees(np.sum(model.angle_from_axis(rays))))
 
 
 def cmd_export(args: argparse.Namespace) -> int:

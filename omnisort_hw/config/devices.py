@@ -42,6 +42,71 @@ BACKENDS: dict[str, dict[str, type]] = {
 }
 
 
+# The simulated devices' settings (sim_backend.devices.open_devices documents them); checked
+# when the cell file loads, so a typo stops the start, not the first grab.
+SIM_SETTINGS: dict[str, dict[str, type]] = {
+    "camera": {
+        "scene": str,
+        "seed": int,
+        "degraded": bool,
+        "width": int,
+        "height": int,
+        "model_file": str,
+        "exposure_ms": float,
+        "gain": float,
+        "grab_timeout_s": float,
+        "bump_deg": float,
+        "bump_axis": str,
+        "bump_after_grabs": int,
+        "pixel_format": str,
+        "lighting": str,
+    },
+    "laser": {"scene": str, "seed": int},
+    "arm": {
+        "scene": str,
+        "seed": int,
+        "joint_speed_deg_s": float,
+        "joint_accel_deg_s2": float,
+        "linear_speed_mm_s": float,
+        "linear_accel_mm_s2": float,
+        "max_joint_speed_deg_s": float,
+        "max_joint_accel_deg_s2": float,
+        "max_linear_speed_mm_s": float,
+        "max_linear_accel_mm_s2": float,
+        "realtime": bool,
+    },
+}
+
+
+# Numeric settings that may be zero or negative; every other one must be positive.
+SIM_SIGNED = frozenset({"seed", "bump_deg", "bump_after_grabs"})
+
+
+def check_sim_settings(kind: str, settings: Mapping[str, Any]) -> dict[str, Any]:
+    """A `backend = "sim"` section's settings with their TOML types checked (ints accepted
+    for floats), or a ConfigError naming `[kind].key`."""
+    allowed = SIM_SETTINGS.get(kind)
+    if allowed is None:
+        raise config_error(f"[{kind}].backend", f'no simulated "{kind}" device')
+    out: dict[str, Any] = {}
+    for key, value in settings.items():
+        if key not in allowed:
+            raise config_error(
+                f"[{kind}].{key}",
+                f"unknown key for the simulated {kind} (known: {', '.join(sorted(allowed))})",
+            )
+        tp = allowed[key]
+        ok = isinstance(value, tp) and not (tp is int and isinstance(value, bool))
+        if tp is float and isinstance(value, int) and not isinstance(value, bool):
+            value, ok = float(value), True
+        if not ok:
+            raise config_error(f"[{kind}].{key}", f"expected {tp.__name__}, got {value!r}")
+        if tp in (int, float) and key not in SIM_SIGNED and not value > 0:
+            raise config_error(f"[{kind}].{key}", f"must be positive, got {value!r}")
+        out[key] = value
+    return out
+
+
 def config_error(key: str, message: str) -> ConfigError:
     """A `ConfigError` whose message starts with `key` and which carries it as `.key`."""
     err = ConfigError(f"{key}: {message}")
@@ -176,7 +241,7 @@ def parse_device_section(
         )
     settings = {k: v for k, v in data.items() if k != "backend"}
     if backend == SIM_BACKEND:
-        return DeviceSection(kind, backend, settings)
+        return DeviceSection(kind, backend, check_sim_settings(kind, settings))
     if kind == "camera" and base_dir is not None:
         settings = _resolve_camera_file(settings, base_dir)
     return DeviceSection(kind, backend, build_config(BACKENDS[kind][backend], kind, settings))
@@ -214,6 +279,7 @@ __all__ = [
     "CellDeviceConfig",
     "DeviceSection",
     "build_config",
+    "check_sim_settings",
     "config_error",
     "parse_device_config",
     "parse_device_section",

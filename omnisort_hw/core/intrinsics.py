@@ -18,8 +18,6 @@ Sensor coordinates here follow the camera frame C: with the stretch undone, a pi
 from __future__ import annotations
 
 import json
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,10 +25,16 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from omnisort_hw.core.board_views import (
+    CornerRejection,
+    Rejection,
+    detect_views,
+    min_corners,
+)
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.checkerboard import BoardDetection, BoardSpec, detect_board, to_gray
+from omnisort_hw.core.checkerboard import BoardSpec, to_gray
 from omnisort_hw.core.plane_refinement import refine_on_board_plane
-from omnisort_hw.errors import CalibrationError, FeatureNotFoundError
+from omnisort_hw.errors import CalibrationError
 
 MIN_IMAGES = 3
 
@@ -53,21 +57,6 @@ class ImagePoints:
         """The same image without the corners where `drop` (a boolean mask) is set."""
         keep = ~drop
         return ImagePoints(self.name, self.pixels[keep], self.board[keep], self.ids[keep])
-
-
-@dataclass
-class Rejection:
-    name: str
-    reason: str
-
-
-@dataclass
-class CornerRejection:
-    """One corner left out of the fit: image, board index (row-major) and why."""
-
-    name: str
-    corner: int
-    reason: str
 
 
 @dataclass
@@ -454,11 +443,6 @@ def _neighbour_median(views: list[ImagePoints], prob: _Problem, res2: np.ndarray
     return out
 
 
-def min_corners(n_board: int) -> int:
-    """An image keeps its place while at least half of its board's corners are good."""
-    return max(6, (n_board + 1) // 2)
-
-
 def calibrate(
     views: list[ImagePoints],
     image_size: tuple[int, int],
@@ -634,37 +618,7 @@ def calibrate_images(
                 f"{size[0]}x{size[1]}; all images must come from the same camera mode"
             )
     grays = {name: to_gray(img) for name, img in images}
-
-    def detect(item: tuple[str, np.ndarray]) -> tuple[str, BoardDetection | Rejection]:
-        name, gray = item
-        try:
-            found: BoardDetection | Rejection = detect_board(gray, board, dense=True)
-        except FeatureNotFoundError as exc:
-            found = Rejection(name, str(exc))
-        if on_detected is not None:
-            on_detected(name)
-        return name, found
-
-    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-        detections = list(pool.map(detect, grays.items()))
-    rejected = [d for _, d in detections if isinstance(d, Rejection)]
-    found = {n: d for n, d in detections if isinstance(d, BoardDetection)}
-    at_detection = [
-        CornerRejection(n, k, reason) for n, d in found.items() for k, reason in d.rejected.items()
-    ]
-    need = min_corners(board.cols * board.rows)
-    for name, det in list(found.items()):
-        if int(det.good.sum()) < need:
-            rejected.append(
-                Rejection(name, f"only {int(det.good.sum())} corners pass the saddle check")
-            )
-            del found[name]
-    if len(found) < MIN_IMAGES:
-        reasons = "; ".join(f"{r.name}: {r.reason}" for r in rejected)
-        raise CalibrationError(
-            f"only {len(found)} of {len(images)} image(s) show the full {board.cols}x{board.rows} "
-            f"board, at least {MIN_IMAGES} are needed" + (f" ({reasons})" if reasons else "")
-        )
+    found, rejected, at_detection = detect_views(grays, board, MIN_IMAGES, on_detected)
     obj = board.object_points()
     saddle = {n: ImagePoints(n, d.corners, obj).without(~d.good) for n, d in found.items()}
     first = calibrate(

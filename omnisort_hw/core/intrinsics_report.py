@@ -38,6 +38,8 @@ class ReportFigures:
     sectors_inside: int
     residual_by_radius: list[tuple[float, float, int]]  # (radius px, RMS px, corners) per bin
     warning: str | None
+    circle_field_deg: float = 0.0  # across the lit image circle, through the fitted model
+    corners_field_deg: float = 0.0  # twice the largest angle from the axis of a used corner
 
 
 def image_circle_radius(grays: list[np.ndarray], centre: tuple[float, float]) -> float:
@@ -90,7 +92,13 @@ def report_figures(
             f"only {coverage:.0%} of the outer {OUTER_BAND:.0%} of the image circle has corners: "
             "add views with the board near the rim, where the targets and the laser line are"
         )
-    return ReportFigures(radius, coverage, int(inside.sum()), by_radius, warning)
+    model = result.model
+    across = np.array([[cu - radius, cv_], [cu + radius, cv_]])
+    circle_field = float(np.degrees(np.sum(model.angle_from_axis(model.pixel_to_ray(across)))))
+    corners_field = float(np.degrees(2 * np.max(model.angle_from_axis(model.pixel_to_ray(pts)))))
+    return ReportFigures(
+        radius, coverage, int(inside.sum()), by_radius, warning, circle_field, corners_field
+    )
 
 
 def render_report(

@@ -191,10 +191,10 @@ def test_sim_settings_pass_through_to_the_sim_backend(monkeypatch: pytest.Monkey
     import sim_backend
 
     monkeypatch.setattr(sim_backend, "devices", module, raising=False)
-    doc = tomllib.loads('[laser]\nbackend = "sim"\nscene = "table.toml"\nlag_s = 0.1\n')
+    doc = tomllib.loads('[laser]\nbackend = "sim"\nscene = "table.toml"\nseed = 3\n')
     devices = open_devices(doc, Path("/etc/omnisort/cell.toml"))
     assert isinstance(devices.laser, FakeSimLaser)
-    assert seen["sections"] == {"laser": {"scene": "table.toml", "lag_s": 0.1}}
+    assert seen["sections"] == {"laser": {"scene": "table.toml", "seed": 3}}
     assert seen["base_dir"] == Path("/etc/omnisort")
 
 
@@ -205,3 +205,24 @@ def test_sim_backend_not_importable_is_a_clear_error(monkeypatch: pytest.MonkeyP
     monkeypatch.delattr(sim_backend, "devices", raising=False)
     with pytest.raises(ConfigError, match=r"^\[arm\]\.backend: .*sim_backend\.devices"):
         open_devices(tomllib.loads('[arm]\nbackend = "sim"\n'))
+
+
+@pytest.mark.parametrize(
+    ("text", "key", "why"),
+    [
+        ('[camera]\nbackend = "sim"\nwidht = 640\n', "[camera].widht", "unknown key"),
+        ('[laser]\nbackend = "sim"\nscnee = "sorting"\n', "[laser].scnee", "unknown key"),
+        ('[arm]\nbackend = "sim"\nrealtime = "yes"\n', "[arm].realtime", "expected bool"),
+        ('[camera]\nbackend = "sim"\nwidth = -5\n', "[camera].width", "must be positive"),
+    ],
+)
+def test_a_simulated_section_is_checked_when_the_file_loads(
+    tmp_path: Path, text: str, key: str, why: str
+) -> None:
+    """A typo in a simulated device stops the load of the cell file (before any device or
+    the simulator is built), not the first grab minutes later."""
+    path = tmp_path / "cell.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_cell_config(path)
+    assert str(path) in str(info.value) and f"{key}: {why}" in str(info.value), str(info.value)

@@ -185,6 +185,13 @@ def test_reference_set_all_images_used_and_rms_below_030(
     assert meta["rms_px"] == summary["rms_px"]
     # The reference camera looks straight down with a ~180 deg circle centred in the image.
     assert np.hypot(model.center_uv[0] - 959.5, model.center_uv[1] - 959.5) < 5
+    # scene_truth.json: equidistant, 180 deg at r = 960 px. The field is read across the lit
+    # circle, whose edge (a quarter of the way up from the dark floor) the render's darker rim
+    # pulls in by up to 3 % of the radius: 180 deg within 6 deg, never the 265 deg that the
+    # frame's edge pixels (outside the circle, extrapolated) gave.
+    fov = summary["field_of_view_deg"]
+    assert abs(fov["image_circle"] - 180.0) < 6.0, fov
+    assert 90.0 < fov["corners_seen"] < fov["image_circle"], fov
     from omnisort_hw.runlog import entity_paths
 
     assert {
@@ -205,8 +212,9 @@ def test_bad_inputs_fail_clearly_and_write_nothing(reference_dir: Path, tmp_path
     cases = [
         ([*good, broken], ["--board", "9x6"], "broken.jpg: not a readable image"),
         ([*good, tmp_path / "missing.jpg"], ["--board", "9x6"], "missing.jpg: no such image file"),
-        ([*good[:2], no_board], ["--board", "9x6"], "gray.png: no complete 9x6 checkerboard"),
-        (good[:3], ["--board", "8x6"], "no complete 8x6 checkerboard"),
+        ([*good[:2], no_board], ["--board", "9x6"], "(gray.png): no complete 9x6 checkerboard"),
+        (good[:3], ["--board", "8x6"], "3 image(s) (a1.jpg, a2.jpg, a3.jpg): no complete 8x6"),
+        (good[:3], ["--board", "10x7"], "the first image shows a 9x6 board"),
         (good[:2], ["--board", "9x6"], "only 2 of 2 image(s)"),
         (good[:3], ["--board", "9by6"], "--board"),
     ]
@@ -223,6 +231,8 @@ def test_bad_inputs_fail_clearly_and_write_nothing(reference_dir: Path, tmp_path
         )
         assert proc.returncode != 0, message
         assert message in proc.stderr, proc.stderr
+        # One line per reason, not one per image run together.
+        assert max(map(len, proc.stderr.splitlines())) < 400, proc.stderr
         assert not out.exists()
 
 
