@@ -78,6 +78,7 @@ def test_review_lists_entities_and_spawns_the_viewer(tmp_path, capsys, monkeypat
     out = capsys.readouterr().out.split()
     assert "/service/state" in out and "/calibration/rms_px" in out
     monkeypatch.setenv("OMNISORT_RERUN", "echo viewer")
+    monkeypatch.setenv("DISPLAY", ":0")  # the viewer needs one; the headless case has its test
     assert main(["review", str(rrd)]) == 0
     assert main(["review", str(tmp_path / "missing.rrd")]) == 2
     (tmp_path / "bad.rrd").write_bytes(b"not rerun")
