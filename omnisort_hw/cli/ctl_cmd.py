@@ -1,9 +1,10 @@
 """`omnisort ctl [--host H --port P --token T] COMMAND [key=value ...]`: talk to the service.
 
 Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0]`,
-`max_objects=3`) and as plain strings otherwise (`folder=/data/calib`). The reply is printed as
-JSON; the exit code is 0 for an ok reply, 1 for an error reply, 3 when the service cannot be
-reached or does not answer in time.
+`max_objects=3`) and as plain strings otherwise (`folder=/data/calib`; a relative path is made
+absolute here). `status` prints a one-screen summary (`--json`: the whole reply); other replies
+are printed as JSON; a job shows its progress on the terminal. The exit code is 0 for an ok
+reply, 1 for an error reply, 3 when the service cannot be reached or does not answer in time.
 """
 
 from __future__ import annotations
@@ -34,6 +35,11 @@ def register(sub: Any) -> None:
     p.add_argument("--timeout", type=float, default=None, help="reply timeout, s")
     p.add_argument("--connect-timeout", type=float, default=5.0, help="connect timeout, s")
     p.add_argument("--compact", action="store_true", help="print the reply on one line")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the whole reply as JSON (status otherwise prints a one-screen summary)",
+    )
     p.add_argument("command", help="status, capture, laser, calibrate, move, sort, stop, ...")
     p.add_argument("args", nargs="*", metavar="key=value", help="command arguments")
     p.set_defaults(func=run)
@@ -98,12 +104,68 @@ def run(args: argparse.Namespace) -> int:
     cmd_args = absolute_paths(args.command, parse_kv(args.args), host)
     timeout = args.timeout if args.timeout is not None else default_timeout(args.command)
     try:
-        with Client(
-            host, port, token, timeout_s=timeout, connect_timeout_s=args.connect_timeout
-        ) as c:
-            reply = c.call(args.command, cmd_args or None)
+        with (
+            Client(
+                host, port, token, timeout_s=timeout, connect_timeout_s=args.connect_timeout
+            ) as c,
+            JobProgress(args.command) as progress,
+        ):
+            reply = c.call(args.command, cmd_args or None, on_event=progress.on_event)
     except ClientError as exc:
         print(f"omnisort ctl: {exc}", file=sys.stderr)
         return EXIT_UNREACHABLE
-    print(json.dumps(reply, indent=None if args.compact else 2))
+    if args.command == "status" and reply.get("ok") and not (args.json or args.compact):
+        from omnisort_hw.cli.status_summary import summarise
+
+        print(summarise(reply["result"]))
+    else:
+        print(json.dumps(reply, indent=None if args.compact else 2))
     return 0 if reply.get("ok") else EXIT_ERROR_REPLY
+
+
+class JobProgress:
+    """A job's progress events as a bar on stderr (off when stderr is not a terminal, so
+    scripts and journald see only the reply). `on_event` is None for commands that are not
+    jobs: only jobs send events."""
+
+    def __init__(self, command: str) -> None:
+        from omnisort_hw.service.protocol import COMMANDS
+
+        spec = COMMANDS.get(command)
+        self.command = command
+        self.on_event = self._event if spec is not None and spec.kind == "job" else None
+        self._bar: Any = None
+
+    def __enter__(self) -> JobProgress:
+        if self.on_event is not None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                desc=self.command,
+                file=sys.stderr,
+                disable=None,
+                bar_format="{desc}: running {elapsed}{postfix}",
+            )
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+    def _event(self, event: dict[str, Any]) -> None:
+        bar = self._bar
+        if bar is None:
+            return
+        if "to_pick" in event:
+            bar.bar_format = None  # a count is known now: the usual bar
+            bar.reset(total=int(event["to_pick"]))
+            bar.unit = "cube"
+            bar.set_postfix_str(f"{event.get('located', '?')} located")
+        elif "cube" in event:
+            bar.update(1)
+            bar.set_postfix_str(
+                f"cube {event['cube']} {event.get('status', '')} ({event.get('color', '?')})"
+            )
+        elif "running_s" not in event and "stage" not in event:
+            bar.set_postfix_str(", ".join(f"{k} {v}" for k, v in event.items()))
+        bar.refresh()

@@ -8,6 +8,7 @@ from __future__ import annotations
 import itertools
 import json
 import socket
+from collections.abc import Callable
 from typing import Any
 
 from omnisort_hw.config.service import DEFAULT_PORT
@@ -91,14 +92,25 @@ class Client:
         return rid
 
     def call(
-        self, cmd: str, args: dict[str, Any] | None = None, timeout_s: float | None = None
+        self,
+        cmd: str,
+        args: dict[str, Any] | None = None,
+        timeout_s: float | None = None,
+        on_event: Callable[[dict[str, Any]], None] | None = None,
     ) -> dict[str, Any]:
-        """Send a request and wait for the reply with the same id (others are skipped)."""
-        rid = self.send(cmd, args)
+        """Send a request and wait for the reply with the same id (others are skipped).
+        With `on_event`, the request asks for a job's progress events and each is passed to
+        it as it arrives; the timeout then applies to the gap between two lines."""
+        rid = self.send(cmd, args, progress=True) if on_event else self.send(cmd, args)
         while True:
             reply = self.read_reply(timeout_s)
-            if reply.get("id") == rid:
-                return reply
+            if reply.get("id") != rid:
+                continue
+            if "event" in reply and "ok" not in reply:
+                if on_event is not None:
+                    on_event(reply.get("progress", {}))
+                continue
+            return reply
 
     def close(self) -> None:
         self._sock.close()

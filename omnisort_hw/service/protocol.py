@@ -115,6 +115,7 @@ class Request:
     cmd: str
     args: dict[str, Any] = field(default_factory=dict)
     token: str | None = None
+    progress: bool = False  # the client asked for progress events before a job's reply
 
     @property
     def command(self) -> Command:
@@ -444,12 +445,16 @@ def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
     """
     if not isinstance(obj, dict):
         raise ProtocolError(BAD_REQUEST, f"request must be a JSON object, got {_type_name(obj)}")
-    unknown = sorted(set(obj) - {"id", "cmd", "args", "token"})
+    unknown = sorted(set(obj) - {"id", "cmd", "args", "token", "progress"})
     if unknown:
         shown = ", ".join(repr(k[:32]) for k in unknown[:5])
         raise ProtocolError(
-            BAD_REQUEST, f"unknown request field(s) {shown}; allowed: id, cmd, args, token"
+            BAD_REQUEST,
+            f"unknown request field(s) {shown}; allowed: id, cmd, args, token, progress",
         )
+    progress = obj.get("progress", False)
+    if not isinstance(progress, bool):
+        raise ProtocolError(BAD_REQUEST, "'progress' must be true or false", field="progress")
     rid = obj.get("id")
     if rid is not None and peek_id(obj) is None:
         raise ProtocolError(
@@ -484,7 +489,7 @@ def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
             BAD_REQUEST, f"'args' must be an object, got {_type_name(raw_args)}", field="args"
         )
     args = validate_args(spec, raw_args)
-    return Request(id=rid, cmd=cmd, args=args, token=token)
+    return Request(id=rid, cmd=cmd, args=args, token=token, progress=progress)
 
 
 def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
@@ -555,6 +560,12 @@ def _denan(obj: Any) -> Any:
 
 def ok_reply(rid: int | str | None, result: Mapping[str, Any]) -> dict[str, Any]:
     return {"id": rid, "ok": True, "result": dict(result)}
+
+
+def progress_event(rid: int | str | None, event: Mapping[str, Any]) -> dict[str, Any]:
+    """A line sent before a job's reply when the request asked for `progress`: it carries the
+    request's id and no `ok`, so a client tells it from the reply."""
+    return {"id": rid, "event": "progress", "progress": dict(event)}
 
 
 def error_reply(rid: int | str | None, code: str, message: str, **details: Any) -> dict[str, Any]:

@@ -55,6 +55,9 @@ SAFETY_INFLIGHT_PER_CLIENT = 4
 MAX_SAFETY_LINE_BYTES = 4096
 OVERFLOW_PER_CLIENT = 4
 LOG_CHECK_S = 1.0
+PROGRESS_PERIOD_S = 1.0
+
+Emit = Callable[[dict[str, Any]], None]
 
 
 def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
@@ -376,7 +379,7 @@ class Service:
     async def _send(
         self, writer: asyncio.StreamWriter, lock: asyncio.Lock, reply: dict[str, Any]
     ) -> None:
-        if not reply["ok"]:
+        if reply.get("ok") is False:
             self.counters["errors"] += 1
         data = proto.encode(reply)
         async with lock:
@@ -396,9 +399,9 @@ class Service:
             except ConnectionError:
                 writer.close()
 
-    async def _reply(self, req: proto.Request) -> dict[str, Any]:
+    async def _reply(self, req: proto.Request, emit: Emit | None = None) -> dict[str, Any]:
         try:
-            return await self.dispatch(req)
+            return await self.dispatch(req, emit)
         except proto.ProtocolError as exc:
             return proto.reply_for(exc, req.id)
         except Exception as exc:
@@ -415,8 +418,17 @@ class Service:
     ) -> None:
         """Run one request and write its reply; the client's slot is freed only once the reply
         is written (or the client dropped), so a client that does not read stops being read."""
+        sent: list[asyncio.Future[None]] = []
+
+        def emit(event: dict[str, Any]) -> None:
+            """Write one progress event (in the loop thread); the reply waits for them all."""
+            line = proto.progress_event(req.id, event)
+            sent.append(asyncio.ensure_future(self._send(writer, lock, line)))
+
         try:
-            await self._send(writer, lock, await self._reply(req))
+            reply = await self._reply(req, emit if req.progress else None)
+            await asyncio.gather(*sent, return_exceptions=True)
+            await self._send(writer, lock, reply)
         finally:
             slot.release()
 
@@ -437,11 +449,12 @@ class Service:
 
     # -- dispatch --------------------------------------------------------------------------
 
-    async def dispatch(self, req: proto.Request) -> dict[str, Any]:
-        """Run one validated, authorised request and build its reply."""
+    async def dispatch(self, req: proto.Request, emit: Emit | None = None) -> dict[str, Any]:
+        """Run one validated, authorised request and build its reply; `emit` (in the loop
+        thread) gets a job's progress events when the client asked for them."""
         spec = req.command
         if spec.kind == "job":
-            return await self._run_job(req)
+            return await self._run_job(req, emit)
         if spec.kind == "safety":
             fn = self._stop if req.cmd == "stop" else self._estop
             return await self._in_pool(self._safety, req, fn, self.config.quick_timeout_s)
@@ -578,7 +591,7 @@ class Service:
             self.states.set(State.IDLE, f"reset from {old.value}")
         return {"state": State.IDLE.value, "previous": old.value, **safety, **devices}
 
-    async def _run_job(self, req: proto.Request) -> dict[str, Any]:
+    async def _run_job(self, req: proto.Request, emit: Emit | None = None) -> dict[str, Any]:
         spec = req.command
         with self._job_lock:
             if self._job is not None:
@@ -606,6 +619,8 @@ class Service:
         def report(event: dict[str, Any]) -> None:
             job.report(event)
             self.cell.journal.progress(event)
+            if emit is not None:
+                loop.call_soon_threadsafe(emit, event)
 
         ctx = Context(self.cell, job.cancel, self.service_status, report)
         thread = threading.Thread(
@@ -615,6 +630,7 @@ class Service:
             daemon=True,
         )
         thread.start()
+        beats = asyncio.ensure_future(self._heartbeats(job, emit)) if emit else None
         try:
             return await asyncio.wait_for(asyncio.shield(done), self.config.job_timeout_s)
         except TimeoutError:
@@ -627,6 +643,17 @@ class Service:
                 f"{req.cmd} did not finish within {self.config.job_timeout_s:g} s; arm stopped",
                 device_code="device_timeout",
             )
+        finally:
+            if beats is not None:
+                beats.cancel()
+
+    async def _heartbeats(self, job: Job, emit: Emit) -> None:
+        """`{"stage": "started"}`, then the running time every PROGRESS_PERIOD_S, so a client
+        shows a job that reports nothing (a calibration) as alive rather than silent."""
+        emit({"stage": "started", "cmd": job.cmd})
+        while True:
+            await asyncio.sleep(PROGRESS_PERIOD_S)
+            emit({"running_s": round(time.monotonic() - job.started, 1)})
 
     def _job_thread(
         self,

@@ -255,8 +255,14 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
 
             # Sort, with status polled from another connection meanwhile; then the cubes
             # reported sorted must be gone from where the simulator had them.
-            seen, poll_errors = _poll_status_while(port, lambda: c.call("sort"))
+            events: list[dict] = []
+            seen, poll_errors = _poll_status_while(
+                port, lambda: c.call("sort", on_event=events.append)
+            )
             r = seen.pop("reply")
+            # The progress events asked for came before the reply: started, then what the
+            # sorter reports (the count located, then one line per cube outcome).
+            assert events and events[0] == {"stage": "started", "cmd": "sort"}, events[:3]
             assert not poll_errors, poll_errors
             assert "sorting" in seen["states"], seen
             if r["ok"]:
@@ -274,6 +280,11 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
                     if colour in left:
                         assert np.linalg.norm(left[colour] - true_cubes[colour]) > 50.0, colour
                 sorted_any = totals["sorted"] > 0
+                reported = {e["cube"]: e["status"] for e in events if "cube" in e}
+                for o in r["result"]["cubes"]:
+                    if o["status"] == "sorted":
+                        assert reported.get(o["index"]) == "sorted", (o, events)
+                assert any("to_pick" in e for e in events), events
                 if totals["cubes"] >= 2:
                     assert seen["progress_max"] >= 1, "no sort progress seen in status"
                 ran["sort"] = (
