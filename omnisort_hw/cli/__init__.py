@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from collections.abc import Sequence
 
+from omnisort_hw.cli.output import report_error
 from omnisort_hw.errors import OmnisortError
 
 # Each module defines `register(subparsers)` and sets `func` on its parsers; `func(args)`
@@ -37,30 +37,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def report_error(args: argparse.Namespace, code: str, message: str) -> None:
-    """The error on stderr for people and, for a `--json` command, on stdout in the service's
-    error shape (`{"ok": false, "error": {"code", "message"}}`) so scripts always get JSON."""
-    print(f"omnisort: error [{code}]: {message}", file=sys.stderr)
-    if getattr(args, "json", False) is True:
-        print(json.dumps({"ok": False, "error": {"code": code, "message": message}}))
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except OmnisortError as exc:
-        report_error(args, exc.code, str(exc))
+        report_error(getattr(args, "json", False) is True, exc.code, str(exc))
         return exc.exit_code
     except KeyboardInterrupt:
-        report_error(args, "interrupted", "interrupted")
+        report_error(getattr(args, "json", False) is True, "interrupted", "interrupted")
         return 130
     except Exception as exc:
         # Device errors live in drivers/ and do not derive from OmnisortError; any class with
         # a `code` attribute is one of ours and gets the same treatment.
         code = getattr(exc, "code", None)
         if isinstance(code, str):
-            report_error(args, code, str(exc))
+            report_error(getattr(args, "json", False) is True, code, str(exc))
             return 2
         raise
 

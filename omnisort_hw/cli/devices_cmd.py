@@ -10,11 +10,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
+
+from omnisort_hw.cli.output import print_result
 
 EXIT_DEVICE_FAILED = 1
 
@@ -46,14 +47,9 @@ def run_list(args: argparse.Namespace) -> int:
 
     cameras, ports = list_cameras(), list_serial_ports()
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "cameras": [asdict(c) for c in cameras],
-                    "serial_ports": [asdict(p) for p in ports],
-                },
-                indent=2,
-            )
+        print_result(
+            {"cameras": [asdict(c) for c in cameras], "serial_ports": [asdict(p) for p in ports]},
+            indent=2,
         )
         return 0
     print("Cameras:")
@@ -155,7 +151,7 @@ def format_table(rows: list[CheckRow]) -> str:
 def run_check(args: argparse.Namespace) -> int:
     rows = check_devices(args.config, args.only)
     if args.json:
-        print(json.dumps([asdict(r) for r in rows], indent=2))
+        print_result({"devices": [asdict(r) for r in rows]}, indent=2)
     else:
         print(format_table(rows))
     return 0 if all(r.ok for r in rows) else EXIT_DEVICE_FAILED

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.output import print_result
 
 
 def register(sub: Any) -> None:
@@ -81,7 +82,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         )
     s = res.summary()
     if args.json:
-        print(json.dumps(s))
+        print_result(s)
     else:
         b = s["board"] or {}
         print(
@@ -132,7 +133,7 @@ def cmd_evaluate_drift(args: argparse.Namespace) -> int:
     if args.out is not None:
         fileio.atomic_write_json(args.out, result, keep_history=False)
     if args.json:
-        print(json.dumps(result))
+        print_result(result)
         return 0
     print(
         f"unmoved: {result['unmoved_captures']} captures ({result['occluded_captures']} with the "

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli import drift_cmd, lighting_cmd, robot_cmd
+from omnisort_hw.cli.output import print_result
 
 
 def register(sub: Any) -> None:
@@ -98,7 +99,7 @@ def cmd_table3(args: argparse.Namespace) -> int:
     assume = ToneCurve.parse(args.assume_tone_curve) if args.assume_tone_curve else None
     result = evaluate_dataset(data, progress=sys.stderr.isatty(), tone=assume)
     if args.json:
-        print(json.dumps(result))
+        print_result(result)
     else:
         print(format_table(result))
     return 0

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.output import print_result
 from omnisort_hw.errors import InputError
 
 
@@ -203,7 +204,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "residuals": calib.residuals,
             "method": calib.method,
         }
-        print(json.dumps({**out, **(record or {})}))
+        print_result({**out, **(record or {})})
     else:
         print(f"system calibration ({calib.method}) written to {args.out}")
         for key, value in calib.parameters().items():
@@ -240,7 +241,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     png = write_png(map_png_path(args), map_overlay(image, laser_map, calib, source))
     if args.json:
         out = {**laser_map.summary(with_points=args.points), "overlay_png": str(png)}
-        print(json.dumps({**out, "capture": record} if record else out))
+        print_result({**out, "capture": record} if record else out)
     else:
         segs = laser_map.segments
         print(f"{len(laser_map.pixels)} laser points, {len(segs)} segments")

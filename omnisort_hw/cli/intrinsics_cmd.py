@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.output import print_result
 from omnisort_hw.errors import InputError
 
 
@@ -83,7 +83,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         "corners_seen": figures.corners_field_deg,
     }
     if args.json:
-        print(json.dumps(summary))
+        print_result(summary)
     else:
         model = result.model
         print(f"camera model written to {args.out}")

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
+
+from omnisort_hw.cli.output import print_result
 
 
 def add_lighting_evaluation(esub: Any) -> None:
@@ -40,7 +41,10 @@ def cmd_lighting(args: argparse.Namespace) -> int:
     result = evaluate_lighting(
         args.seed, args.frames, args.width, chosen, progress=sys.stderr.isatty()
     )
-    print(json.dumps(result) if args.json else format_lighting(result))
+    if args.json:
+        print_result(result)
+    else:
+        print(format_lighting(result))
     return 0
 
 
@@ -57,5 +61,8 @@ def table3_with_captures(args: argparse.Namespace) -> int:
     result = evaluate_captures(
         args.n, args.seed, args.frames, args.width, progress=sys.stderr.isatty()
     )
-    print(json.dumps(result) if args.json else format_table(result))
+    if args.json:
+        print_result(result)
+    else:
+        print(format_table(result))
     return 0

@@ -17,12 +17,12 @@ face up has RX = 180). See `omnisort_hw.core.registration`.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.output import print_result
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.pipeline.sort import resolve_sorting
 
@@ -187,7 +187,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     record = robot_base_record(reg, rc, source, args.model)
     written = None if args.dry_run else write_robot_base(args.system, record)
     if args.json:
-        print(json.dumps({**record, "written": str(written) if written else None}))
+        print_result({**record, "written": str(written) if written else None})
     else:
         x, y, z = record["xyz_mm"]
         r, p, w = record["rpy_deg"]
@@ -264,7 +264,7 @@ def cmd_locate(args: argparse.Namespace) -> int:
         "rejected": [r for r in diag["rejected"] if r["reason"] != "outside the search region"],
     }
     if args.json:
-        print(json.dumps(result))
+        print_result(result)
         return 0
     print(f"{len(cubes)} cubes")
     for i, c in enumerate(cubes):
@@ -353,7 +353,7 @@ def _print_progress(event: dict[str, Any]) -> None:
 
 def _print_report(result: dict[str, Any], as_json: bool) -> None:
     if as_json:
-        print(json.dumps(result))
+        print_result(result)
         return
     for c in result["cubes"]:
         err = f"  error {c['error_mm']:.2f} mm" if "error_mm" in c else ""
@@ -403,7 +403,7 @@ def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
     if args.out is not None:
         atomic_write_json(args.out, result, keep_history=False)
     if args.json:
-        print(json.dumps(result))
+        print_result(result)
         return 0
     for k in (*SUMMARY_KEYS, "wall_s"):
         print(f"{k:<28} {result[k]}")

@@ -39,12 +39,12 @@ def test_check_an_image_against_system_json(tmp_path: Path, capsys: pytest.Captu
         cv2.imwrite(str(tmp_path / f"{name}.png"), img)
     base = ["check", "--system", str(tmp_path / "system.json"), "--reference"]
     assert main([*base, str(tmp_path / "ref.png"), str(tmp_path / "same.png"), "--json"]) == 0
-    ok = json.loads(capsys.readouterr().out)
+    ok = json.loads(capsys.readouterr().out)["result"]
     assert ok["drift"] is False and ok["source"] == "image" and ok["angle_deg"] < 0.01
     # Degraded 640 px frames: squares ~5 px wide, a few corners fail the saddle test.
     assert ok["board"]["visible"] >= 0.8 * rc.board.cols * rc.board.rows
     assert main([*base, str(tmp_path / "ref.png"), str(tmp_path / "knocked.png"), "--json"]) == 1
-    bad = json.loads(capsys.readouterr().out)
+    bad = json.loads(capsys.readouterr().out)["result"]
     assert bad["drift"] is True
     assert bad["rotvec_deg"][0] == pytest.approx(0.2, abs=0.02)
     assert np.hypot(*bad["rotvec_deg"][1:]) < 0.02

@@ -69,7 +69,7 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
         "--json",
     )
     assert proc.returncode == 0, proc.stderr
-    result = json.loads(proc.stdout)
+    result = json.loads(proc.stdout)["result"]
     truth = json.loads(rendered["truth"].read_text())
     assert result["method"] == "joint"
     got = result["parameters"]
@@ -86,11 +86,11 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
     assert 0.002 < changed.mean() < 0.2  # features and lines drawn, the image still there
     proc = run_cli("map", str(d / "on.png"), "--system", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout)["overlay_png"] == str(d / "on_map_overlay.png")
+    assert json.loads(proc.stdout)["result"]["overlay_png"] == str(d / "on_map_overlay.png")
     map_pic = cv2.imread(str(d / "on_map_overlay.png"))
     # image | square top view | legend, the image's height
     assert map_pic.shape[0] == source.shape[0] and map_pic.shape[1] > 2 * source.shape[1]
-    segs = json.loads(proc.stdout)["segments"]
+    segs = json.loads(proc.stdout)["result"]["segments"]
     # The two walls' laser lines; their nearest points are the walls' near ends.
     target = truth["target"]
     half, near = target["separation_mm"] / 2, target["walls"][0]["inner_face_origin_mm"][1]
@@ -225,7 +225,7 @@ def test_evaluate_table3_json(tmp_path: Path) -> None:
         "--json",
     )
     assert proc.returncode == 0, proc.stderr
-    result = json.loads(proc.stdout)
+    result = json.loads(proc.stdout)["result"]
     from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS
 
     keys = set(PARAMETERS)

@@ -34,7 +34,7 @@ def test_lighting_json_has_the_keys_and_the_capture_maps_no_spurious_point() -> 
         timeout=580,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    out = json.loads(proc.stdout)
+    out = json.loads(proc.stdout)["result"]
     sc = out["scenarios"]["red_objects"]
     for key in ("single", "capture"):
         for field in ("spurious_points", "laser_points", "mapping_max_rel_error"):
@@ -87,7 +87,7 @@ def test_map_without_an_image_measures_with_the_configured_cell(tmp_path) -> Non
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    out = json.loads(proc.stdout)
+    out = json.loads(proc.stdout)["result"]
     assert out["capture"]["frames"] == 2
     assert out["capture"]["pixel_format"] == "BGR3"
     assert out["points"] > 20 and out["segments"]
@@ -126,7 +126,7 @@ def test_extrinsics_calibrate_without_an_image_measures_with_the_configured_cell
         timeout=500,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    res = json.loads(proc.stdout)
+    res = json.loads(proc.stdout)["result"]
     assert res["capture"]["frames"] == 8 and res["capture"]["pixel_format"] == "BGR3"
     saved = json.loads(out.read_text())
     assert saved["image"]["capture"]["method"] == "laser on/off difference"

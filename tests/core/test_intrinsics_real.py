@@ -61,7 +61,7 @@ def cli_run(photos: list[Path], tmp_path_factory: pytest.TempPathFactory) -> dic
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    return {"summary": json.loads(proc.stdout), "out": out, "rrd": rrd}
+    return {"summary": json.loads(proc.stdout)["result"], "out": out, "rrd": rrd}
 
 
 @pytest.mark.reference

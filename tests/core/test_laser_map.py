@@ -118,7 +118,7 @@ def test_map_cli_prints_every_point_with_its_pixel_and_keeps_the_dashed_stripe(
     png = tmp_path / "pictures" / "cubes.png"
     proc = cli("map", image, "--system", str(system), "--json", "--points", "--png", str(png))
     assert proc.returncode == 0, proc.stderr
-    res = json.loads(proc.stdout)
+    res = json.loads(proc.stdout)["result"]
     _check_map_picture(res, png, cv2.imread(image))
     pts, px = np.asarray(res["points_S"]), np.asarray(res["pixels"])
     assert pts.shape == (res["points_on_plane"], 3) and px.shape == (res["points_on_plane"], 2)

@@ -57,7 +57,7 @@ def test_check_exits_one_and_names_the_failing_device(tmp_path, emulator, capsys
     cfg = write_config(tmp_path, serial_laser(emulator), arm)
     emulator.mode = "silent"
     assert main(["devices", "check", "--config", str(cfg), "--json"]) == 1
-    rows = {r["device"]: r for r in json.loads(capsys.readouterr().out)}
+    rows = {r["device"]: r for r in json.loads(capsys.readouterr().out)["result"]["devices"]}
     assert rows["camera"]["ok"] is True
     assert rows["laser"]["status"] == "device_timeout"
     assert emulator.path in rows["laser"]["detail"]
@@ -105,5 +105,5 @@ def test_devices_list_runs(capsys) -> None:
     out = capsys.readouterr().out
     assert out.startswith("Cameras:") and "Serial ports:" in out
     assert main(["devices", "list", "--json"]) == 0
-    data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"cameras", "serial_ports"}
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["ok"] is True and set(doc["result"]) == {"cameras", "serial_ports"}

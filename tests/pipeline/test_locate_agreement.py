@@ -32,7 +32,7 @@ def locate_cli(*args: str) -> list[dict]:
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout)["cubes"]
+    return json.loads(proc.stdout)["result"]["cubes"]
 
 
 def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:

@@ -1,0 +1,22 @@
+"""What `--json` commands print: one shape for every command, the protocol's without the id.
+A result is `{"ok": true, "result": {...}}`, an error `{"ok": false, "error": {"code",
+"message"}}`, so a script reads every command (and `ctl`'s replies) the same way."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Mapping
+from typing import Any
+
+
+def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
+    """A command's result as one JSON document on stdout."""
+    print(json.dumps({"ok": True, "result": dict(result)}, indent=indent))
+
+
+def report_error(json_requested: bool, code: str, message: str) -> None:
+    """The error on stderr for people and, when `--json` was given, on stdout as JSON."""
+    print(f"omnisort: error [{code}]: {message}", file=sys.stderr)
+    if json_requested:
+        print(json.dumps({"ok": False, "error": {"code": code, "message": message}}))
