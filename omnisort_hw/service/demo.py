@@ -106,7 +106,7 @@ def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None
         (
             "calibrate intrinsics",
             "calibrate",
-            {"what": "intrinsics", "folder": str(views_dir), "square_mm": 116.0},
+            {"what": "intrinsics", "folder": str(views_dir.resolve()), "square_mm": 116.0},
         ),
         ("calibrate extrinsics", "calibrate", {"what": "extrinsics", "target": "two-sided"}),
         ("register_robot", "register_robot", {}),

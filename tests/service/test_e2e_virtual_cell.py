@@ -31,8 +31,13 @@ def test_shipped_virtual_cell_file_is_the_generated_one() -> None:
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_serve_sorts_the_virtual_cell_with_the_real_drivers(tmp_path: Path) -> None:
-    summary = run(tmp_path / "demo", width=960, views=10)
+def test_serve_sorts_the_virtual_cell_with_the_real_drivers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With a relative output folder, as `make demo` gives it: the client must send absolute
+    paths (the protocol refuses relative ones)."""
+    monkeypatch.chdir(tmp_path)
+    summary = run(Path("demo"), width=960, views=10)
     failed = [s for s in summary["steps"] if not s["ok"]]
     assert not failed, failed
     assert summary["exit_code"] == 0
