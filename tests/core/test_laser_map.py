@@ -15,10 +15,10 @@ from omnisort_hw.core.frames import camera_rotation
 from omnisort_hw.core.mapping import segments
 
 
-def _level_system() -> SystemCalibration:
+def level_system(width: int = 960) -> SystemCalibration:
     """Camera looking straight down, laser plane horizontal 900 mm below it."""
     return SystemCalibration(
-        model=OcamModel.equidistant(960, 960, 185.0),
+        model=OcamModel.equidistant(width, width, 185.0),
         R_SC=camera_rotation(0.0, 0.0, 0.0),
         laser_normal=np.array([0.0, 0.0, 1.0]),
         laser_distance_mm=900.0,
@@ -39,7 +39,7 @@ def test_dashes_of_one_stripe_make_one_segment() -> None:
     """A stripe seen 4 px apart (11 mm at 2.8 mm/px) whose light drops out for 12 and 28 px
     stretches (as on a dark face): without the pixels every dash is too short and dropped;
     with them it is one segment."""
-    calib = _level_system()
+    calib = level_system()
     pts, px = _line(-300.0, 300.0, 1500.0, 11.2, 2.8)
     keep = np.ones(len(pts), bool)
     for a, b in ((5, 7), (11, 13), (17, 23), (28, 30), (34, 36), (41, 43), (47, 49)):
@@ -54,7 +54,7 @@ def test_dashes_of_one_stripe_make_one_segment() -> None:
 def test_a_jump_in_depth_still_splits() -> None:
     """Two stripes next to each other in the image but 300 mm apart in depth (an occluding
     edge) stay two segments: the gap spans far more than its pixels imply."""
-    calib = _level_system()
+    calib = level_system()
     near, near_px = _line(-300.0, 0.0, 1200.0, 11.2, 2.8)
     far, far_px = _line(12.0, 300.0, 1500.0, 14.0, 3.5)
     far_px[:, 0] += 2.0  # the far stripe starts 3 px after the near one ends

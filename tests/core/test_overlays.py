@@ -9,9 +9,6 @@ import numpy as np
 import pytest
 
 from omnisort_hw.core import overlays
-from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.core.frames import camera_rotation
 from omnisort_hw.core.mapping import segments
 from omnisort_hw.core.overlays import (
     MODEL_BORDER,
@@ -24,6 +21,7 @@ from omnisort_hw.core.overlays import (
     write_png,
 )
 from omnisort_hw.pipeline.extrinsics import ExtrinsicsRun
+from tests.core.test_laser_map import level_system
 
 
 def test_dots_are_stamped_in_place_clipped_and_per_point_coloured() -> None:
@@ -46,21 +44,11 @@ def test_nice_step_and_write_png_roundtrip(tmp_path: Path) -> None:
     assert overlays.overlay_path(tmp_path / "system.json") == tmp_path / "system_overlay.png"
 
 
-def _level_system() -> SystemCalibration:
-    return SystemCalibration(
-        model=OcamModel.equidistant(480, 480, 185.0),
-        R_SC=camera_rotation(0.0, 0.0, 0.0),
-        laser_normal=np.array([0.0, 0.0, 1.0]),
-        laser_distance_mm=900.0,
-        method="test",
-    )
-
-
 def test_map_picture_colours_each_segment_in_both_panels() -> None:
     """Two straight walls on a level laser plane: the picture is image | top view | legend,
     the image keeps its pixels where no point is, and each segment's points on the image wear
     that segment's colour."""
-    calib = _level_system()
+    calib = level_system(480)
     x = np.linspace(-400.0, 400.0, 60)
     wall_a = np.stack([x, np.full_like(x, 1200.0), np.full_like(x, -900.0)], axis=1)
     wall_b = np.stack([np.full_like(x, 900.0), x + 200.0, np.full_like(x, -900.0)], axis=1)
