@@ -12,7 +12,8 @@ The lint (`measured_figures`, run by `tests/test_prose_figures.py` and by
 *measured* when its sentence holds one of `MEASUREMENT_WORDS` (a table row counts with its
 header row; a code block is one sentence). Outside generated regions a measured figure must be
 excused by an entry of `docs/figures_allowlist.txt` saying why it is not a measurement of
-this code (a setting, a tolerance, a published figure, ...).
+this code (a setting, a tolerance, a published figure, ...); "unrecorded" (a measurement no
+bench records) is refused, so such a figure is generated or goes.
 """
 
 from __future__ import annotations
@@ -35,7 +36,13 @@ MEASUREMENT_WORDS = (
     *("maximum", "worst", "largest", "rms", "mae", "error", "errors", "latency", "grew"),
     *("σ", "std", "p50", "p90", "p95", "p99"),
 )
-REASONS = ("setting", "tolerance", "published", "input", "history", "unrecorded")
+REASONS = ("setting", "tolerance", "published", "input", "history")
+# Not a reason: a measurement of this code that no bench records is debt, not an excuse. Record
+# it in a bench and generate it, or tell the sentence without the number.
+REFUSED = {
+    "unrecorded": "a measurement of this code that no bench records is not excused: record it in"
+    " a bench and generate it with <!-- fig:PATH|FMT -->, or reword the sentence without it"
+}
 
 _NUM = r"[-+−]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?"
 _UNIT = "|".join(sorted((re.escape(u) for u in UNITS), key=len, reverse=True))
@@ -165,12 +172,16 @@ def measured_figures(path: Path, root: Path) -> list[Hit]:
 
 def load_allowlist(path: Path) -> list[Entry]:
     """`file | text around the figure | reason: why` lines (the text may hold ` | ` of a table
-    row); `#` starts a comment line."""
+    row); `#` starts a comment line. A reason outside `REASONS` is a ValueError, `unrecorded`
+    with what to do instead."""
     entries = []
     for n, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
         if not raw.strip() or raw.lstrip().startswith("#"):
             continue
         parts = [p.strip() for p in raw.split(" | ")]
+        reason = parts[-1].split(":", 1)[0].strip()
+        if len(parts) >= 3 and reason in REFUSED:
+            raise ValueError(f"{path.name}:{n}: {REFUSED[reason]}: {raw!r}")
         if len(parts) < 3 or parts[-1].split(":", 1)[0] not in REASONS:
             raise ValueError(f"{path.name}:{n}: want 'file | text | reason: why', got {raw!r}")
         entries.append(Entry(parts[0], " | ".join(parts[1:-1]), parts[-1]))
