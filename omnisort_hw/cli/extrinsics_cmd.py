@@ -144,26 +144,21 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import (
-        check_separation_mm,
         image_record,
+        resolve_target,
         run_extrinsics,
         system_payload,
     )
     from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.runlog import RunLog
 
-    if args.separation is not None and args.target == "checkerboards":
-        raise InputError("--separation is for the wall targets; boards take --board/--square")
-    separation = None
-    if args.target != "checkerboards":
-        separation = args.separation
-        field = "--separation"
-        if separation is None and args.config is not None:
-            from omnisort_hw.config.cell import load_cell_config
+    default, field = None, "--separation"
+    if args.separation is None and args.config is not None and args.target != "checkerboards":
+        from omnisort_hw.config.cell import load_cell_config
 
-            separation = load_cell_config(args.config).target.separation_mm
-            field = f"--separation (or [target] separation_mm in {args.config})"
-        separation = check_separation_mm(separation, field)
+        default = load_cell_config(args.config).target.separation_mm
+        field = f"--separation (or [target] separation_mm in {args.config})"
+    _, separation = resolve_target(args.target, args.separation, None, default, field)
     try:
         cols, rows = (int(v) for v in args.board.lower().split("x"))
     except ValueError as exc:

@@ -63,6 +63,27 @@ def check_separation_mm(value: float | None, field: str) -> float:
     return float(value)
 
 
+def resolve_target(
+    target: str | None,
+    separation_mm: float | None,
+    default_kind: str | None,
+    default_separation_mm: float | None,
+    field: str,
+) -> tuple[str, float | None]:
+    """The target kind and, for the wall targets, its measured separation: the request's, else
+    the cell file's `[target]` defaults. The separation is required and range-checked for a
+    wall target and refused for boards; `field` names it in the errors."""
+    kind = target or default_kind
+    if kind is None:
+        raise InputError(f"target: one of {', '.join(TARGETS)} is needed (or [target] kind)")
+    if kind == "checkerboards":
+        if separation_mm is not None:
+            raise InputError(f"{field} is for the wall targets; boards take board and square")
+        return kind, None
+    value = separation_mm if separation_mm is not None else default_separation_mm
+    return kind, check_separation_mm(value, field)
+
+
 def image_record(path: str | Path) -> dict[str, Any]:
     p = Path(path)
     return {"path": str(p), "sha256": hashlib.sha256(p.read_bytes()).hexdigest()}

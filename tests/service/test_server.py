@@ -5,7 +5,9 @@ from __future__ import annotations
 import base64
 import threading
 import time
+from pathlib import Path
 
+import cv2
 import pytest
 
 from omnisort_hw.runlog import entity_paths
@@ -317,7 +319,7 @@ def test_calibrate_intrinsics_errors_are_typed(service: Harness, tmp_path) -> No
 def test_extrinsics_and_map_need_their_inputs(service: Harness) -> None:
     with service.client() as c:
         r = c.call("calibrate", {"what": "extrinsics"})
-        assert r["error"]["code"] == "bad_input" and "needs target" in r["error"]["message"]
+        assert r["error"]["code"] == "bad_input" and "target: one of" in r["error"]["message"]
         # A wall target's scale is its measured separation: refused before any frame is taken.
         grabs = service.devices.camera._seq
         r = c.call("calibrate", {"what": "extrinsics", "target": "two-sided"})
@@ -327,6 +329,10 @@ def test_extrinsics_and_map_need_their_inputs(service: Harness) -> None:
         )
         assert r["error"]["code"] == "bad_input" and "looks like metres" in r["error"]["message"]
         assert service.devices.camera._seq == grabs
+        r = c.call(
+            "calibrate", {"what": "extrinsics", "target": "checkerboards", "separation_mm": 1292.4}
+        )
+        assert r["error"]["code"] == "bad_argument" and "separation_mm" in r["error"]["message"]
         # The in-memory cell's system.json is a stand-in without a camera rotation matrix.
         r = c.call("map")
         assert r["error"]["code"] == "bad_calibration_file", r
@@ -365,6 +371,12 @@ def test_calibration_and_map_on_the_reference_images(make_service, reference_dir
         )
         assert r["ok"], r
         assert set(r["result"]["parameters"]) >= {"cam_roll_deg", "laser_distance_mm"}
+        # The picture of what was detected and fitted lies beside system.json: the image's
+        # height, a legend column beside it.
+        picture = Path(r["result"]["overlay_png"])
+        assert picture.parent == Path(r["result"]["path"]).parent
+        shown = cv2.imread(str(picture))
+        assert shown.shape[0] == 1920 and shown.shape[1] > 1920
         st = c.call("status")["result"]["calibration"]
         assert st["files"]["system"]["health"] == "ok" and st["motion_allowed"] is True
         assert st["robot_registered"] is False
