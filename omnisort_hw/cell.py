@@ -564,6 +564,7 @@ class Cell:
         """Camera rotation and laser plane from one image of the calibration target (a fresh
         capture with the laser on, or `image`), saved as system.json. The previous robot base
         pose is not carried over: it was registered with the previous camera rotation."""
+        from omnisort_hw.core.checkerboard import BoardSpec
         from omnisort_hw.core.overlays import overlay_path, write_png
         from omnisort_hw.pipeline.extrinsics import resolve_target, run_extrinsics, system_payload
 
@@ -572,6 +573,10 @@ class Cell:
         target, separation = resolve_target(
             target, separation_mm, defaults.kind, defaults.separation_mm, field
         )
+        try:
+            board_size = BoardSpec.parse(board or "9x6", square_mm or 97.0).size
+        except ValueError as exc:
+            raise InputError(f"calibrate: board/square_mm: {exc}") from None
         model = self.store.camera_model()
         tone = self.camera_tone_curve()
         acq = self.measure(image)
@@ -585,7 +590,7 @@ class Cell:
             target,
             method,
             separation_mm=separation,
-            board=_board_size(board or "9x6"),
+            board=board_size,
             square_mm=square_mm or 97.0,
             source=source,
             tone=tone,
@@ -629,11 +634,14 @@ class Cell:
         image: str | None = None,
         cancel: threading.Event | None = None,
         with_points: bool = False,
+        picture: bool = False,
     ) -> dict[str, Any]:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
 
-        `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels."""
-        from omnisort_hw.pipeline.laser_map import floor_plane_S, map_laser
+        `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels; `picture`
+        writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
+        from omnisort_hw.core.overlays import write_png
+        from omnisort_hw.pipeline.laser_map import floor_plane_S, map_laser, map_overlay
 
         calib = self.system_calibration()
         acq = self.measure(image, board=False)
@@ -641,7 +649,13 @@ class Cell:
         floor = floor_plane_S(calib, self.sort_config)  # the floor's mirror images go
         light = acq.stripe_px is not None  # a capture's laser light: red-channel centres
         laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog, floor, light_only=light)
-        return {"image": acq.record, **laser_map.summary(with_points)}
+        out = {"image": acq.record, **laser_map.summary(with_points)}
+        if picture:
+            drawn = map_overlay(acq.stripe, laser_map, calib, acq.source)
+            out["overlay_png"] = str(
+                write_png(self.store.path("system").with_name("map_overlay.png"), drawn)
+            )
+        return out
 
     def measure(self, image: str | None, board: bool = True) -> Any:
         """The file `image`, or a measurement capture (`pipeline.cell_acquisition`)."""
@@ -778,14 +792,6 @@ class _CellLaser:
 
     def off(self) -> None:
         self.cell.set_laser(False)
-
-
-def _board_size(text: str) -> tuple[int, int]:
-    try:
-        cols, rows = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise InputError(f"board must look like 9x6 (inner corners), got {text!r}") from None
-    return cols, rows
 
 
 def _raise_if_cancelled(cancel: threading.Event | None, what: str = "move") -> None:

@@ -66,7 +66,9 @@ def calibrate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def map_scene(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.map_scene(args["image"], ctx.cancel, with_points=args["points"])
+    return ctx.cell.map_scene(
+        args["image"], ctx.cancel, with_points=args["points"], picture=args["picture"]
+    )
 
 
 def register_robot(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:

@@ -210,6 +210,7 @@ COMMANDS: dict[str, Command] = {
             (
                 _IMAGE,
                 Arg("points", "bool", default=False, help="include the points (S, mm), pixels"),
+                Arg("picture", "bool", default=False, help="write map_overlay.png (state dir)"),
             ),
             job_state="mapping",
             help="laser map of the scene",

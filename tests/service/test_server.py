@@ -383,6 +383,10 @@ def test_calibration_and_map_on_the_reference_images(make_service, reference_dir
         r = c.call("map", {"image": str(reference_dir / "mapping_cubes.jpg")})
         assert r["ok"], r
         assert r["result"]["points_on_plane"] > 100 and r["result"]["segments"]
+        assert "overlay_png" not in r["result"]  # drawn only when asked: map stays fast
+        r = c.call("map", {"image": str(reference_dir / "mapping_cubes.jpg"), "picture": True})
+        drawn = cv2.imread(r["result"]["overlay_png"])
+        assert drawn.shape[0] == 1920 and drawn.shape[1] > 2 * 1920  # image + top view
     h.running.stop()
     paths = entity_paths(h.cell.runlog_path or "")
     assert {"/extrinsics/image", "/map/points_S", "/map/image/laser"} <= paths
