@@ -15,6 +15,7 @@ import subprocess
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -46,11 +47,11 @@ class _Diagnosed:
     def __init__(self, client: Client, proc: subprocess.Popen[bytes], tmp: Path) -> None:
         self.client, self.proc, self.tmp = client, proc, tmp
 
-    def call(self, cmd: str, args: dict | None = None) -> dict:
+    def call(self, cmd: str, args: dict | None = None, **kw: Any) -> dict:
         from omnisort_hw.service.client import ClientError
 
         try:
-            return self.client.call(cmd, args)
+            return self.client.call(cmd, args, **kw)
         except ClientError as exc:
             self.proc.send_signal(signal.SIGUSR1)
             time.sleep(1.0)
