@@ -8,9 +8,12 @@ is an example, not a figure. `benchmarks.figures.render` rewrites the
 VALUE of every inline figure together with the tables, so both come from the same record.
 
 The lint (`measured_figures`, run by `tests/test_prose_figures.py` and by
-`python -m benchmarks.figures`): a *figure* is a number followed by a unit of `UNITS`; it is
-*measured* when its sentence holds one of `MEASUREMENT_WORDS` (a table row counts with its
-header row; a code block is one sentence). Outside generated regions a measured figure must be
+`python -m benchmarks.figures`): a *figure* is a number followed by a unit of `UNITS` (rates
+included); it is *measured* when its sentence (ended by `.`, `!` or `?`; `;` only joins
+clauses) holds one of `MEASUREMENT_WORDS`, one of `RESULT_VERBS` with a number right after it
+("takes 0.6 s"), one of `CHANGE_VERBS` with "by" and a number after its object ("moved the
+distance by 0.1 mm"), or "within NUMBER of" (a table row counts with its header row; a code
+block is one sentence). Outside generated regions a measured figure must be
 excused by an entry of `docs/figures_allowlist.txt` saying why it is not a measurement of
 this code (a setting, a tolerance, a published figure, ...); "unrecorded" (a measurement no
 bench records) is refused, so such a figure is generated or goes.
@@ -30,12 +33,29 @@ _BLOCK = re.compile(r"(<!-- figures:\w+ -->\n)(.*?)(<!-- /figures -->)", re.S)
 UNITS = (
     *("ms", "µs", "us", "s", "min", "h", "seconds", "minutes", "px", "mm", "cm", "m", "deg"),
     *("°", "%", "fps", "Hz", "kHz", "MB", "KB", "KiB", "MiB", "GB"),
+    # rates: a throughput is a figure too ("9.47/min", "8.79 picks per minute", "10 fps")
+    *("/min", "/s", "per minute", "per second", "per pick", "picks per minute"),
+    *("frames per second",),
 )
 MEASUREMENT_WORDS = (
     *("measured", "measures", "took", "timed", "found", "median", "mean", "average", "max"),
     *("maximum", "worst", "largest", "rms", "mae", "error", "errors", "latency", "grew"),
-    *("σ", "std", "p50", "p90", "p95", "p99"),
+    *("std", "p50", "p90", "p95", "p99"),  # σ below: case-sensitive, Σ is a covariance
+    # a comparison or a miss is a result: "206x faster", "off by 0.6 px"
+    *("faster", "slower", "off by"),
 )
+# Verbs that state a result only when a number follows them ("takes 0.6 s", "gives 0.170 %",
+# "came out at about 70 mm", "drops to 1 %"); alone they are common prose ("takes a cube away",
+# "gives the laser plane a third line", "drops the oldest data").
+RESULT_VERBS = (
+    *("takes", "take", "costs", "cost", "gives", "give", "gave", "reached", "reaches"),
+    *("comes out", "came out", "come out", "is at", "drops", "dropped", "falls", "fell"),
+    *("rises", "rose", "grows"),
+)
+# Verbs that state a change by a number after their object: "moved the laser distance by
+# 0.1-0.3 mm", "changed it by 0.001 px".
+CHANGE_VERBS = ("moved", "shifted", "changed")
+_FILLER = r"(?:(?:at|to|from|by|about|only|up to|under|over|around|roughly|nearly|just|~)\s*)*"
 REASONS = ("setting", "tolerance", "published", "input", "history")
 # Not a reason: a measurement of this code that no bench records is debt, not an excuse. Record
 # it in a bench and generate it, or tell the sentence without the number.
@@ -47,10 +67,23 @@ REFUSED = {
 _NUM = r"[-+−]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?"
 _UNIT = "|".join(sorted((re.escape(u) for u in UNITS), key=len, reverse=True))
 FIGURE = re.compile(rf"(?<![\w.]){_NUM}(?:\s?(?:–|-|…|\.\.\.|/)\s?{_NUM})*\s?(?:{_UNIT})(?![\w])")
+_START = r"[-+−]?\d"
+
+
+def _any(words: tuple[str, ...]) -> str:
+    return "(?:" + "|".join(map(re.escape, words)) + ")"
+
+
 _WORD = re.compile(
-    r"(?<![\w])(?:" + "|".join(map(re.escape, MEASUREMENT_WORDS)) + r")(?![\w])", re.I
+    rf"(?<![\w])(?:{_any(MEASUREMENT_WORDS)}(?![\w])|(?-i:σ)"
+    # "within 0.002 px of a linear camera's edge": how far a result is from a reference
+    rf"|within\s+{_START}[^\s]*(?:\s\S+)?\s+of\b"
+    rf"|{_any(RESULT_VERBS)}\s+{_FILLER}{_START}"
+    rf"|{_any(CHANGE_VERBS)}\b[^.!?]{{0,40}}?\bby\s+{_FILLER}{_START})",
+    re.I,
 )
-_SPLIT = re.compile(r"(?<!e\.g\.)(?<!i\.e\.)(?<!\bvs\.)(?<=[.!?;])\s+")
+# `;` joins clauses of one sentence ("p95 0.7 px; 1.3 px degraded"): it does not end one
+_SPLIT = re.compile(r"(?<!e\.g\.)(?<!i\.e\.)(?<!\bvs\.)(?<=[.!?])\s+")
 
 
 def lookup(results: dict[str, Any], path: str) -> Any:
