@@ -52,6 +52,23 @@ def output_file_problem(path: str | os.PathLike[str]) -> str | None:
     return None
 
 
+def output_folder_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why files cannot be written into the folder `path` (created if missing), or None."""
+    target = Path(path)
+    if target.exists():
+        if not target.is_dir():
+            return f"{target} is a file, not a folder"
+        return None if os.access(target, os.W_OK | os.X_OK) else f"{target} is not writable"
+    ancestor = target.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        return f"{ancestor} is not a folder, so {target} cannot be created"
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        return f"{ancestor} is not writable, so {target} cannot be created"
+    return None
+
+
 def _fsync_dir(directory: Path) -> None:
     fd = os.open(directory, os.O_RDONLY)
     try:

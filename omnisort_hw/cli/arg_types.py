@@ -6,12 +6,20 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from omnisort_hw.fileio import output_file_problem
+from omnisort_hw.fileio import output_file_problem, output_folder_problem
 
 
 def output_file(text: str) -> Path:
     """A file the command will write: not a folder, and in a folder that can be written."""
     problem = output_file_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return Path(text)
+
+
+def output_folder(text: str) -> Path:
+    """A folder the command will write into: not a file, and creatable or writable."""
+    problem = output_folder_problem(text)
     if problem:
         raise argparse.ArgumentTypeError(problem)
     return Path(text)

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.arg_types import output_folder
 from omnisort_hw.cli.virtual_cell_args import add_arguments
 from omnisort_hw.errors import InputError
 
@@ -20,7 +21,7 @@ def register(sub: Any) -> None:
 
     ren = ssub.add_parser("render", help="render one scene file: NAME.png + NAME.truth.json")
     ren.add_argument("scene", help="scene TOML file, or the name of a shipped scene")
-    ren.add_argument("--out", type=Path, required=True, help="output folder")
+    ren.add_argument("--out", type=output_folder, required=True, help="output folder")
     ren.add_argument("--seed", type=int, default=0, help="seed of the degradation (default 0)")
     ren.add_argument("--degraded", action="store_true", help='"real camera" mode')
     ren.add_argument("--laser", choices=("on", "off"), default=None, help="override [laser].on")
@@ -32,7 +33,7 @@ def register(sub: Any) -> None:
     ds.add_argument("--experiment", default="table3", help="experiment (default table3)")
     ds.add_argument("--n", type=int, default=35, help="number of configurations (default 35)")
     ds.add_argument("--seed", type=int, default=0)
-    ds.add_argument("--out", type=Path, required=True)
+    ds.add_argument("--out", type=output_folder, required=True)
     ds.add_argument("--width", type=int, default=None, help="square image size (default 1920)")
     ds.add_argument("--degraded", action="store_true", help='"real camera" mode')
     ds.set_defaults(func=cmd_dataset)
@@ -42,7 +43,7 @@ def register(sub: Any) -> None:
     )
     cv.add_argument("--n", type=int, default=12, help="number of views (default 12)")
     cv.add_argument("--seed", type=int, default=0)
-    cv.add_argument("--out", type=Path, required=True)
+    cv.add_argument("--out", type=output_folder, required=True)
     cv.add_argument("--board", default="9x6", help="inner corners COLSxROWS (default 9x6)")
     cv.add_argument("--square", type=float, default=116.0, help="square size mm (default 116)")
     cv.add_argument("--width", type=int, default=None, help="square image size (default 1920)")

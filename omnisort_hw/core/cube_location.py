@@ -109,11 +109,16 @@ class ColorTable:
             text = p.read_text(encoding="utf-8")
         except FileNotFoundError:
             raise ConfigError(f"{p}: colour table file not found") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{p}: cannot be read as a colour table ({exc})") from None
         try:
             data = json.loads(text) if p.suffix.lower() == ".json" else tomllib.loads(text)
         except (ValueError, tomllib.TOMLDecodeError) as exc:
             raise ConfigError(f"{p}: not a readable colour table ({exc})") from None
-        return cls.from_mapping(data.get("colors", data), source=str(p))
+        table = data.get("colors", data) if isinstance(data, dict) else None
+        if not isinstance(table, dict):
+            raise ConfigError(f"{p}: expected a table of colours ({{name: [h, h, s, s, v, v]}})")
+        return cls.from_mapping(table, source=str(p))
 
     def names(self) -> list[str]:
         return list(self.ranges)

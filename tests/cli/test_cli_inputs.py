@@ -91,3 +91,33 @@ def test_locate_without_a_registration_says_so_not_motion_refused(
     doc = json.loads(capsys.readouterr().out)
     assert code == 2 and doc["error"]["code"] == "not_registered", doc
     assert "register-robot" in doc["error"]["message"] and str(system) in doc["error"]["message"]
+
+
+def test_an_output_folder_that_is_a_file_is_refused_before_rendering(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    blocker = tmp_path / "views"
+    blocker.write_text("not a folder")
+    with pytest.raises(SystemExit):
+        main(["sim", "checkerboard-views", "--out", str(blocker)])
+    assert f"{blocker} is a file, not a folder" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["demo", "--out", str(blocker / "demo")])
+    assert f"{blocker} is not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("content", "why"),
+    [(b"\xff\xfe\x00binary", "cannot be read"), (b"[1, 2]", "expected a table of colours")],
+)
+def test_a_colour_table_that_is_not_one_is_a_config_error(
+    tmp_path: Path, content: bytes, why: str
+) -> None:
+    from omnisort_hw.core.cube_location import ColorTable
+    from omnisort_hw.errors import ConfigError
+
+    path = tmp_path / "colors.json"
+    path.write_bytes(content)
+    with pytest.raises(ConfigError, match=why) as info:
+        ColorTable.load(path)
+    assert str(path) in str(info.value)
