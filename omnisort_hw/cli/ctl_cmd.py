@@ -111,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
             JobProgress(args.command) as progress,
         ):
             reply = c.call(args.command, cmd_args or None, on_event=progress.on_event)
+            if progress.on_event is not None and _refused_progress(reply):
+                reply = c.call(args.command, cmd_args or None)  # a service before progress
     except ClientError as exc:
         print(f"omnisort ctl: {exc}", file=sys.stderr)
         return EXIT_UNREACHABLE
@@ -121,6 +123,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(json.dumps(reply, indent=None if args.compact else 2))
     return 0 if reply.get("ok") else EXIT_ERROR_REPLY
+
+
+def _refused_progress(reply: dict[str, Any]) -> bool:
+    error = reply.get("error") or {}
+    return error.get("code") == "bad_request" and "'progress'" in str(error.get("message"))
 
 
 class JobProgress:
@@ -146,6 +153,8 @@ class JobProgress:
                 disable=None,
                 bar_format="{desc}: running {elapsed}{postfix}",
             )
+            if self._bar.disable:  # not a terminal: no bar, so no events asked for
+                self.on_event = None
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -11,8 +11,12 @@ from typing import Any
 
 
 def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
-    """A command's result as one JSON document on stdout."""
-    print(json.dumps({"ok": True, "result": dict(result)}, indent=indent))
+    """A command's result as one JSON document on stdout (NaN as null, as on the protocol:
+    strict JSON parsers refuse NaN)."""
+    from omnisort_hw.service.protocol import encode
+
+    doc = json.loads(encode({"ok": True, "result": dict(result)}))
+    print(json.dumps(doc, indent=indent))
 
 
 def report_error(json_requested: bool, code: str, message: str) -> None:

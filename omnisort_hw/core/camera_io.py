@@ -141,7 +141,7 @@ def import_ocamcalib(path: str | Path) -> OcamModel:
     file_rho = np.polynomial.polynomial.polyval(theta - np.pi / 2, invpol)
     model_rho = np.polynomial.polynomial.polyval(theta, model.inv_poly)
     mismatch = float(np.max(np.abs(file_rho - model_rho)))
-    if mismatch > 1.0:
+    if not mismatch <= 1.0:  # NaN coefficients compare False both ways
         raise InputError(
             f"{p}: inverse polynomial disagrees with the direct one by {mismatch:.2f} px "
             "(file edited by hand, or lines swapped?)"

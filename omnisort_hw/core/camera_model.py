@@ -16,6 +16,7 @@ and z into the scene negative; swapping x/y and negating z is a proper rotation)
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -114,7 +115,7 @@ class OcamModel:
         for name, values in (("poly", poly_arr), ("center_uv", center_uv), ("stretch", stretch)):
             if not np.all(np.isfinite(np.asarray(values, dtype=float))):
                 raise InputError(f"camera model: {name!r} holds a NaN or infinite value")
-        if any(int(n) != n or n < 1 for n in image_size):
+        if any(not math.isfinite(n) or int(n) != n or n < 1 for n in image_size):
             raise InputError(
                 f"camera model: 'image_size' must be two positive whole pixel counts, "
                 f"got {list(image_size)}"

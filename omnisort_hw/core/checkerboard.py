@@ -41,6 +41,11 @@ _RING = 0.35
 _RING_SAMPLES = 32
 
 
+# Inner corners per side: far beyond any printable calibration board, and a bound on the
+# detector's work for a mistyped size.
+MAX_CORNERS = 60
+
+
 @dataclass(frozen=True)
 class BoardSpec:
     """A planar checkerboard: inner corners (cols x rows) and square size in mm."""
@@ -56,8 +61,11 @@ class BoardSpec:
             cols, rows = (int(x) for x in text.lower().split("x"))
         except ValueError as exc:
             raise ValueError(f"board must look like 9x6 (inner corners), got {text!r}") from exc
-        if cols < 2 or rows < 2 or square_mm <= 0:
-            raise ValueError(f"board {text!r} with square {square_mm} mm is not a board")
+        if not (2 <= cols <= MAX_CORNERS and 2 <= rows <= MAX_CORNERS) or not square_mm > 0:
+            raise ValueError(
+                f"board {text!r} with square {square_mm} mm is not a board (2 to {MAX_CORNERS} "
+                "inner corners each way, a positive square)"
+            )
         return cls(cols, rows, float(square_mm))
 
     @property

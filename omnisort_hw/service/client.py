@@ -8,6 +8,7 @@ from __future__ import annotations
 import itertools
 import json
 import socket
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -100,10 +101,15 @@ class Client:
     ) -> dict[str, Any]:
         """Send a request and wait for the reply with the same id (others are skipped).
         With `on_event`, the request asks for a job's progress events and each is passed to
-        it as it arrives; the timeout then applies to the gap between two lines."""
+        it as it arrives; the timeout still bounds the whole wait for the reply."""
         rid = self.send(cmd, args, progress=True) if on_event else self.send(cmd, args)
+        limit = timeout_s if timeout_s is not None else self.timeout_s
+        deadline = time.monotonic() + limit
         while True:
-            reply = self.read_reply(timeout_s)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise ClientError(f"no reply from {self.host}:{self.port} within {limit} s")
+            reply = self.read_reply(left)
             if reply.get("id") != rid:
                 continue
             if "event" in reply and "ok" not in reply:

@@ -15,7 +15,7 @@ from omnisort_hw import fileio
 from omnisort_hw.cell import Cell
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.instance_lock import InstanceLock
-from omnisort_hw.service.listener import bind_listener, check_exposure, probe_ports
+from omnisort_hw.service.listener import preflight
 from omnisort_hw.service.live_view import start_live_view
 from omnisort_hw.service.plc_face import start_plc_face
 from omnisort_hw.service.server import SWITCH_INTERVAL_S, Service
@@ -52,32 +52,23 @@ def serve(
     check_directories(settings)
     with InstanceLock(settings.storage.state_dir):
         # Every check that needs no device comes first: a refused start opens nothing.
-        check_exposure(cfg)
-        view = settings.logging.live
-        probe_ports(
-            [(settings.plc.host, settings.plc.modbus_port or 0, "[plc] modbus_port")]
-            + ([(view.host, view.port, "[logging] live_port")] if view.enabled else [])
-        )
-        listener = bind_listener(cfg)
+        preflight(settings, cfg)
         notifier.status("opening devices")
-        cell = cell or Cell.from_settings(settings, devices_in_child=True)  # no pybullet here
-        try:
+        with contextlib.ExitStack() as opened:
+            opened.callback(notifier.close)
+            cell = cell or Cell.from_settings(settings, devices_in_child=True)  # no pybullet
+            closing = opened.enter_context(contextlib.ExitStack())
+            closing.callback(cell.close)  # until the service owns the cell (it closes it)
             cell.connect()
             service = Service(cell, cfg, notifier)
             plc = start_plc_face(service, settings.plc)
-            live = start_live_view(settings.logging.live, cell.runlog)
-        except BaseException:
-            listener.close()
-            cell.close()
-            raise
-        try:
-            code = asyncio.run(service.run(sock=listener))
-        finally:
-            notifier.close()
             if plc is not None:
-                plc.close()
+                opened.callback(plc.close)
+            live = start_live_view(settings.logging.live, cell.runlog)
             if live is not None:
-                live.close()
+                opened.callback(live.close)
+            closing.pop_all()
+            code = asyncio.run(service.run())
     if service.exit_problems:
         log.warning("stopped with problems: %s", "; ".join(service.exit_problems))
     return code

@@ -345,8 +345,7 @@ def _check_arg(arg: Arg, cmd: str, value: Any) -> Any:
                 arg,
                 cmd,
                 f"must be an absolute path on the cell PC, got {text[:200]!r}: the service "
-                f"does not guess a base folder (its working directory is {os.getcwd()}); "
-                "`omnisort ctl` makes relative paths absolute",
+                f"does not guess a base folder (its working directory is {os.getcwd()})",
             )
         return text
     if arg.kind == "str":

@@ -21,7 +21,6 @@ import hmac
 import logging
 import os
 import signal
-import socket
 import threading
 import time
 from collections.abc import Callable
@@ -43,7 +42,7 @@ from omnisort_hw.service.connection import (
     peer_host,
 )
 from omnisort_hw.service.handlers import HANDLERS, Context
-from omnisort_hw.service.listener import bind_listener, check_exposure
+from omnisort_hw.service.listener import check_exposure
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
@@ -173,13 +172,16 @@ class Service:
 
     # -- life cycle ------------------------------------------------------------------------
 
-    async def start(self, sock: socket.socket | None = None) -> tuple[str, int]:
-        """Listen on `sock` (bound before the devices opened) or bind the configured address;
-        returns the (host, port) actually bound."""
+    async def start(self) -> tuple[str, int]:
+        """Bind the listening socket; returns the (host, port) actually bound."""
         self._loop = asyncio.get_running_loop()
         self._stop_requested = asyncio.Event()
         self._server = await asyncio.start_server(
-            self._client, sock=sock or bind_listener(self.config), limit=READ_CHUNK
+            self._client,
+            host=self.config.host,
+            port=self.config.port,
+            limit=READ_CHUNK,
+            reuse_address=True,
         )
         sock = self._server.sockets[0].getsockname()
         self.address = (str(sock[0]), int(sock[1]))
@@ -195,10 +197,10 @@ class Service:
         with contextlib.suppress(RuntimeError):
             loop.call_soon_threadsafe(ev.set)
 
-    async def run(self, install_signals: bool = True, sock: socket.socket | None = None) -> int:
+    async def run(self, install_signals: bool = True) -> int:
         """Serve until shutdown is requested, then stop cleanly; returns the exit code (0)."""
         if self._server is None:
-            await self.start(sock)
+            await self.start()
         assert self._stop_requested is not None and self._loop is not None
         if install_signals:
             for sig in (signal.SIGTERM, signal.SIGINT):
@@ -616,11 +618,14 @@ class Service:
         loop = asyncio.get_running_loop()
         done: asyncio.Future[dict[str, Any]] = loop.create_future()
 
+        replied = threading.Event()  # set once the reply is decided: no event after it
+
         def report(event: dict[str, Any]) -> None:
             job.report(event)
             self.cell.journal.progress(event)
-            if emit is not None:
-                loop.call_soon_threadsafe(emit, event)
+            if emit is not None and not replied.is_set():
+                with contextlib.suppress(RuntimeError):  # the loop is gone at shutdown
+                    loop.call_soon_threadsafe(_emit_unless, replied, emit, event)
 
         ctx = Context(self.cell, job.cancel, self.service_status, report)
         thread = threading.Thread(
@@ -644,6 +649,7 @@ class Service:
                 device_code="device_timeout",
             )
         finally:
+            replied.set()
             if beats is not None:
                 beats.cancel()
 
@@ -708,6 +714,13 @@ class Service:
         with self._job_lock:
             if self.states.state == job.state and not job.cancel.is_set():
                 self.states.set(new, reason)
+
+
+def _emit_unless(replied: threading.Event, emit: Emit, event: dict[str, Any]) -> None:
+    """In the loop: forward a job's event unless its reply is already decided (a job that
+    timed out still reports as it winds down; its events must not follow the reply)."""
+    if not replied.is_set():
+        emit(event)
 
 
 def _set_if_pending(fut: asyncio.Future[dict[str, Any]], value: dict[str, Any]) -> None:

@@ -246,3 +246,16 @@ def test_invalid_models_are_refused() -> None:
         OcamModel.create([300.0, 0.0, -1e-3], (10, 10), image_size=(20, 20))
     with pytest.raises(InputError, match="singular"):
         OcamModel.create([-300.0, 0.0, 1e-4], (10, 10), (1.0, 1.0, 1.0), (20, 20))
+
+
+@pytest.mark.parametrize("size_line", ["nan 1920", "inf 1920"])
+def test_an_ocamcalib_file_with_a_non_finite_size_names_the_file(
+    tmp_path: Path, size_line: str
+) -> None:
+    lines = OCAM_TXT.rstrip().split("\n")
+    data_rows = [i for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
+    lines[data_rows[-1]] = size_line
+    bad = tmp_path / "calib_results.txt"
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"calib_results\.txt: 'image_size'"):
+        import_ocamcalib(bad)

@@ -8,6 +8,7 @@ import json
 import pytest
 
 from omnisort_hw.cli import main
+from omnisort_hw.service.client import ClientError
 from tests.service.conftest import TOKEN, Harness
 
 pytestmark = pytest.mark.timeout(60)
@@ -26,12 +27,15 @@ def test_a_job_sends_its_events_before_the_reply(make_service) -> None:
             lines.append(line)
             if "ok" in line:
                 break
+        # Nothing follows the reply: the heartbeats stop with it (2 heartbeat periods).
+        with pytest.raises(ClientError, match="no reply"):
+            c.read_reply(timeout_s=2.0)
     *events, reply = lines
     assert reply["ok"], reply
     assert events and all(e["event"] == "progress" and "ok" not in e for e in events)
     assert events[0]["progress"] == {"stage": "started", "cmd": "move"}
     times = [e["progress"]["running_s"] for e in events[1:]]
-    assert times == sorted(times)
+    assert times == sorted(times) and all(0 < t < 30 for t in times), times
 
 
 def test_without_asking_there_are_no_events(make_service) -> None:

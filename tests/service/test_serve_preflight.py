@@ -77,6 +77,17 @@ def test_the_plc_port_in_use_is_refused_before_the_devices_open(tmp_path, laser_
     assert not _connected(laser_peer)
 
 
+def test_a_port_given_twice_is_a_config_error_before_the_devices_open(tmp_path, laser_peer) -> None:
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    extra = f"[service]\nport = {port}\n[plc]\nmodbus_port = {port}\n"
+    proc = _serve(tmp_path, laser_peer.getsockname()[1], extra)
+    assert proc.returncode == 78, proc.stderr
+    assert f"[plc] modbus_port: port {port} is also [service] port" in proc.stderr
+    assert not _connected(laser_peer)
+
+
 def test_an_exposed_address_without_a_token_is_refused_first(tmp_path, laser_peer) -> None:
     """Exit 78 (EX_CONFIG): the unit's RestartPreventExitStatus keeps systemd from retrying."""
     proc = _serve(tmp_path, laser_peer.getsockname()[1], "", "--host", "0.0.0.0", "--port", "0")
@@ -99,3 +110,14 @@ def test_the_same_cell_starts_when_nothing_is_wrong(tmp_path, laser_peer) -> Non
     proc = _serve(tmp_path, laser_peer.getsockname()[1], "[service]\nport = 0\n")
     assert proc.returncode != 0
     assert _connected(laser_peer), proc.stderr
+
+
+def test_an_address_not_on_this_machine_is_retried_not_a_config_error() -> None:
+    """At boot the cell's address may not be up yet: exit 2 (systemd retries), not 78. The
+    bind is refused locally (TEST-NET-1 is on no interface); nothing is sent."""
+    from omnisort_hw.errors import ConfigError
+    from omnisort_hw.service.listener import AddressError, probe
+
+    with pytest.raises(AddressError, match="no such address") as info:
+        probe("192.0.2.1", 0, "[service] host")
+    assert info.value.exit_code == 2 and not isinstance(info.value, ConfigError)
