@@ -565,7 +565,7 @@ class Cell:
         capture with the laser on, or `image`), saved as system.json. The previous robot base
         pose is not carried over: it was registered with the previous camera rotation."""
         from omnisort_hw.core.checkerboard import BoardSpec
-        from omnisort_hw.core.overlays import overlay_path, write_png
+        from omnisort_hw.core.overlays import overlay_path, write_picture
         from omnisort_hw.pipeline.extrinsics import resolve_target, run_extrinsics, system_payload
 
         defaults = self.config.target
@@ -601,11 +601,9 @@ class Cell:
         _raise_if_cancelled(cancel, "calibration")
         calib = run.calib
         saved = self.store.save_system(system_payload(calib, record))
-        # What was detected and fitted, beside system.json (drawn here: about 11 ms).
-        picture = write_png(overlay_path(saved), run.overlay(img, source))
-        return {
+        return {  # and the picture of what was detected and fitted (about 11 ms)
             "path": str(saved),
-            "overlay_png": str(picture),
+            **write_picture(overlay_path(saved), lambda: run.overlay(img, source)),
             "method": calib.method,
             "target": target,
             "parameters": calib.parameters(),
@@ -640,7 +638,7 @@ class Cell:
 
         `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels; `picture`
         writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
-        from omnisort_hw.core.overlays import write_png
+        from omnisort_hw.core.overlays import write_picture
         from omnisort_hw.pipeline.laser_map import floor_plane_S, map_laser, map_overlay
 
         calib = self.system_calibration()
@@ -651,9 +649,9 @@ class Cell:
         laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog, floor, light_only=light)
         out = {"image": acq.record, **laser_map.summary(with_points)}
         if picture:
-            drawn = map_overlay(acq.stripe, laser_map, calib, acq.source)
-            out["overlay_png"] = str(
-                write_png(self.store.path("system").with_name("map_overlay.png"), drawn)
+            path = self.store.path("system").with_name("map_overlay.png")
+            out |= write_picture(
+                path, lambda: map_overlay(acq.stripe, laser_map, calib, acq.source)
             )
         return out
 

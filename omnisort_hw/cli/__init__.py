@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from omnisort_hw.cli.output import report_error
 from omnisort_hw.errors import OmnisortError
@@ -27,8 +29,21 @@ COMMAND_MODULES: tuple[str, ...] = (
 )
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, but a command line refused while parsing (a bad value, an output that is a
+    folder) is also JSON on stdout when `--json` is among the arguments."""
+
+    def error(self, message: str) -> NoReturn:
+        if "--json" in _ARGV:
+            print(json.dumps({"ok": False, "error": {"code": "bad_input", "message": message}}))
+        super().error(message)
+
+
+_ARGV: list[str] = []  # the command line main() parses
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="omnisort", description="Fisheye camera + laser-plane robotic sorting cell."
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -38,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    _ARGV[:] = list(argv) if argv is not None else sys.argv[1:]
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -140,7 +141,7 @@ def load_system(path: Path) -> Any:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.camera_io import load_camera_json
-    from omnisort_hw.core.overlays import overlay_path, write_png
+    from omnisort_hw.core.overlays import overlay_path, write_picture
     from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import (
@@ -189,11 +190,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     calib = run.calib
     image_rec = image_record(args.image) if args.image is not None else record
     atomic_write_json(args.out, system_payload(calib, image_rec))
-    png = write_png(overlay_path(args.out), run.overlay(image, source))
+    picture = write_picture(overlay_path(args.out), lambda: run.overlay(image, source))
+    _warn(picture)
     if args.json:
         out = {
             "out": str(args.out),
-            "overlay_png": str(png),
+            **picture,
             "parameters": calib.parameters(),
             "std": calib.std,
             "residuals": calib.residuals,
@@ -206,8 +208,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             std = calib.std.get(key)
             extra = f"  +- {std:.4f}" if std is not None else ""
             print(f"  {key:<20} {value:10.4f}{extra}")
-        print(f"picture of what was detected and fitted: {png}")
+        if picture["overlay_png"]:
+            print(f"picture of what was detected and fitted: {picture['overlay_png']}")
     return 0
+
+
+def _warn(picture: dict[str, str | None]) -> None:
+    """A picture that could not be written: said on stderr, the command still succeeds."""
+    if picture.get("overlay_problem"):
+        print(f"omnisort: warning: {picture['overlay_problem']}", file=sys.stderr)
 
 
 def map_png_path(args: argparse.Namespace) -> Path:
@@ -219,7 +228,7 @@ def map_png_path(args: argparse.Namespace) -> Path:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from omnisort_hw.core.overlays import write_png
+    from omnisort_hw.core.overlays import write_picture
     from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.pipeline.laser_map import map_laser, map_overlay
     from omnisort_hw.runlog import RunLog
@@ -233,9 +242,12 @@ def cmd_map(args: argparse.Namespace) -> int:
             image, record = _capture(args.config, log)
             source = "capture"
         laser_map = map_laser(image, calib, source, log)
-    png = write_png(map_png_path(args), map_overlay(image, laser_map, calib, source))
+    picture = write_picture(
+        map_png_path(args), lambda: map_overlay(image, laser_map, calib, source)
+    )
+    _warn(picture)
     if args.json:
-        out = {**laser_map.summary(with_points=args.points), "overlay_png": str(png)}
+        out = {**laser_map.summary(with_points=args.points), **picture}
         print_result({**out, "capture": record} if record else out)
     else:
         segs = laser_map.segments
@@ -245,5 +257,6 @@ def cmd_map(args: argparse.Namespace) -> int:
                 f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"
                 f"  bearing {s.bearing_deg:7.1f} deg  length {s.length_mm:7.1f} mm"
             )
-        print(f"picture of the points and their top view: {png}")
+        if picture["overlay_png"]:
+            print(f"picture of the points and their top view: {picture['overlay_png']}")
     return 0

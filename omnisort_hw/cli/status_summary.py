@@ -59,7 +59,7 @@ def summarise(status: dict[str, Any]) -> str:
     rows.append(("job", _job(status.get("job"))))
     cal = status.get("calibration") or {}
     drift = status.get("drift") or {}
-    if status.get("motion_allowed"):
+    if status.get("motion_allowed") and not drift.get("motion_refused"):
         rows.append(("motion", "allowed"))
     else:
         why = [

@@ -18,7 +18,7 @@ Colours are BGR (OpenCV), pixels (u, v) as in docs/frames.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -151,6 +151,20 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
         return atomic_write_bytes(path, encode_png(image), keep_history=False)
     except OSError as exc:
         raise StorageError(f"{path}: could not write the picture: {os_error_text(exc)}") from None
+
+
+def write_picture(path: str | Path, draw: Callable[[], np.ndarray]) -> dict[str, str | None]:
+    """Draw and write a command's picture, a by-product of its result: `{"overlay_png":
+    path}`, or `{"overlay_png": None, "overlay_problem": why}` when drawing or writing failed,
+    so a measurement already saved is still reported as done (a full disk or a read-only
+    folder costs the picture only)."""
+    try:
+        return {"overlay_png": str(write_png(path, draw()))}
+    except StorageError as exc:
+        why = str(exc)
+    except Exception as exc:  # a drawing defect must not turn a saved calibration into an error
+        why = f"{path}: the picture could not be drawn ({type(exc).__name__}: {exc})"
+    return {"overlay_png": None, "overlay_problem": why}
 
 
 def overlay_path(out: str | Path) -> Path:

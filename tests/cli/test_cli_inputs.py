@@ -121,3 +121,35 @@ def test_a_colour_table_that_is_not_one_is_a_config_error(
     with pytest.raises(ConfigError, match=why) as info:
         ColorTable.load(path)
     assert str(path) in str(info.value)
+
+
+def test_a_json_command_refused_while_parsing_still_prints_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "out"
+    folder.mkdir()
+    with pytest.raises(SystemExit):
+        main(["intrinsics", "calibrate", "a.png", "--square", "20", "--out", str(folder), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["ok"] is False and doc["error"]["code"] == "bad_input"
+    assert f"{folder} is a folder" in doc["error"]["message"]
+
+
+def test_a_picture_that_cannot_be_written_costs_only_the_picture(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The calibration is the result: a folder where its picture should go is a warning, and
+    system.json is written and reported."""
+    from omnisort_hw.core.overlays import write_picture
+
+    blocked = tmp_path / "system_overlay.png"
+    blocked.mkdir()
+    out = write_picture(blocked, lambda: np.zeros((4, 4, 3), np.uint8))
+    assert out["overlay_png"] is None and str(blocked) in out["overlay_problem"]
+
+    def broken() -> np.ndarray:
+        raise IndexError("empty stripe")
+
+    out = write_picture(tmp_path / "map_overlay.png", broken)
+    assert out["overlay_png"] is None and "IndexError: empty stripe" in out["overlay_problem"]
+    assert not (tmp_path / "map_overlay.png").exists()

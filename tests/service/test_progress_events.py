@@ -66,3 +66,18 @@ def test_ctl_status_is_one_screen_and_json_on_request(make_service, capsys) -> N
     assert len(lines) <= 20 and max(map(len, lines)) <= 160, out
     assert main(["ctl", "--port", port, "--json", "status"]) == 0
     assert json.loads(capsys.readouterr().out)["result"]["state"] == "idle"
+
+
+def test_the_summary_says_refused_when_drift_refuses_motion() -> None:
+    """`motion_allowed` in status speaks of the calibration files; a detected drift refuses
+    motion too, and the summary must not say "allowed" then."""
+    from omnisort_hw.cli.status_summary import summarise
+
+    status = {
+        "state": "idle",
+        "motion_allowed": True,
+        "calibration": {"files": {"camera": {"health": "ok"}}, "robot_registered": True},
+        "drift": {"motion_refused": True, "reason": "camera turned 0.4 deg", "last": None},
+    }
+    motion = next(line for line in summarise(status).splitlines() if line.startswith("motion"))
+    assert "REFUSED" in motion and "camera turned 0.4 deg" in motion, motion
