@@ -86,10 +86,25 @@ def register(sub: Any) -> None:
     mp.set_defaults(func=cmd_map)
 
 
-def _capture(config: Path | None, log: Any) -> tuple[Any, dict[str, Any]]:
-    """The laser-light image of a measurement capture with the cell file's camera and laser."""
-    cap = measure(config, log, board=False)
-    return cap.stripe_image, cap.record
+def _floor(calib: Any, config: Path | None) -> Any:
+    """The floor the map's mirror images are judged against, as the service has it: from the
+    registered robot base and the cell file's `[sorting]` (resolved as the service resolves
+    it), or None without a registration."""
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.pipeline.laser_map import floor_plane_S
+    from omnisort_hw.pipeline.sort import resolve_sorting
+
+    sort_cfg = None
+    if config is not None:
+        cell = load_cell_config(config)
+        if cell.sorting is not None:
+            scene = None
+            if cell.sorting.from_scene:
+                from omnisort_hw.devices import open_devices
+
+                scene = open_devices(cell.devices).scene
+            sort_cfg, _ = resolve_sorting(cell.sorting, cell.registration, scene)
+    return floor_plane_S(calib, sort_cfg)
 
 
 def measure(config: Path | None, log: Any, board: bool) -> Any:
@@ -234,14 +249,18 @@ def cmd_map(args: argparse.Namespace) -> int:
     from omnisort_hw.runlog import RunLog
 
     calib = load_system(args.system)
-    record = None
+    record, light = None, False
     with RunLog(args.log) as log:
         if args.image is not None:
             image, source = read_image(args.image), str(args.image)
-        else:
-            image, record = _capture(args.config, log)
-            source = "capture"
-        laser_map = map_laser(image, calib, source, log)
+        else:  # the laser light of a measurement capture with the cell file's camera and laser
+            cap = measure(args.config, log, board=False)
+            image, record, source = cap.stripe_image, cap.record, "capture"
+            light = cap.stripe_px is not None
+        # The service's map: the floor's mirror images dropped, a capture's laser light fitted
+        # on its own (the same capture gives the same points through either door).
+        floor = _floor(calib, args.config)
+        laser_map = map_laser(image, calib, source, log, floor, light_only=light)
     picture = write_picture(
         map_png_path(args), lambda: map_overlay(image, laser_map, calib, source)
     )

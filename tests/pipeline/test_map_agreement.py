@@ -1,0 +1,69 @@
+"""`omnisort map` and the service's `map` are one use case: on the same image, calibration and
+cell file they give the same points (both judge the floor's mirror images against the floor of
+`[sorting]` and the registered robot base). On this render the floor test drops no point that
+the map's other echo rules keep, so the test guards the whole path's agreement rather than the
+floor filter's own effect (that is `tests/core/test_laser_echoes.py`)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import pytest
+
+pytest.importorskip("pybullet", reason="the image is rendered by the simulated cell")
+
+from omnisort_hw.cell import Cell, CellDevices
+from omnisort_hw.config.cell import load_cell_config
+from omnisort_hw.core.camera_io import camera_record
+from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.storage import CalibrationStore
+
+WIDTH = 960
+CALIB_KEYS = ("camera", "camera_rotation", "laser_plane", "target", "robot_base")
+
+
+def map_cli(*args: str) -> dict:
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnisort_hw.cli", "map", *args, "--json", "--points"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout)["result"]
+
+
+def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import camera_model_for, render_scene
+    from sim_backend.sort_harness import sim_sort_config
+
+    scene = sized(load_scene("sorting"), WIDTH).replace(
+        robot={"home_deg": SortConfig().home_deg, "pedestal_mm": 80.0}
+    )
+    image, truth = render_scene(scene, seed=4, laser_on=True)
+    assert truth is not None and truth["robot_base"] is not None
+    image_path = tmp_path / "laser.png"
+    cv2.imwrite(str(image_path), image)
+    store = CalibrationStore(state_dir=tmp_path / "state")
+    store.save_camera(camera_record(camera_model_for(scene)))
+    payload = {k: truth[k] for k in CALIB_KEYS}
+    payload.update(method="truth", residuals={}, std={}, image=None, created="now")
+    system = store.save_system(payload)
+    cell_file = tmp_path / "cell.toml"
+    cell_file.write_text(
+        f'[storage]\nstate_dir = "{store.state_dir}"\n'
+        f"[sorting]\nfloor_z_B_mm = {sim_sort_config(scene).floor_z_B_mm}\n"
+    )
+
+    cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
+    service = json.loads(json.dumps(cell.map_scene(str(image_path), with_points=True)))
+    cli = map_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
+    assert cli["points_S"] == service["points_S"] and cli["pixels"] == service["pixels"]
+    assert cli["segments"] == service["segments"]
+    # Not a vacuous agreement: a real map of this scene.
+    assert cli["points_on_plane"] > 50 and len(cli["segments"]) >= 3
