@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -50,15 +49,12 @@ def cmd_check(args: argparse.Namespace) -> int:
     from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.config.watchdog import WatchdogConfig
     from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-    from omnisort_hw.errors import CalibrationFileError
+    from omnisort_hw.pipeline.calibration_source import read_system_payload
     from omnisort_hw.pipeline.drift_check import calibration_key, check_drift, load_reference
     from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.runlog import RunLog
 
-    try:
-        payload = json.loads(args.system.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise CalibrationFileError(f"{args.system}: not a readable system.json ({exc})") from None
+    payload, _ = read_system_payload(args.system)  # a store file's checksum is verified
     calib = SystemCalibration.from_json(payload, source=str(args.system))
     cfg = load_cell_config(args.config) if args.config else None
     registration = cfg.registration if cfg is not None else None

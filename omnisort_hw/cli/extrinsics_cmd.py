@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -143,15 +142,11 @@ def laser_off_frame(config: Path | None) -> Any:
 
 def load_system(path: Path) -> Any:
     """system.json from the CLI or from the service's store (then its checksum is verified)."""
-    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration, load_system_json
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+    from omnisort_hw.pipeline.calibration_source import read_system_payload
 
-    raw = json.loads(path.read_text()) if path.is_file() else None
-    if isinstance(raw, dict) and "checksum" in raw:
-        from omnisort_hw.storage import read_calibration_file
-
-        record = read_calibration_file(path, "system")
-        return SystemCalibration.from_json(record.payload, source=str(path))
-    return load_system_json(path)
+    payload, _ = read_system_payload(path)
+    return SystemCalibration.from_json(payload, source=str(path))
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

@@ -43,6 +43,26 @@ class StoreCalibration(CalibrationSource):
         return SystemCalibration.from_json(rec.payload, source=str(rec.path))
 
 
+def read_system_payload(path: str | Path) -> tuple[dict[str, Any], str | None]:
+    """A system.json's payload and, for one written by the store, its save time, the store's
+    checksum verified (a tampered file is refused); a plain file (the CLI's) as it is."""
+    path = Path(path)
+    if not path.is_file():
+        raise CalibrationFileError(f"{path}: system calibration file not found")
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise CalibrationFileError(f"{path}: corrupt, not valid JSON ({exc})") from None
+    if not isinstance(raw, dict):
+        raise CalibrationFileError(f"{path}: corrupt, top level is not a JSON object")
+    if "checksum" not in raw:
+        return raw, None
+    from omnisort_hw.storage import read_calibration_file
+
+    rec = read_calibration_file(path, "system")
+    return dict(rec.payload), rec.saved.isoformat()
+
+
 class FileCalibration(CalibrationSource):
     """A system.json file (plain, or written by the store: then its checksum is verified); it
     must parse and be no older than `max_age_days` (from its save or creation time)."""
@@ -52,22 +72,8 @@ class FileCalibration(CalibrationSource):
         self.max_age_days = max_age_days
 
     def _payload(self) -> dict[str, Any]:
-        if not self.path.is_file():
-            raise CalibrationFileError(f"{self.path}: system calibration file not found")
-        try:
-            raw = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise CalibrationFileError(f"{self.path}: corrupt, not valid JSON ({exc})") from None
-        if not isinstance(raw, dict):
-            raise CalibrationFileError(f"{self.path}: corrupt, top level is not a JSON object")
-        if "checksum" in raw:
-            from omnisort_hw.storage import read_calibration_file
-
-            rec = read_calibration_file(self.path, "system")
-            payload = dict(rec.payload)
-            payload["_saved"] = rec.saved.isoformat()
-            return payload
-        return raw
+        payload, saved = read_system_payload(self.path)
+        return {**payload, "_saved": saved} if saved else payload
 
     def check_motion_allowed(self) -> None:
         try:

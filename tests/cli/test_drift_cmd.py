@@ -50,3 +50,27 @@ def test_check_an_image_against_system_json(tmp_path: Path, capsys: pytest.Captu
     assert np.hypot(*bad["rotvec_deg"][1:]) < 0.02
     # A re-registration would move the base by millimetres: what the knock costs at the robot.
     assert bad["board"]["base_shift_mm"] > 2.0
+
+
+def test_check_refuses_a_tampered_store_file(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A system.json written by the service's store carries a checksum: `check` verifies it,
+    as the service does, and an edited file is bad_calibration_file before any image is read."""
+    from omnisort_hw.core.camera_model import OcamModel
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+    from omnisort_hw.storage import CalibrationStore
+
+    zero = dict.fromkeys(
+        ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg"), 0.0
+    )
+    calib = SystemCalibration.from_angles(
+        OcamModel.equidistant(640, 640, 185.0), {**zero, "laser_distance_mm": 950.0}, "truth"
+    )
+    store = CalibrationStore(state_dir=tmp_path / "state")
+    path = store.save_system(calib.to_json())
+    doc = json.loads(path.read_text())
+    doc["laser_plane"]["distance_mm"] = 900.0  # edited by hand, checksum left as it was
+    path.write_text(json.dumps(doc))
+    code = main(["check", "missing.png", "--system", str(path), "--json"])
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert code == 2 and err["code"] == "bad_calibration_file", err
+    assert "checksum mismatch" in err["message"] and str(path) in err["message"]
