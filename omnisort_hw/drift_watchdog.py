@@ -8,7 +8,6 @@ extrinsic calibration or robot registration clears it by itself.
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 import time
@@ -23,8 +22,11 @@ from omnisort_hw import fileio
 from omnisort_hw.config.watchdog import WatchdogConfig
 from omnisort_hw.errors import CalibrationDriftError, FeatureNotFoundError, InputError
 from omnisort_hw.pipeline.drift_check import (
+    DRIFT_STATE_NAME,
     calibration_key,
     check_drift,
+    drift_refusal,
+    load_drift_state,
     load_reference,
     save_reference,
 )
@@ -34,7 +36,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-STATE_NAME = "drift.json"
+STATE_NAME = DRIFT_STATE_NAME
 
 
 class DriftWatchdog:
@@ -54,11 +56,7 @@ class DriftWatchdog:
     # -- state -------------------------------------------------------------------------------
 
     def _load(self) -> dict[str, Any]:
-        try:
-            data = json.loads(self._path.read_text(encoding="utf-8"))
-            return data if isinstance(data, dict) else {}
-        except (OSError, ValueError):
-            return {}
+        return load_drift_state(self._path.parent)
 
     def _save(self) -> None:
         try:
@@ -76,19 +74,7 @@ class DriftWatchdog:
         """Why motion is refused now (a drift of the current calibration not acknowledged)."""
         with self._lock:
             st = dict(self._state)
-        drift = st.get("drift_detected")
-        if (
-            not drift
-            or st.get("acknowledged")
-            or drift.get("calibration_key") != self._current_key()
-        ):
-            return None
-        return (
-            f"calibration drift: the camera turned {drift['angle_deg']:.3f} deg since the "
-            f"calibration (threshold {drift['threshold_deg']:.3f} deg, checked "
-            f"{drift['checked_at']}); recalibrate (calibrate what=extrinsics, register_robot) or "
-            "send acknowledge_drift"
-        )
+        return drift_refusal(st, self._current_key())
 
     def check_motion_allowed(self) -> None:
         why = self.refusal()

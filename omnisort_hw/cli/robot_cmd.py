@@ -305,6 +305,10 @@ def cmd_sort(args: argparse.Namespace) -> int:
     colors = [c.strip() for c in args.colors.split(",")] if args.colors else None
     if args.max is not None and args.max < 1:
         raise InputError(f"--max must be at least 1, got {args.max}")
+    # The service's gates before anything opens: a usable calibration (checksum, age) and no
+    # drift of it on record in the cell's state folder (the watchdog's drift.json).
+    calibration.check_motion_allowed()
+    _refuse_on_recorded_drift(cell.storage.state_dir, args.system)
     verifier = devices.scene.verifier() if devices.scene is not None else None
     connected = []
     try:
@@ -341,6 +345,21 @@ def cmd_sort(args: argparse.Namespace) -> int:
             dev.close()
     _print_report(report.to_dict(), args.json)
     return 0
+
+
+def _refuse_on_recorded_drift(state_dir: Path, system: Path | None) -> None:
+    """CalibrationDriftError when the cell's drift state holds an unacknowledged drift of the
+    calibration this sort would use (`system`, else the store's system.json)."""
+    from omnisort_hw.errors import CalibrationDriftError
+    from omnisort_hw.pipeline.calibration_source import read_system_payload
+    from omnisort_hw.pipeline.drift_check import calibration_key, drift_refusal, load_drift_state
+    from omnisort_hw.storage import FILE_NAMES
+
+    path = system if system is not None else Path(state_dir) / FILE_NAMES["system"]
+    payload, _ = read_system_payload(path)
+    why = drift_refusal(load_drift_state(state_dir), calibration_key(payload))
+    if why is not None:
+        raise CalibrationDriftError(why)
 
 
 def _print_progress(event: dict[str, Any]) -> None:

@@ -49,6 +49,35 @@ def calibration_key(system_payload: Mapping[str, Any]) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
 
+DRIFT_STATE_NAME = "drift.json"
+
+
+def load_drift_state(state_dir: str | Path) -> dict[str, Any]:
+    """The drift watchdog's state in `state_dir` (`{}` when there is none or it is unreadable:
+    the watchdog then starts afresh)."""
+    try:
+        data = json.loads((Path(state_dir) / DRIFT_STATE_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def drift_refusal(state: Mapping[str, Any], key: str | None) -> str | None:
+    """Why motion is refused by the drift state `state` for the calibration `key`: a drift of
+    that calibration that no operator acknowledged (a new calibration clears it by itself)."""
+    drift = state.get("drift_detected")
+    if not isinstance(drift, Mapping) or state.get("acknowledged") or key is None:
+        return None
+    if drift.get("calibration_key") != key:
+        return None
+    return (
+        f"calibration drift: the camera turned {drift['angle_deg']:.3f} deg since the "
+        f"calibration (threshold {drift['threshold_deg']:.3f} deg, checked "
+        f"{drift['checked_at']}); recalibrate (calibrate what=extrinsics, register_robot) or "
+        "send acknowledge_drift"
+    )
+
+
 def save_reference(state_dir: Path, image: np.ndarray, key: str) -> Path:
     """Keep `image` (the registration's capture) as the drift reference of calibration `key`."""
     ok, buf = cv2.imencode(".png", np.asarray(image))
