@@ -287,9 +287,10 @@ def load_cell(config: Path, devices: bool = True) -> tuple[Any, Any]:
 
 
 def cmd_sort(args: argparse.Namespace) -> int:
+    from omnisort_hw.fileio import check_writable
+    from omnisort_hw.instance_lock import InstanceLock
+    from omnisort_hw.job_journal import JobJournal
     from omnisort_hw.pipeline.calibration_source import FileCalibration, StoreCalibration
-    from omnisort_hw.pipeline.sort import Sorter
-    from omnisort_hw.runlog import RunLog
 
     cell, devices = load_cell(args.config)
     cfg, reg_cfg = resolve_sorting(cell.sorting, cell.registration, devices.scene)
@@ -309,6 +310,38 @@ def cmd_sort(args: argparse.Namespace) -> int:
     # drift of it on record in the cell's state folder (the watchdog's drift.json).
     calibration.check_motion_allowed()
     _refuse_on_recorded_drift(cell.storage.state_dir, args.system)
+    # As the service: the cell is held (not while its service runs), and the job journal
+    # records the sort and the cube in flight, so a cube held after a crash is placed first.
+    check_writable(cell.storage.state_dir, "[storage] state_dir")
+    with InstanceLock(cell.storage.state_dir):
+        journal = JobJournal(cell.storage.state_dir)
+        journal.recover()
+        journal.start("sort", "cli", {"max_objects": args.max, "colors": colors})
+        try:
+            report = _sort_with_devices(args, devices, calibration, cfg, reg_cfg, colors, journal)
+        except BaseException as exc:
+            journal.finish("failed", f"{getattr(exc, 'code', type(exc).__name__)}: {exc}")
+            raise
+        journal.finish("done", "sort done")
+    _print_report(report, args.json)
+    return 0
+
+
+def _sort_with_devices(
+    args: argparse.Namespace,
+    devices: Any,
+    calibration: Any,
+    cfg: Any,
+    reg_cfg: Any,
+    colors: list[str] | None,
+    journal: Any,
+) -> dict[str, Any]:
+    """Connect the devices, place a held cube, sort, close the devices; the report."""
+    from omnisort_hw.pipeline.calibration_source import robot_base_T
+    from omnisort_hw.pipeline.gripper_load import resolve_before_sort
+    from omnisort_hw.pipeline.sort import Sorter
+    from omnisort_hw.runlog import RunLog
+
     verifier = devices.scene.verifier() if devices.scene is not None else None
     connected = []
     try:
@@ -316,7 +349,8 @@ def cmd_sort(args: argparse.Namespace) -> int:
             if dev is not None:
                 dev.connect()
                 connected.append(dev)
-        if args.system is None and store.expected_serial is None:
+        store = getattr(calibration, "store", None)
+        if store is not None and store.expected_serial is None:
             store.expected_serial = devices.camera.serial
         if verifier is not None:
             verifier.start()
@@ -330,7 +364,11 @@ def cmd_sort(args: argparse.Namespace) -> int:
                 reg_cfg,
                 log,
                 progress=None if args.json else _print_progress,
+                on_pick=lambda phase, o: journal.pick_phase(phase, o.index, o.color, o.bin),
             )
+            held = None
+            if calibration.system().robot_base is not None:
+                held = resolve_before_sort(sorter, journal, robot_base_T(calibration.system()))
             report = sorter.run(
                 args.max,
                 colors,
@@ -338,13 +376,14 @@ def cmd_sort(args: argparse.Namespace) -> int:
                 on_located=verifier.on_located if verifier is not None else None,
                 on_done=verifier.on_done if verifier is not None else None,
             )
+            if held is not None:
+                report.outcomes.insert(0, held)
         if verifier is not None:
             verifier.stop()
     finally:
         for dev in reversed(connected):
             dev.close()
-    _print_report(report.to_dict(), args.json)
-    return 0
+    return report.to_dict()
 
 
 def _refuse_on_recorded_drift(state_dir: Path, system: Path | None) -> None:

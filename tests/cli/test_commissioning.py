@@ -65,6 +65,9 @@ def test_commissioning_steps_run_on_the_shipped_sim_cell(tmp_path: Path) -> None
     assert "4 cubes" in outputs[5]
     assert "4 sorted, 0 skipped, 0 failed" in outputs[6]
     assert "4 in the right bin, 0 collisions" in outputs[6]
+    # The sort is in the cell's job journal as the service would have it, nothing in flight.
+    job = json.loads((tmp_path / "build" / "sim-cell" / "state" / "job.json").read_text())
+    assert (job["job"], job["state"], job["in_flight"]) == ("sort", "done", None), job
 
 
 def test_register_robot_without_registration_settings_is_an_input_error(tmp_path: Path) -> None:

@@ -73,3 +73,17 @@ def test_a_tampered_calibration_refuses_the_cli_sort(tmp_path: Path, capsys) -> 
     err = json.loads(capsys.readouterr().out)["error"]
     assert code == 2 and err["code"] == "motion_refused", err
     assert "checksum mismatch" in err["message"], err
+
+
+def test_the_cli_sort_does_not_run_beside_the_service_of_the_same_cell(
+    tmp_path: Path, capsys
+) -> None:
+    """The service holds STATE_DIR/omnisort.lock; a command-line sort of that cell is
+    refused with instance_locked instead of driving the arm beside it."""
+    from omnisort_hw.instance_lock import InstanceLock
+
+    cfg, store = _cell(tmp_path)
+    with InstanceLock(store.state_dir):
+        code = main(["sort", "--config", str(cfg), "--json"])
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert code == 2 and err["code"] == "instance_locked", err
