@@ -36,29 +36,9 @@ def check_writable(directory: str | os.PathLike[str], what: str) -> Path:
     return folder
 
 
-def output_file_problem(path: str | os.PathLike[str]) -> str | None:
-    """Why a file cannot be written at `path`, or None: checked before long work starts, so a
-    calibration does not run for minutes and then fail on its output name."""
-    target = Path(path)
-    if target.is_dir():
-        return f"{target} is a folder; give a file name inside it"
-    ancestor = target.parent
-    while not ancestor.exists() and ancestor != ancestor.parent:
-        ancestor = ancestor.parent
-    if not ancestor.is_dir():
-        return f"{ancestor} is not a folder, so {target} cannot be created"
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        return f"{ancestor} is not writable"
-    return None
-
-
-def output_folder_problem(path: str | os.PathLike[str]) -> str | None:
-    """Why files cannot be written into the folder `path` (created if missing), or None."""
-    target = Path(path)
-    if target.exists():
-        if not target.is_dir():
-            return f"{target} is a file, not a folder"
-        return None if os.access(target, os.W_OK | os.X_OK) else f"{target} is not writable"
+def _creation_problem(target: Path) -> str | None:
+    """Why `target` (which does not exist) cannot be created: its nearest existing ancestor
+    is not a folder, or not writable."""
     ancestor = target.parent
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
@@ -67,6 +47,28 @@ def output_folder_problem(path: str | os.PathLike[str]) -> str | None:
     if not os.access(ancestor, os.W_OK | os.X_OK):
         return f"{ancestor} is not writable, so {target} cannot be created"
     return None
+
+
+def output_file_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why a file cannot be written at `path`, or None: checked before long work starts, so a
+    calibration does not run for minutes and then fail on its output name."""
+    target = Path(path)
+    if target.is_dir():
+        return f"{target} is a folder; give a file name inside it"
+    if target.exists():
+        writable = os.access(target.parent, os.W_OK | os.X_OK)
+        return None if writable else f"{target.parent} is not writable"
+    return _creation_problem(target)
+
+
+def output_folder_problem(path: str | os.PathLike[str]) -> str | None:
+    """Why files cannot be written into the folder `path` (created if missing), or None."""
+    target = Path(path)
+    if not target.exists():
+        return _creation_problem(target)
+    if not target.is_dir():
+        return f"{target} is a file, not a folder"
+    return None if os.access(target, os.W_OK | os.X_OK) else f"{target} is not writable"
 
 
 def _fsync_dir(directory: Path) -> None:

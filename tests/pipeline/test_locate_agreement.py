@@ -8,7 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
@@ -16,12 +15,8 @@ pytest.importorskip("pybullet", reason="the image is rendered by the simulated c
 
 from omnisort_hw.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
-from omnisort_hw.core.camera_io import camera_record
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.storage import CalibrationStore
-
-WIDTH = 960
-CALIB_KEYS = ("camera", "camera_rotation", "laser_plane", "target", "robot_base")
+from tests.pipeline.registered_scene import registered_scene
 
 
 def locate_cli(*args: str) -> list[dict]:
@@ -36,24 +31,14 @@ def locate_cli(*args: str) -> list[dict]:
 
 
 def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:
-    from sim_backend.scene import load_scene, sized
-    from sim_backend.scene_images import camera_model_for, render_scene
-    from sim_backend.sort_harness import sim_sort_config
-
-    # On an 80 mm pedestal: the floor is below the base, so [sorting] floor_z_B_mm matters.
-    scene = sized(load_scene("sorting"), WIDTH).replace(
-        robot={"home_deg": SortConfig().home_deg, "pedestal_mm": 80.0}
+    rs = registered_scene(tmp_path, seed=4, laser_on=False)
+    image_path, truth, store, system, floor = (
+        rs.image_path,
+        rs.truth,
+        rs.store,
+        rs.system,
+        rs.floor_z_B_mm,
     )
-    image, truth = render_scene(scene, seed=4, laser_on=False)
-    assert truth is not None and truth["robot_base"] is not None
-    image_path = tmp_path / "view.png"
-    cv2.imwrite(str(image_path), image)
-    store = CalibrationStore(state_dir=tmp_path / "state")
-    store.save_camera(camera_record(camera_model_for(scene)))
-    payload = {k: truth[k] for k in CALIB_KEYS}
-    payload.update(method="truth", residuals={}, std={}, image=None, created="now")
-    system = store.save_system(payload)
-    floor = sim_sort_config(scene).floor_z_B_mm
     assert floor == -80.0
     (tmp_path / "conf").mkdir()
     (tmp_path / "conf" / "colours.toml").write_text(

@@ -11,19 +11,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-import cv2
 import pytest
 
 pytest.importorskip("pybullet", reason="the image is rendered by the simulated cell")
 
 from omnisort_hw.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
-from omnisort_hw.core.camera_io import camera_record
-from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.storage import CalibrationStore
-
-WIDTH = 960
-CALIB_KEYS = ("camera", "camera_rotation", "laser_plane", "target", "robot_base")
+from tests.pipeline.registered_scene import registered_scene
 
 
 def map_cli(*args: str) -> dict:
@@ -38,26 +32,11 @@ def map_cli(*args: str) -> dict:
 
 
 def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:
-    from sim_backend.scene import load_scene, sized
-    from sim_backend.scene_images import camera_model_for, render_scene
-    from sim_backend.sort_harness import sim_sort_config
-
-    scene = sized(load_scene("sorting"), WIDTH).replace(
-        robot={"home_deg": SortConfig().home_deg, "pedestal_mm": 80.0}
-    )
-    image, truth = render_scene(scene, seed=4, laser_on=True)
-    assert truth is not None and truth["robot_base"] is not None
-    image_path = tmp_path / "laser.png"
-    cv2.imwrite(str(image_path), image)
-    store = CalibrationStore(state_dir=tmp_path / "state")
-    store.save_camera(camera_record(camera_model_for(scene)))
-    payload = {k: truth[k] for k in CALIB_KEYS}
-    payload.update(method="truth", residuals={}, std={}, image=None, created="now")
-    system = store.save_system(payload)
+    rs = registered_scene(tmp_path, seed=4, laser_on=True)
+    store, image_path, system = rs.store, rs.image_path, rs.system
     cell_file = tmp_path / "cell.toml"
     cell_file.write_text(
-        f'[storage]\nstate_dir = "{store.state_dir}"\n'
-        f"[sorting]\nfloor_z_B_mm = {sim_sort_config(scene).floor_z_B_mm}\n"
+        f'[storage]\nstate_dir = "{store.state_dir}"\n[sorting]\nfloor_z_B_mm = {rs.floor_z_B_mm}\n'
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
