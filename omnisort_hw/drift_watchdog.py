@@ -36,8 +36,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-STATE_NAME = DRIFT_STATE_NAME
-
 
 class DriftWatchdog:
     """Drift checks of one cell: on request, before each sort, every `period_s` when idle."""
@@ -46,7 +44,7 @@ class DriftWatchdog:
         self.cell = cell
         self.config = config or WatchdogConfig()
         self._lock = threading.Lock()
-        self._path = Path(cell.store.state_dir) / STATE_NAME
+        self._path = Path(cell.store.state_dir) / DRIFT_STATE_NAME
         self._state: dict[str, Any] = self._load()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()

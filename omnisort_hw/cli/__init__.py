@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from omnisort_hw.cli.output import report_error
+from omnisort_hw.cli.output import print_error, report_error
 from omnisort_hw.errors import OmnisortError
 
 # Each module defines `register(subparsers)` and sets `func` on its parsers; `func(args)`
@@ -35,7 +34,7 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         if "--json" in _ARGV:
-            print(json.dumps({"ok": False, "error": {"code": "bad_input", "message": message}}))
+            print_error("bad_input", message)
         super().error(message)
 
 

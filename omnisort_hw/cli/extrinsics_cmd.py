@@ -87,23 +87,11 @@ def register(sub: Any) -> None:
 
 def _floor(calib: Any, config: Path | None) -> Any:
     """The floor the map's mirror images are judged against, as the service has it: from the
-    registered robot base and the cell file's `[sorting]` (resolved as the service resolves
-    it), or None without a registration."""
-    from omnisort_hw.config.cell import load_cell_config
+    registered robot base and the cell file's `[sorting]`, or None without a registration."""
+    from omnisort_hw.cli.cell_file import sorting_config
     from omnisort_hw.pipeline.laser_map import floor_plane_S
-    from omnisort_hw.pipeline.sort import resolve_sorting
 
-    sort_cfg = None
-    if config is not None:
-        cell = load_cell_config(config)
-        if cell.sorting is not None:
-            scene = None
-            if cell.sorting.from_scene:
-                from omnisort_hw.devices import open_devices
-
-                scene = open_devices(cell.devices).scene
-            sort_cfg, _ = resolve_sorting(cell.sorting, cell.registration, scene)
-    return floor_plane_S(calib, sort_cfg)
+    return floor_plane_S(calib, sorting_config(config) if config is not None else None)
 
 
 def measure(config: Path | None, log: Any, board: bool) -> Any:

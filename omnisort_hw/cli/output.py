@@ -19,8 +19,13 @@ def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
     print(json.dumps(doc, indent=indent))
 
 
+def print_error(code: str, message: str) -> None:
+    """A command's error as one JSON document on stdout."""
+    print(json.dumps({"ok": False, "error": {"code": code, "message": message}}))
+
+
 def report_error(json_requested: bool, code: str, message: str) -> None:
     """The error on stderr for people and, when `--json` was given, on stdout as JSON."""
     print(f"omnisort: error [{code}]: {message}", file=sys.stderr)
     if json_requested:
-        print(json.dumps({"ok": False, "error": {"code": code, "message": message}}))
+        print_error(code, message)

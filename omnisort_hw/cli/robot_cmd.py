@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.cell_file import load_cell, sorting_config
 from omnisort_hw.cli.output import print_result
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.pipeline.sort import resolve_sorting
@@ -215,14 +216,9 @@ def _locate_config(args: argparse.Namespace) -> Any:
 
     cfg = SortConfig()
     if args.config is not None:
-        from omnisort_hw.devices import open_devices
-
-        cell, _ = load_cell(args.config, devices=False)
-        if cell.sorting is None:
+        cfg = sorting_config(args.config)
+        if cfg is None:
             raise ConfigError(f"{args.config}: no [sorting] section")
-        # from_scene: the scene of the cell's backend fills in what the section leaves out.
-        scene = open_devices(cell.devices).scene if cell.sorting.from_scene else None
-        cfg, _ = resolve_sorting(cell.sorting, cell.registration, scene)
     changes: dict[str, Any] = {}
     if args.cube_size is not None:
         if args.cube_size <= 0:
@@ -275,15 +271,6 @@ def cmd_locate(args: argparse.Namespace) -> int:
             f"+- {c.sigma_mm:.2f} mm" + (f"  [{'; '.join(c.notes)}]" if c.notes else "")
         )
     return 0
-
-
-def load_cell(config: Path, devices: bool = True) -> tuple[Any, Any]:
-    """The cell file's typed record and (unless `devices` is False) its devices, unconnected."""
-    from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.devices import open_devices
-
-    cell = load_cell_config(config)
-    return cell, open_devices(cell.devices) if devices else None
 
 
 def cmd_sort(args: argparse.Namespace) -> int:
@@ -366,9 +353,9 @@ def _sort_with_devices(
                 progress=None if args.json else _print_progress,
                 on_pick=lambda phase, o: journal.pick_phase(phase, o.index, o.color, o.bin),
             )
-            held = None
-            if calibration.system().robot_base is not None:
-                held = resolve_before_sort(sorter, journal, robot_base_T(calibration.system()))
+            held, system = None, calibration.system()
+            if system.robot_base is not None:
+                held = resolve_before_sort(sorter, journal, robot_base_T(system))
             report = sorter.run(
                 args.max,
                 colors,

@@ -96,11 +96,7 @@ def check_sim_settings(kind: str, settings: Mapping[str, Any]) -> dict[str, Any]
                 f"unknown key for the simulated {kind} (known: {', '.join(sorted(allowed))})",
             )
         tp = allowed[key]
-        ok = isinstance(value, tp) and not (tp is int and isinstance(value, bool))
-        if tp is float and isinstance(value, int) and not isinstance(value, bool):
-            value, ok = float(value), True
-        if not ok:
-            raise config_error(f"[{kind}].{key}", f"expected {tp.__name__}, got {value!r}")
+        value = _convert(tp, value, f"[{kind}].{key}")  # the real backends' TOML types
         if tp in (int, float) and key not in SIM_SIGNED and not value > 0:
             raise config_error(f"[{kind}].{key}", f"must be positive, got {value!r}")
         out[key] = value

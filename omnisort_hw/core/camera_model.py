@@ -105,7 +105,7 @@ class OcamModel:
         poly: np.ndarray | list[float],
         center_uv: tuple[float, float],
         stretch: tuple[float, float, float] = (1.0, 0.0, 0.0),
-        image_size: tuple[int, int] = (1920, 1920),
+        image_size: tuple[float, float] = (1920, 1920),
         tol_px: float = INVERSE_TOLERANCE_PX,
     ) -> OcamModel:
         """Build a model and fit its inverse polynomial over the whole image."""
@@ -355,16 +355,12 @@ class OcamModel:
             centre = (float(data["center_uv"][0]), float(data["center_uv"][1]))
             st = data["stretch"]
             stretch = (float(st["c"]), float(st["d"]), float(st["e"]))
-            size = (int(data["image_size"][0]), int(data["image_size"][1]))
-            size_raw = (float(data["image_size"][0]), float(data["image_size"][1]))
+            # Whole, finite and positive is checked by `create`, with the other values.
+            size = (float(data["image_size"][0]), float(data["image_size"][1]))
         except KeyError as exc:
             raise InputError(f"{source}: missing key {exc.args[0]!r} in the camera model") from exc
         except (TypeError, ValueError, IndexError, OverflowError) as exc:
             raise InputError(f"{source}: malformed camera model ({exc})") from exc
-        if size_raw != size:
-            raise InputError(
-                f"{source}: 'image_size' must be two whole pixel counts, got {list(size_raw)}"
-            )
         try:
             return cls.create(poly, centre, stretch, size)
         except InputError as exc:

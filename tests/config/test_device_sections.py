@@ -212,7 +212,7 @@ def test_sim_backend_not_importable_is_a_clear_error(monkeypatch: pytest.MonkeyP
     [
         ('[camera]\nbackend = "sim"\nwidht = 640\n', "[camera].widht", "unknown key"),
         ('[laser]\nbackend = "sim"\nscnee = "sorting"\n', "[laser].scnee", "unknown key"),
-        ('[arm]\nbackend = "sim"\nrealtime = "yes"\n', "[arm].realtime", "expected bool"),
+        ('[arm]\nbackend = "sim"\nrealtime = "yes"\n', "[arm].realtime", "must be true or false"),
         ('[camera]\nbackend = "sim"\nwidth = -5\n', "[camera].width", "must be positive"),
     ],
 )

@@ -212,7 +212,7 @@ def test_camera_json_round_trip_and_errors(tmp_path: Path, fisheye: OcamModel) -
         ("stretch", {"c": float("inf"), "d": 0.0, "e": 0.0}, "'stretch'"),
         ("image_size", [1920.5, 1920], "'image_size'"),
         ("image_size", [0, 1920], "'image_size'"),
-        ("image_size", [float("inf"), 1920], "camera model"),
+        ("image_size", [float("inf"), 1920], "'image_size'"),
         ("poly", "abc", "camera model"),
     ],
 )
