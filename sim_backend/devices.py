@@ -8,7 +8,7 @@
         arm.move_linear(T_base_tcp)                 # straight line, analytic IK (core)
         arm.gripper.close()                         # grasps a cube between the fingers
 
-`open_devices(sections, base_dir)` is the factory `omnisort_hw.devices` calls for
+`open_devices(sections, base_dir)` is the factory `omnisort_hw.cell.devices` calls for
 `backend = "sim"`: every sim device of one cell configuration shares one `SimCell`.
 Time in the simulator is simulated time: a move takes its planned duration of physics
 steps (as fast as the computer goes, or paced to the wall clock with `realtime = true`), and

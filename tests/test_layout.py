@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("omnisort_hw", "drivers", "sim_backend")
 MAX_LINES = 800
 SIM_IMPORTERS = {
-    "omnisort_hw.devices",
+    "omnisort_hw.cell.devices",
     "omnisort_hw.cli.demo_cmd",
     "omnisort_hw.cli.sim_cmd",
     "omnisort_hw.cli.evaluate_cmd",
@@ -121,8 +121,8 @@ def test_no_import_cycle() -> None:
 
 def test_the_rules_see_imports() -> None:
     """The checker itself: it finds known edges, lazy and relative ones included."""
-    assert "omnisort_hw.pipeline.sort" in GRAPH["omnisort_hw.cell"]
-    assert "sim_backend.sort_harness" in GRAPH["omnisort_hw.devices"]  # inside a function
+    assert "omnisort_hw.pipeline.sort" in GRAPH["omnisort_hw.cell.cell"]
+    assert "sim_backend.sort_harness" in GRAPH["omnisort_hw.cell.devices"]  # inside a function
     assert "pybullet" in GRAPH["sim_backend.world"]
     assert (
         "omnisort_hw.core.extrinsics.system_calibration"

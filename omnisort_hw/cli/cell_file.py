@@ -9,8 +9,8 @@ from typing import Any
 
 def load_cell(config: Path, devices: bool = True) -> tuple[Any, Any]:
     """The cell file's typed record and (unless `devices` is False) its devices, unconnected."""
+    from omnisort_hw.cell.devices import open_devices
     from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.devices import open_devices
 
     cell = load_cell_config(config)
     return cell, open_devices(cell.devices) if devices else None
@@ -19,7 +19,7 @@ def load_cell(config: Path, devices: bool = True) -> tuple[Any, Any]:
 def sorting_config(config: Path) -> Any:
     """The `[sorting]` record of the cell file, resolved (`from_scene`: the scene of the cell's
     backend fills in what the section leaves out), or None without a `[sorting]` section."""
-    from omnisort_hw.devices import open_devices
+    from omnisort_hw.cell.devices import open_devices
     from omnisort_hw.pipeline.sort import resolve_sorting
 
     cell, _ = load_cell(config, devices=False)

@@ -106,8 +106,8 @@ def _exercise(kind: str, device: Any) -> str:
 
 def check_devices(config_path: Path, only: list[str] | None = None) -> list[CheckRow]:
     """Open, exercise and close each configured device; never raises for a device failure."""
+    from omnisort_hw.cell.devices import open_arm, open_camera, open_laser
     from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.devices import open_arm, open_camera, open_laser
 
     cell = load_cell_config(config_path).devices
     openers = {"camera": open_camera, "laser": open_laser, "arm": open_arm}
@@ -158,8 +158,8 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_laser(args: argparse.Namespace) -> int:
+    from omnisort_hw.cell.devices import open_laser
     from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.devices import open_laser
     from omnisort_hw.errors import ConfigError
 
     cell = load_cell_config(args.config).devices

@@ -96,8 +96,8 @@ def _floor(calib: Any, config: Path | None) -> Any:
 
 def measure(config: Path | None, log: Any, board: bool) -> Any:
     """A measurement capture with the cell file's camera and laser (`MeasurementCapture`)."""
+    from omnisort_hw.cell.devices import open_devices
     from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.devices import open_devices
     from omnisort_hw.pipeline.measurement_capture import capture_measurement
 
     if config is None:
@@ -112,8 +112,8 @@ def measure(config: Path | None, log: Any, board: bool) -> Any:
 
 def laser_off_frame(config: Path | None) -> Any:
     """One frame of the cell file's camera with its laser switched off (registration, colours)."""
+    from omnisort_hw.cell.devices import open_devices
     from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.devices import open_devices
 
     if config is None:
         raise InputError("give an image, or --config CELL.toml to capture with the cell")

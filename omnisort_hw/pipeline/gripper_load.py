@@ -22,7 +22,7 @@ from omnisort_hw.errors import OmnisortError
 from omnisort_hw.pipeline.sort import CubeOutcome
 
 if TYPE_CHECKING:
-    from omnisort_hw.job_journal import JobJournal
+    from omnisort_hw.cell.journal import JobJournal
     from omnisort_hw.pipeline.sort import Sorter
 
 log = logging.getLogger(__name__)

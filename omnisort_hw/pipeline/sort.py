@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from drivers.base import Waypoint
-from omnisort_hw.compute_worker import InCaller
+from omnisort_hw.cell.compute_worker import InCaller
 from omnisort_hw.config.sorting import RegistrationConfig, SortSection
 from omnisort_hw.core.cube_location import Cube
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration

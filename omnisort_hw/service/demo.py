@@ -37,7 +37,7 @@ def calibrate_from_truth(config: Path) -> None:
     not the calibration (the demo itself calibrates through the protocol)."""
     from datetime import UTC, datetime
 
-    from omnisort_hw.cell import Cell
+    from omnisort_hw.cell.cell import Cell
     from omnisort_hw.config.cell import load_cell_config
 
     cell = Cell.from_settings(load_cell_config(config))

@@ -12,9 +12,9 @@ import signal
 import sys
 
 from omnisort_hw import fileio
-from omnisort_hw.cell import Cell
+from omnisort_hw.cell.cell import Cell
+from omnisort_hw.cell.lock import InstanceLock
 from omnisort_hw.config.cell import CellConfig
-from omnisort_hw.instance_lock import InstanceLock
 from omnisort_hw.service.listener import preflight
 from omnisort_hw.service.live_view import start_live_view
 from omnisort_hw.service.plc_face import start_plc_face

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from omnisort_hw.cell import Cell
+from omnisort_hw.cell.cell import Cell
 
 
 @dataclass

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from omnisort_hw import __version__
-from omnisort_hw.cell import Cell
+from omnisort_hw.cell.cell import Cell
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.errors import MotionRefusedError, OmnisortError
 from omnisort_hw.service import protocol as proto

@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
+from omnisort_hw.cell.storage import CalibrationStore
 from omnisort_hw.cli import main
 from omnisort_hw.core.camera_io import camera_record
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.pipeline.drift_check import DRIFT_STATE_NAME, calibration_key
-from omnisort_hw.storage import CalibrationStore
 
 pytest.importorskip("pybullet", reason="the cell file's devices are the simulated ones")
 ROOT = Path(__file__).resolve().parents[2]
@@ -80,7 +80,7 @@ def test_the_cli_sort_does_not_run_beside_the_service_of_the_same_cell(
 ) -> None:
     """The service holds STATE_DIR/omnisort.lock; a command-line sort of that cell is
     refused with instance_locked instead of driving the arm beside it."""
-    from omnisort_hw.instance_lock import InstanceLock
+    from omnisort_hw.cell.lock import InstanceLock
 
     cfg, store = _cell(tmp_path)
     with InstanceLock(store.state_dir):

@@ -16,9 +16,9 @@ from drivers.modbus_laser import ModbusLaser, ModbusLaserConfig
 from drivers.serial_laser import SerialLaser, SerialLaserConfig
 from drivers.ur_arm import URArm, URArmConfig
 from drivers.v4l2_camera import V4L2Camera, V4L2CameraConfig
+from omnisort_hw.cell.devices import open_devices, open_laser
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.config.devices import parse_device_config
-from omnisort_hw.devices import open_devices, open_laser
 from omnisort_hw.errors import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "deploy" / "cell.example.toml"

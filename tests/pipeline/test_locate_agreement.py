@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("pybullet", reason="the image is rendered by the simulated cell")
 
-from omnisort_hw.cell import Cell, CellDevices
+from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.core.pick_planning import SortConfig
 from tests.pipeline.registered_scene import registered_scene

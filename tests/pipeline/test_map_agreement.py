@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("pybullet", reason="the image is rendered by the simulated cell")
 
-from omnisort_hw.cell import Cell, CellDevices
+from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from tests.pipeline.registered_scene import registered_scene
 

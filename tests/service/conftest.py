@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from omnisort_hw.cell import Cell, CellDevices
+from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.server import RunningService, Service, start_in_thread

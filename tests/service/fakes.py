@@ -27,9 +27,9 @@ from drivers.base import (
     as_pose_matrix,
 )
 from drivers.errors import DeviceTimeoutError
-from omnisort_hw.cell import Cell, CellDevices
+from omnisort_hw.cell.cell import Cell, CellDevices
+from omnisort_hw.cell.storage import REQUIRED_KEYS, CalibrationStore
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.storage import REQUIRED_KEYS, CalibrationStore
 
 
 class Journal:

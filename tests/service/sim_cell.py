@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from omnisort_hw.cell import Cell
+from omnisort_hw.cell.cell import Cell
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.service.demo import calibrate_from_truth, write_config
 

@@ -14,8 +14,8 @@ from drivers.errors import (
     DeviceTimeoutError,
     SafetyStopError,
 )
+from omnisort_hw.cell.devices import open_devices as open_cell_devices
 from omnisort_hw.core.frames import invert_pose, rot_z
-from omnisort_hw.devices import open_devices as open_cell_devices
 from sim_backend.devices import (
     SimArm,
     SimCamera,

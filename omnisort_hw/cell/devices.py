@@ -3,7 +3,7 @@
 `open_camera`, `open_laser` and `open_arm` build the device for one `DeviceSection` and return
 it NOT yet connected (use `with device:` or `device.connect()`), so building never blocks and
 the caller decides when to touch the hardware. `open_devices` builds all three from a parsed
-cell document (what `omnisort_hw.cell.open_devices` calls).
+cell document (what `omnisort_hw.cell.devices.open_devices` reads).
 
 `backend = "sim"` is delegated to the simulated cell, imported lazily because it pulls in
 pybullet. Its contract (implemented in `sim_backend/devices.py`):
@@ -28,13 +28,13 @@ from typing import TYPE_CHECKING, Any
 
 from drivers.base import Arm, Camera, Device, LaserSwitch
 from drivers.errors import DeviceError
+from omnisort_hw.cell.status import error_text
 from omnisort_hw.config.devices import (
     CellDeviceConfig,
     DeviceSection,
     config_error,
     parse_device_config,
 )
-from omnisort_hw.device_status import error_text
 
 if TYPE_CHECKING:
     from omnisort_hw.pipeline.sort import SceneLayout

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from omnisort_hw.instance_lock import InstanceLock, InstanceLockedError
+from omnisort_hw.cell.lock import InstanceLock, InstanceLockedError
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.demo import write_config
 from omnisort_hw.service.launch import start_service
@@ -56,7 +56,7 @@ def test_a_killed_holder_does_not_block_the_next(tmp_path: Path) -> None:
         [
             sys.executable,
             "-c",
-            "import sys, time; from omnisort_hw.instance_lock import InstanceLock;"
+            "import sys, time; from omnisort_hw.cell.lock import InstanceLock;"
             "InstanceLock(sys.argv[1]).acquire(); print('held', flush=True); time.sleep(60)",
             str(tmp_path),
         ],

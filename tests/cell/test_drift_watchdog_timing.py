@@ -8,8 +8,8 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+from omnisort_hw.cell.watchdog import DriftWatchdog
 from omnisort_hw.config.watchdog import WatchdogConfig
-from omnisort_hw.drift_watchdog import DriftWatchdog
 
 
 def test_periodic_checks_wait_for_jobs(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from omnisort_hw.compute_worker import ComputeWorker, WorkerError
+from omnisort_hw.cell.compute_worker import ComputeWorker, WorkerError
 from omnisort_hw.errors import InputError, MotionRefusedError
 from tests.service.conftest import Harness
 

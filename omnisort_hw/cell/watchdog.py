@@ -32,7 +32,7 @@ from omnisort_hw.pipeline.drift_check import (
 )
 
 if TYPE_CHECKING:
-    from omnisort_hw.cell import Cell
+    from omnisort_hw.cell.cell import Cell
 
 log = logging.getLogger(__name__)
 

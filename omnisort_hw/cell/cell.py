@@ -29,20 +29,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from omnisort_hw import fileio
-from omnisort_hw.compute_worker import ComputeWorker
+from omnisort_hw.cell.compute_worker import ComputeWorker
+from omnisort_hw.cell.devices import Devices, open_devices
+from omnisort_hw.cell.journal import JobJournal
+from omnisort_hw.cell.status import Cached, Caches, arm_summary, camera_summary, error_text
+from omnisort_hw.cell.storage import CalibrationStore
+from omnisort_hw.cell.watchdog import DriftWatchdog
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.device_status import Cached, Caches, arm_summary, camera_summary, error_text
-from omnisort_hw.devices import Devices, open_devices
-from omnisort_hw.drift_watchdog import DriftWatchdog
 from omnisort_hw.errors import InputError, MotionRefusedError, OmnisortError
-from omnisort_hw.job_journal import JobJournal
 from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.gripper_load import assess
 from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
-from omnisort_hw.storage import CalibrationStore
 
 if TYPE_CHECKING:
     from omnisort_hw.core.radiometry import ToneCurve
