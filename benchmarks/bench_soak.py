@@ -83,8 +83,8 @@ def _abuse(host: str, port: int, round_: int) -> None:
 
 def run(shared: Path) -> dict[str, Any]:
     from benchmarks.bench_faults import sim_service
+    from omnisort_hw.cell.rrd import rrd_files
     from omnisort_hw.service.loadgen import StatusPoller, open_fds, rss_bytes
-    from omnisort_hw.service.rrd import rrd_files
 
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)

@@ -182,7 +182,7 @@ def run(shared: Path) -> dict[str, Any]:
         figures["killed_to_error_s"] = seconds
         figures["killed_error"] = code
         arm.close()
-    from sim_backend.virtual_cell.demo import run as run_demo
+    from omnisort_hw.service.virtual_cell_demo import run as run_demo
 
     with tempfile.TemporaryDirectory() as tmp:
         summary = run_demo(Path(tmp) / "demo", 960)

@@ -23,8 +23,6 @@ from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.frames import invert_pose
 from omnisort_hw.core.pick_planning import BinSpec, ObstacleSpec, SortConfig
 from omnisort_hw.errors import ConfigError
-from omnisort_hw.pipeline.locate import Located
-from omnisort_hw.pipeline.sort import CubeOutcome, SortReport
 from sim_backend.scene import wall_footprints
 
 
@@ -73,7 +71,7 @@ class SimVerifier:
                 out.append(_TrueCube(i, spec.color.name, body, spec.size_mm, T[:3, 3].copy()))
         return out
 
-    def on_located(self, loc: Located | None = None) -> None:
+    def on_located(self, loc: Any = None) -> None:
         """Remember where the cubes are now (the truth the located positions compare with)."""
         del loc
         self.truth = self.true_cubes()
@@ -164,9 +162,10 @@ class SimVerifier:
 
     # -- verification ---------------------------------------------------------------------
 
-    def on_done(self, report: SortReport, loc: Located) -> None:
+    def on_done(self, report: Any, loc: Any) -> None:
         """Fill each outcome's error against the truth and whether its cube is in the right bin;
-        cubes the pipeline never found are added as "missed"."""
+        cubes the pipeline never found are added as "missed". `report` is the pipeline's
+        `SortReport` (the simulator sits below the pipeline, so it is duck-typed here)."""
         del loc
         truth = self.truth or self.true_cubes()
         final = {c.body: c.center_S for c in self.true_cubes()}
@@ -192,20 +191,7 @@ class SimVerifier:
             if t.index in used:
                 continue
             in_bin = self.bin_of(final[t.body]) == t.color
-            report.outcomes.append(
-                CubeOutcome(
-                    len(report.outcomes),
-                    t.color,
-                    t.center_S.tolist(),
-                    [np.nan] * 3,
-                    0.0,
-                    float("nan"),
-                    "missed",
-                    "not located",
-                    None,
-                    in_right_bin=in_bin,
-                )
-            )
+            report.add_missed(t.color, t.center_S.tolist(), in_bin)
         report.verified = True
         report.collisions = len(self.collisions)
         report.extra["collision_events"] = list(self.collisions)

@@ -85,33 +85,6 @@ def _logged(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any
     return fn(*args, log=rec, **kwargs), rec.calls
 
 
-class InCaller:
-    """`ComputeWorker`'s interface, running the function in the caller's thread: for the CLI
-    and the evaluations, which have no service to keep answering."""
-
-    def call(
-        self,
-        fn: Callable[..., T],
-        *args: Any,
-        timeout_s: float | None = None,
-        cancel: threading.Event | None = None,
-        what: str = "job",
-        **kwargs: Any,
-    ) -> T:
-        return fn(*args, **kwargs)
-
-    def call_logged(
-        self,
-        fn: Callable[..., T],
-        log: Any,
-        *args: Any,
-        cancel: threading.Event | None = None,
-        what: str = "job",
-        **kwargs: Any,
-    ) -> T:
-        return fn(*args, log=log, **kwargs)
-
-
 class ComputeWorker:
     """One child process that runs CPU-bound functions for the service (see module doc)."""
 

@@ -3,7 +3,9 @@ after a detected drift until the calibration changes or an operator acknowledges
 
 The state lives in `STATE_DIR/drift.json` (atomic writes), so a restart does not forget a
 detected drift. A drift belongs to the calibration it was measured against (its key): a new
-extrinsic calibration or robot registration clears it by itself.
+extrinsic calibration or robot registration clears it by itself. The watchdog sees its cell
+only through `WatchdogPorts`: the store, a capture with the laser off, the registration
+settings and the current run log.
 """
 
 from __future__ import annotations
@@ -12,15 +14,18 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from omnisort_hw import fileio
+from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.config.watchdog import WatchdogConfig
 from omnisort_hw.errors import CalibrationDriftError, FeatureNotFoundError, InputError
+from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import (
     DRIFT_STATE_NAME,
     calibration_key,
@@ -30,21 +35,31 @@ from omnisort_hw.pipeline.drift_check import (
     load_reference,
     save_reference,
 )
-
-if TYPE_CHECKING:
-    from omnisort_hw.cell.cell import Cell
+from omnisort_hw.runlog import RunLog
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class WatchdogPorts:
+    """What the watchdog needs of its cell: the calibration store, a frame with the laser off,
+    the `[registration]` settings and the run log of the moment (it rotates)."""
+
+    store: CalibrationStore
+    capture_dark: Callable[[], np.ndarray]
+    registration: Callable[[], RegistrationConfig]
+    runlog: Callable[[], RunLog]
 
 
 class DriftWatchdog:
     """Drift checks of one cell: on request, before each sort, every `period_s` when idle."""
 
-    def __init__(self, cell: Cell, config: WatchdogConfig | None = None) -> None:
-        self.cell = cell
+    def __init__(self, ports: WatchdogPorts, config: WatchdogConfig | None = None) -> None:
+        self.ports = ports
+        self.store = ports.store
         self.config = config or WatchdogConfig()
         self._lock = threading.Lock()
-        self._path = Path(cell.store.state_dir) / DRIFT_STATE_NAME
+        self._path = Path(ports.store.state_dir) / DRIFT_STATE_NAME
         self._state: dict[str, Any] = self._load()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -64,7 +79,7 @@ class DriftWatchdog:
 
     def _current_key(self) -> str | None:
         try:
-            return calibration_key(self.cell.store.read("system").payload)
+            return calibration_key(self.store.read("system").payload)
         except Exception:
             return None
 
@@ -107,7 +122,7 @@ class DriftWatchdog:
                 else None
             )
             self._save()
-        self.cell.runlog.event("drift/check", "drift acknowledged by an operator", level="WARN")
+        self.ports.runlog().event("drift/check", "drift acknowledged by an operator", level="WARN")
         return {"acknowledged": drift is not None, "drift": drift}
 
     # -- checks ------------------------------------------------------------------------------
@@ -115,8 +130,8 @@ class DriftWatchdog:
     def save_reference(self, image: np.ndarray) -> None:
         """The registration's capture becomes the reference of the calibration just saved."""
         try:
-            key = calibration_key(self.cell.store.read("system").payload)
-            save_reference(self.cell.store.state_dir, image, key)
+            key = calibration_key(self.store.read("system").payload)
+            save_reference(self.store.state_dir, image, key)
         except Exception as exc:
             log.error("drift watchdog: cannot save the reference image: %s", exc)
 
@@ -125,28 +140,27 @@ class DriftWatchdog:
         from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
         from omnisort_hw.pipeline.image_files import read_image
 
-        cell = self.cell
-        rec = cell.store.read("system")
+        rec = self.store.read("system")
         payload = rec.payload
         calib = SystemCalibration.from_json(payload, source=str(rec.path))
         key = calibration_key(payload)
-        img = read_image(image) if image is not None else cell._image(None, laser=False)
-        reference = load_reference(cell.store.state_dir, key)
+        img = read_image(image) if image is not None else self.ports.capture_dark()
+        reference = load_reference(self.store.state_dir, key)
         result = check_drift(
             img,
             calib,
             payload,
-            cell.registration_config,
+            self.ports.registration(),
             reference,
             self.config,
             image or "capture",
-            cell.runlog,
+            self.ports.runlog(),
         )
         summary = result.summary()
         if reference is None and not result.drift and image is None:
             # No reference for this calibration yet (registered elsewhere): the board found
             # no drift, so this capture becomes the reference of the finer image check.
-            save_reference(cell.store.state_dir, img, key)
+            save_reference(self.store.state_dir, img, key)
             summary["reference_adopted"] = True
         with self._lock:
             self._state["last"] = summary

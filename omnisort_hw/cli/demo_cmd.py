@@ -139,7 +139,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     )
 
     _step("5. the same cell through the real drivers (ur-rtde, pymodbus, OpenCV) on a virtual cell")
-    from sim_backend.virtual_cell import demo as virtual_demo
+    from omnisort_hw.service import virtual_cell_demo as virtual_demo
 
     virtual = virtual_demo.run(out / "virtual", width=args.width)
     virtual_demo.report(virtual)

@@ -286,7 +286,7 @@ def cmd_sort(args: argparse.Namespace) -> int:
     if args.system is not None:
         calibration: Any = FileCalibration(args.system, cell.storage.max_age_days or None)
     else:
-        from omnisort_hw.cell.storage import CalibrationStore
+        from omnisort_hw.pipeline.calibration_store import CalibrationStore
 
         store = CalibrationStore.from_config(cell.storage)
         calibration = StoreCalibration(store)
@@ -376,9 +376,9 @@ def _sort_with_devices(
 def _refuse_on_recorded_drift(state_dir: Path, system: Path | None) -> None:
     """CalibrationDriftError when the cell's drift state holds an unacknowledged drift of the
     calibration this sort would use (`system`, else the store's system.json)."""
-    from omnisort_hw.cell.storage import FILE_NAMES
     from omnisort_hw.errors import CalibrationDriftError
     from omnisort_hw.pipeline.calibration_source import read_system_payload
+    from omnisort_hw.pipeline.calibration_store import FILE_NAMES
     from omnisort_hw.pipeline.drift_check import calibration_key, drift_refusal, load_drift_state
 
     path = system if system is not None else Path(state_dir) / FILE_NAMES["system"]

@@ -1,4 +1,4 @@
-"""The arguments of `omnisort sim virtual-cell` and `python -m sim_backend.virtual_cell.run`.
+"""The arguments of `omnisort sim virtual-cell` (run by `sim_backend.virtual_cell.run.serve`).
 
 Declared here, outside `sim_backend`, because every `omnisort` start builds every parser:
 importing the simulator to declare them would load pybullet (and print its build banner) for

@@ -4,7 +4,7 @@ Every section is parsed and validated here, so a wrong key stops `omnisort serve
 command that reads the file) at start with the file and the key in the message:
 
     [service] [logging]          -> omnisort_hw.config.service
-    [storage]                    -> omnisort_hw.cell.storage.StorageConfig
+    [storage]                    -> omnisort_hw.config.storage.StorageConfig
     [camera] [laser] [arm]       -> omnisort_hw.config.devices
     [sorting] [registration]     -> omnisort_hw.config.sorting
     [target]                     -> TargetConfig (the extrinsic calibration's defaults)
@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.cell.storage import StorageConfig
+from omnisort_hw.config.capture import CaptureSettings, capture_settings
 from omnisort_hw.config.devices import CellDeviceConfig, parse_device_config
 from omnisort_hw.config.service import LoggingConfig, ServiceConfig
 from omnisort_hw.config.sorting import (
@@ -30,10 +30,10 @@ from omnisort_hw.config.sorting import (
     parse_registration_config,
     parse_sort_section,
 )
+from omnisort_hw.config.storage import StorageConfig
+from omnisort_hw.config.target import TARGETS, separation_problem
 from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
 from omnisort_hw.errors import ConfigError
-from omnisort_hw.pipeline.extrinsics import TARGETS, separation_problem
-from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_settings
 
 SECTIONS = (
     "service",

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS, SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane
 from omnisort_hw.core.radiometry import ToneCurve
@@ -34,7 +35,6 @@ from omnisort_hw.evaluation.table3 import truth_parameters
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 from omnisort_hw.pipeline.laser_map import map_laser
 from omnisort_hw.pipeline.measurement_capture import (
-    CaptureSettings,
     MeasurementCapture,
     capture_measurement,
     single_frame,

@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.radiometry import ToneCurve
@@ -31,11 +32,7 @@ from omnisort_hw.evaluation.table3 import (
     mapping_errors,
 )
 from omnisort_hw.pipeline.extrinsics import calibrate_system
-from omnisort_hw.pipeline.measurement_capture import (
-    CaptureSettings,
-    MeasurementCapture,
-    capture_measurement,
-)
+from omnisort_hw.pipeline.measurement_capture import MeasurementCapture, capture_measurement
 from sim_backend.dataset import TABLE3_SCENES, table3_configs
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
 from sim_backend.scene import Scene, load_scene, sized

@@ -57,7 +57,7 @@ def read_system_payload(path: str | Path) -> tuple[dict[str, Any], str | None]:
         raise CalibrationFileError(f"{path}: corrupt, top level is not a JSON object")
     if "checksum" not in raw:
         return raw, None
-    from omnisort_hw.cell.storage import read_calibration_file
+    from omnisort_hw.pipeline.calibration_store import read_calibration_file
 
     rec = read_calibration_file(path, "system")
     return dict(rec.payload), rec.saved.isoformat()

@@ -10,20 +10,43 @@ for colours and the laser-light image for heights. A given file serves as both, 
 from __future__ import annotations
 
 import hashlib
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
 
 from omnisort_hw import fileio
+from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import OmnisortError
 from omnisort_hw.pipeline.extrinsics import image_record
 from omnisort_hw.pipeline.image_files import read_image
-from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_measurement
+from omnisort_hw.pipeline.measurement_capture import capture_measurement
+from omnisort_hw.runlog import RunLog
+
+
+class CaptureRig(Protocol):
+    """What a measurement capture needs of a cell (`cell.Cell` is one): its camera and laser
+    held for the capture, where the images go, the `[capture]` settings and the run log."""
+
+    capture_dir: Path
+
+    @property
+    def runlog(self) -> RunLog: ...
+
+    @property
+    def capture_settings(self) -> CaptureSettings: ...
+
+    def measuring(self) -> AbstractContextManager[tuple[Any, Any]]:
+        """(camera, laser), both held for this capture alone; refuses when nothing may
+        actuate; the laser's state is read back when it ends."""
+        ...
+
+    def prune_captures(self) -> None: ...
 
 
 @dataclass
@@ -50,28 +73,20 @@ def _save(folder: Path, name: str, image: np.ndarray) -> dict[str, Any]:
     return {"path": str(path), "sha256": hashlib.sha256(data).hexdigest()}
 
 
-def acquire(cell: Any, image: str | None, board: bool = True) -> Acquired:
-    """The file `image`, or a measurement capture on `cell` (a `Cell`: its camera and laser
-    under their locks, its capture folder, run log and `[capture]` settings)."""
+def acquire(rig: CaptureRig, image: str | None, board: bool = True) -> Acquired:
+    """The file `image`, or a measurement capture on `rig` (its camera and laser, its capture
+    folder, run log and `[capture]` settings)."""
     if image is not None:
         img = read_image(image)
         return Acquired(img, img, None, image_record(image), str(image))
-    camera = cell._need("camera")
-    laser = cell._need("laser")
-    settings: CaptureSettings = getattr(cell.config, "capture", None) or CaptureSettings()
-    if cell.actuation_guard is not None:
-        cell.actuation_guard()
-    with cell._locked(cell._camera_lock, "camera"), cell._locked(cell._laser_lock, "laser"):
-        try:
-            cap = capture_measurement(camera, laser, settings, cell.runlog, board=board)
-        finally:
-            cell._cache_laser(bool(laser.state()))
-    stripe = _save(cell.capture_dir, "laser", cap.stripe_image)
+    with rig.measuring() as (camera, laser):
+        cap = capture_measurement(camera, laser, rig.capture_settings, rig.runlog, board=board)
+    stripe = _save(rig.capture_dir, "laser", cap.stripe_image)
     record: dict[str, Any] = {"capture": cap.record, "laser_image": stripe}
     if cap.board_image is not None:
-        record.update(_save(cell.capture_dir, "board", cap.board_image))
+        record.update(_save(rig.capture_dir, "board", cap.board_image))
     else:
         record.update(stripe)
-    cell._prune_captures()
+    rig.prune_captures()
     board_img = cap.board_image if cap.board_image is not None else cap.stripe_image
     return Acquired(board_img, cap.stripe_image, cap.stripe_px, record, record["path"], cap.tone)

@@ -9,13 +9,13 @@ checks the image against the camera model, and logs what it saw and produced.
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from omnisort_hw.config.target import METHODS_FOR, TARGETS, separation_problem
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
@@ -23,31 +23,6 @@ from omnisort_hw.core.overlays import draw_extrinsics
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.errors import InputError
 from omnisort_hw.runlog import NullLog, RunLog
-
-TARGETS = ("two-sided", "three-sided", "checkerboards")
-METHODS_FOR = {
-    "two-sided": ("joint", "paper"),
-    "three-sided": ("joint", "method1"),
-    "checkerboards": ("method2",),
-}
-SEPARATION_RANGE_MM = (100.0, 10000.0)
-"""Inner wall distances a wall target can have, mm: a value below is a typo or metres."""
-
-
-def separation_problem(value: Any) -> str | None:
-    """What is wrong with a measured inner wall distance `value` (mm), or None. The distance
-    sets the scale of every extrinsic result, so there is no default and no unit guessing."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        return f"expected a number of millimetres, got {value!r}"
-    lo, hi = SEPARATION_RANGE_MM
-    if 0 < value < 10:
-        return (
-            f"{value:g} looks like metres; give the inner distance between the walls in mm "
-            f"(e.g. {value * 1000:g})"
-        )
-    if not lo <= value <= hi:
-        return f"{value:g} mm is outside the plausible {lo:g}-{hi:g} mm of a wall target"
-    return None
 
 
 def check_separation_mm(value: float | None, field: str) -> float:

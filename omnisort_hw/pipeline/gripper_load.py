@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -22,10 +22,18 @@ from omnisort_hw.errors import OmnisortError
 from omnisort_hw.pipeline.sort import CubeOutcome
 
 if TYPE_CHECKING:
-    from omnisort_hw.cell.journal import JobJournal
     from omnisort_hw.pipeline.sort import Sorter
 
 log = logging.getLogger(__name__)
+
+
+class InFlightJournal(Protocol):
+    """The part of the job journal (`cell.journal.JobJournal`) a held cube needs: the cube in
+    flight, and clearing it once its fate is known."""
+
+    def in_flight(self) -> dict[str, Any] | None: ...
+
+    def clear_in_flight(self, why: str) -> None: ...
 
 
 class GripperLoadedError(OmnisortError):
@@ -74,7 +82,7 @@ def assess(arm: Any, in_flight: dict[str, Any] | None) -> GripperLoad:
 
 
 def resolve_before_sort(
-    sorter: Sorter, journal: JobJournal, T_SB: np.ndarray
+    sorter: Sorter, journal: InFlightJournal, T_SB: np.ndarray
 ) -> CubeOutcome | None:
     """Place the cube the gripper holds in its bin before anything else moves; None when the
     gripper is empty. Raises GripperLoadedError when the load cannot be placed."""

@@ -73,11 +73,38 @@ class CycleTimes:
 
 
 class Compute(Protocol):
-    """Where CPU-bound work runs (`compute_worker.ComputeWorker` or `InCaller`)."""
+    """Where CPU-bound work runs (`cell.compute_worker.ComputeWorker` or `InCaller`)."""
 
     def call(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T: ...
 
     def call_logged(self, fn: Callable[..., T], log: Any, *args: Any, **kwargs: Any) -> T: ...
+
+
+class InCaller:
+    """`ComputeWorker`'s interface, running the function in the caller's thread: for the CLI
+    and the evaluations, which have no service to keep answering."""
+
+    def call(
+        self,
+        fn: Callable[..., T],
+        *args: Any,
+        timeout_s: float | None = None,
+        cancel: threading.Event | None = None,
+        what: str = "job",
+        **kwargs: Any,
+    ) -> T:
+        return fn(*args, **kwargs)
+
+    def call_logged(
+        self,
+        fn: Callable[..., T],
+        log: Any,
+        *args: Any,
+        cancel: threading.Event | None = None,
+        what: str = "job",
+        **kwargs: Any,
+    ) -> T:
+        return fn(*args, log=log, **kwargs)
 
 
 def _never() -> bool:

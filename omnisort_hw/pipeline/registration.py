@@ -78,7 +78,7 @@ def write_robot_base(path: str | Path, record: Mapping[str, Any]) -> Path:
     if not isinstance(raw, dict):
         raise CalibrationFileError(f"{p}: top level is not a JSON object")
     if "checksum" in raw:
-        from omnisort_hw.cell.storage import CalibrationStore, read_calibration_file
+        from omnisort_hw.pipeline.calibration_store import CalibrationStore, read_calibration_file
 
         rec = read_calibration_file(p, "system")
         if p.name != "system.json":

@@ -25,7 +25,6 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from drivers.base import Waypoint
-from omnisort_hw.cell.compute_worker import InCaller
 from omnisort_hw.config.sorting import RegistrationConfig, SortSection
 from omnisort_hw.core.cube_location import Cube
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
@@ -33,7 +32,7 @@ from omnisort_hw.core.pick_planning import Move, PickPlan, Planner, SortConfig
 from omnisort_hw.errors import ConfigError, MotionRefusedError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
 from omnisort_hw.pipeline.locate import Located, locate_in_images, locate_settings_for
-from omnisort_hw.pipeline.pick_cycle import Compute, CycleTimes, PickQueue
+from omnisort_hw.pipeline.pick_cycle import Compute, CycleTimes, InCaller, PickQueue
 from omnisort_hw.pipeline.registration import register_from_image
 from omnisort_hw.pipeline.scene_check import ChangeWatch, SceneCheck
 from omnisort_hw.runlog import NullLog, RunLog
@@ -141,6 +140,23 @@ class SortReport:
     verified: bool = False
     collisions: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+
+    def add_missed(self, color: str, center_S_mm: list[float], in_right_bin: bool) -> None:
+        """A cube a verifier knows of that the run never located (status "missed")."""
+        self.outcomes.append(
+            CubeOutcome(
+                len(self.outcomes),
+                color,
+                list(center_S_mm),
+                [float("nan")] * 3,
+                0.0,
+                float("nan"),
+                "missed",
+                "not located",
+                None,
+                in_right_bin=in_right_bin,
+            )
+        )
 
     def totals(self) -> dict[str, Any]:
         picked = [o for o in self.outcomes if o.status == "sorted"]

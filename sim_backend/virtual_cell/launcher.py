@@ -58,7 +58,7 @@ class VirtualCellError(RuntimeError):
 
 
 class VirtualCellProcess:
-    """One `python -m sim_backend.virtual_cell.run` subprocess on its own loopback address."""
+    """One `omnisort sim virtual-cell` subprocess on its own loopback address."""
 
     def __init__(
         self,
@@ -75,7 +75,9 @@ class VirtualCellProcess:
         self.args = [
             sys.executable,
             "-m",
-            "sim_backend.virtual_cell.run",
+            "omnisort_hw.cli",
+            "sim",
+            "virtual-cell",
             "--scene",
             scene,
             "--host",

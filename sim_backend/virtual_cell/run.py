@@ -1,5 +1,6 @@
 """Run one virtual cell in this process until SIGTERM/SIGINT; prints `ready HOST` once every
-port accepts (what `omnisort sim virtual-cell` and `launcher.VirtualCellProcess` call)."""
+port accepts (what `omnisort sim virtual-cell` runs; `launcher.VirtualCellProcess` starts that
+command in a child process). Its arguments are the CLI's (`cli/virtual_cell_args.py`)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,6 @@ import logging
 import signal
 import sys
 import threading
-
-from omnisort_hw.cli.virtual_cell_args import add_arguments
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -48,13 +47,3 @@ def serve(args: argparse.Namespace) -> int:
     finally:
         cell.close()
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sim_backend.virtual_cell.run", description=__doc__)
-    add_arguments(ap)
-    return serve(ap.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

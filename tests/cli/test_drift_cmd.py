@@ -55,9 +55,9 @@ def test_check_an_image_against_system_json(tmp_path: Path, capsys: pytest.Captu
 def test_check_refuses_a_tampered_store_file(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """A system.json written by the service's store carries a checksum: `check` verifies it,
     as the service does, and an edited file is bad_calibration_file before any image is read."""
-    from omnisort_hw.cell.storage import CalibrationStore
     from omnisort_hw.core.camera_model import OcamModel
     from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+    from omnisort_hw.pipeline.calibration_store import CalibrationStore
 
     zero = dict.fromkeys(
         ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg"), 0.0

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from omnisort_hw.cell.storage import CalibrationStore
 from omnisort_hw.cli import main
 from omnisort_hw.core.camera_io import camera_record
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import DRIFT_STATE_NAME, calibration_key
 
 pytest.importorskip("pybullet", reason="the cell file's devices are the simulated ones")

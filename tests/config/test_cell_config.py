@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw.cell.cell import Cell, CellDevices
-from omnisort_hw.cell.storage import CalibrationStore
 from omnisort_hw.config.cell import CellConfig, load_cell_config
 from omnisort_hw.errors import ConfigError
+from omnisort_hw.pipeline.calibration_store import CalibrationStore
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "deploy" / "cell.example.toml"
 COLORS = "[colors]\nred = [[0, 8, 100, 255, 50, 255]]\nteal = [[80, 100, 100, 255, 50, 255]]\n"

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.evaluation.table3_capture import _measure, evaluate_captures, evaluate_kept
-from omnisort_hw.pipeline.measurement_capture import CaptureSettings
 from sim_backend.dataset import TABLE3_SCENES, table3_configs
 from sim_backend.scene import load_scene, sized
 from sim_backend.scene_images import render_scene

@@ -10,9 +10,9 @@ from typing import Any
 
 import cv2
 
-from omnisort_hw.cell.storage import CalibrationStore
 from omnisort_hw.core.camera_io import camera_record
 from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.pipeline.calibration_store import CalibrationStore
 
 WIDTH = 960
 CALIB_KEYS = ("camera", "camera_rotation", "laser_plane", "target", "robot_base")

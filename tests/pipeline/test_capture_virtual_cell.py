@@ -7,8 +7,9 @@ import pytest
 
 from drivers.modbus_laser import ModbusLaser, ModbusLaserConfig
 from drivers.v4l2_camera import V4L2Camera, V4L2CameraConfig
+from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.evaluation.lighting import score_points
-from omnisort_hw.pipeline.measurement_capture import CaptureSettings, capture_measurement
+from omnisort_hw.pipeline.measurement_capture import capture_measurement
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
 from tests.sim.virtual_cell_fixture import virtual_cell
 

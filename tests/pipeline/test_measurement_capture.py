@@ -17,10 +17,10 @@ from drivers.errors import DeviceError
 from drivers.modbus_laser import ModbusLaser, ModbusLaserConfig
 from drivers.serial_laser import SerialLaser, SerialLaserConfig
 from drivers.v4l2_camera import V4L2Camera, V4L2CameraConfig
+from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.evaluation.lighting import score_points
 from omnisort_hw.pipeline.measurement_capture import (
     CaptureSaturatedError,
-    CaptureSettings,
     LaserSwitchError,
     NoLaserDifferenceError,
     capture_measurement,

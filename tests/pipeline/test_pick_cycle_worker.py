@@ -15,9 +15,9 @@ import pytest
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 
-from omnisort_hw.cell.compute_worker import ComputeWorker, InCaller, WorkerError
+from omnisort_hw.cell.compute_worker import ComputeWorker, WorkerError
 from omnisort_hw.core.pick_planning import Planner
-from omnisort_hw.pipeline.pick_cycle import PickQueue
+from omnisort_hw.pipeline.pick_cycle import InCaller, PickQueue
 from sim_backend.sort_harness import sim_sort_config
 from tests.pipeline.sorting_scene import T_SB_of, make_cube, sorting_scene
 

@@ -67,7 +67,7 @@ def small_cell() -> Any:
 def test_missing_stale_or_unregistered_calibration_moves_nothing(
     small_cell: Any, tmp_path: Path
 ) -> None:
-    from omnisort_hw.cell.storage import CalibrationStore
+    from omnisort_hw.pipeline.calibration_store import CalibrationStore
 
     cell, (cam, laser, arm) = small_cell
     rec = _Recorder(arm)
@@ -186,9 +186,9 @@ def test_service_commands_through_the_cell(tmp_path: Path) -> None:
     import threading
 
     from omnisort_hw.cell.cell import Cell, CellDevices
-    from omnisort_hw.cell.storage import CalibrationStore
     from omnisort_hw.core.camera_io import camera_record
     from omnisort_hw.core.pick_planning import SortConfig
+    from omnisort_hw.pipeline.calibration_store import CalibrationStore
     from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
     from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
 

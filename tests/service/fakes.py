@@ -28,8 +28,8 @@ from drivers.base import (
 )
 from drivers.errors import DeviceTimeoutError
 from omnisort_hw.cell.cell import Cell, CellDevices
-from omnisort_hw.cell.storage import REQUIRED_KEYS, CalibrationStore
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.pipeline.calibration_store import REQUIRED_KEYS, CalibrationStore
 
 
 class Journal:
@@ -241,7 +241,7 @@ def make_cell(
     journal_path: Path | None = None,
     max_file_bytes: int | None = None,
 ) -> tuple[Cell, CellDevices, Journal]:
-    from omnisort_hw.service.rrd import RunLogRotator
+    from omnisort_hw.cell.rrd import RunLogRotator
 
     journal = Journal(journal_path)
     devices = CellDevices(FakeCamera(journal), FakeLaser(journal), FakeArm(journal, move_seconds))

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from omnisort_hw.service.virtual_cell_demo import check_truth, run
 from sim_backend.virtual_cell.cell_file import cell_file_text
-from sim_backend.virtual_cell.demo import check_truth, run
 
 pytest.importorskip("rtde_control", reason="needs ur-rtde")
 ROOT = Path(__file__).resolve().parents[2]

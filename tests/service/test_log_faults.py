@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnisort_hw.cell.rrd import RunLogRotator, rrd_files
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.runlog import entity_paths
-from omnisort_hw.service.rrd import RunLogRotator, rrd_files
 from omnisort_hw.service.server import Service, start_in_thread
 from omnisort_hw.service.systemd import Notifier
 from tests.service.fakes import make_cell

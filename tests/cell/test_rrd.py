@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from omnisort_hw.cell.rrd import RunLogRotator, rotate_rrd_files, rrd_files
 from omnisort_hw.runlog import entity_paths
-from omnisort_hw.service.rrd import RunLogRotator, rotate_rrd_files, rrd_files
 
 
 def _make(folder: Path, name: str, size: int, age_s: float) -> Path:

@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 from omnisort_hw import fileio
-from omnisort_hw.cell.storage import (
+from omnisort_hw.config.storage import StorageConfig
+from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.errors import CalibrationFileError, ConfigError, MotionRefusedError
+from omnisort_hw.pipeline.calibration_store import (
     REQUIRED_KEYS,
     CalibrationStore,
-    StorageConfig,
     checksum_of,
     read_calibration_file,
 )
-from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.errors import CalibrationFileError, ConfigError, MotionRefusedError
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 
@@ -178,7 +178,7 @@ WRITER = textwrap.dedent(
     """
     import sys
     from pathlib import Path
-    from omnisort_hw.cell.storage import CalibrationStore
+    from omnisort_hw.pipeline.calibration_store import CalibrationStore
     import json
     store = CalibrationStore(Path(sys.argv[1]), history_keep=4, expected_serial="CAM-1")
     model = json.loads(Path(sys.argv[3]).read_text())

@@ -150,9 +150,7 @@ def seal_unfinished_rrd(path: str | Path) -> bool:
     src = Path(path)
     if not _lacks_footer(src):
         return False
-    code = (
-        "import sys; from omnisort_hw.service.rrd import _rewrite_with_footer as f; f(sys.argv[1])"
-    )
+    code = "import sys; from omnisort_hw.cell.rrd import _rewrite_with_footer as f; f(sys.argv[1])"
     try:
         subprocess.run(
             [sys.executable, "-c", code, str(src)],

@@ -2,7 +2,7 @@
 and arm are a virtual cell, driven over TCP (calibrate -> register_robot -> map -> sort), then
 checked against the virtual cell's truth: every cube in the bin of its colour, no collision.
 
-    python -m sim_backend.virtual_cell.demo [--out build/demo-virtual] [--width 960]
+    python -m omnisort_hw.service.virtual_cell_demo [--out build/demo-virtual] [--width 960]
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def report(summary: dict[str, Any]) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
-        prog="python -m sim_backend.virtual_cell.demo", description=__doc__
+        prog="python -m omnisort_hw.service.virtual_cell_demo", description=__doc__
     )
     ap.add_argument("--out", type=Path, default=Path("build/demo-virtual"))
     ap.add_argument("--width", type=int, default=960)

@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw import fileio
-from omnisort_hw.cell.storage import CalibrationStore
 from omnisort_hw.errors import StorageError
+from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from tests.service.conftest import Harness
 from tests.service.fakes import camera_payload, system_payload
 
@@ -46,7 +46,7 @@ FAILING_SAVES = """
 import resource, signal, sys
 from pathlib import Path
 from omnisort_hw.errors import StorageError
-from omnisort_hw.cell.storage import CalibrationStore
+from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from tests.service.fakes import camera_payload
 
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
