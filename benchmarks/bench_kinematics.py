@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.core.collision import Box, FloorPlane, check_collisions
 from omnisort_hw.core.frames import rotation_angle_deg
 from omnisort_hw.core.kinematics import (
     UR5E,
@@ -23,14 +24,7 @@ from omnisort_hw.core.kinematics import (
     nearest_solutions,
     wrap_deg,
 )
-from omnisort_hw.core.motion import (
-    Box,
-    FloorPlane,
-    MotionLimits,
-    check_collisions,
-    plan_joint_move,
-    plan_linear_move,
-)
+from omnisort_hw.core.motion import MotionLimits, plan_joint_move, plan_linear_move
 
 N_SPEED = 100_000
 N_ACCURACY = 10_000

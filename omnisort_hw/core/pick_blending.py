@@ -20,8 +20,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.blended_path import BlendedPath, Segment, plan_blended_path
-from omnisort_hw.core.kinematics import forward
-from omnisort_hw.core.motion import (
+from omnisort_hw.core.collision import (
     Box,
     Capsule,
     CollisionError,
@@ -30,6 +29,7 @@ from omnisort_hw.core.motion import (
     clearance,
     find_collision,
 )
+from omnisort_hw.core.kinematics import forward
 
 __all__ = ["BlendedMoves", "MoveChecks", "blend_moves", "check_blends", "corner_clearance"]
 

@@ -22,20 +22,11 @@ from itertools import pairwise
 
 import numpy as np
 
+from omnisort_hw.core.collision import Box, Capsule, CollisionError, FloorPlane, find_collision
 from omnisort_hw.core.cube_location import UNKNOWN, ColorTable, Cube, LocateSettings
 from omnisort_hw.core.frames import invert_pose
 from omnisort_hw.core.kinematics import URModel, forward, get_model, nearest_solution
-from omnisort_hw.core.motion import (
-    Box,
-    Capsule,
-    CollisionError,
-    FloorPlane,
-    MotionLimits,
-    Trajectory,
-    find_collision,
-    plan_joint_move,
-    plan_linear_move,
-)
+from omnisort_hw.core.motion import MotionLimits, Trajectory, plan_joint_move, plan_linear_move
 from omnisort_hw.core.pick_blending import MoveChecks, blend_moves
 from omnisort_hw.errors import MotionRefusedError
 

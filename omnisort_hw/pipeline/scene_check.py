@@ -32,10 +32,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from omnisort_hw.core.collision import arm_capsules
 from omnisort_hw.core.cube_location import Cube, FloorGeometry, LocateSettings, blob_verdict
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.kinematics import joint_frames
-from omnisort_hw.core.motion import arm_capsules
 from omnisort_hw.core.pick_planning import Planner, SortConfig
 
 # Pixels around a cube's box that count as covered when an arm point lands there.

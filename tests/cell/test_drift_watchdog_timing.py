@@ -3,6 +3,7 @@ it ends its thread. Counted in events, not in seconds, so a loaded machine only 
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 from pathlib import Path
@@ -59,5 +60,5 @@ def test_periodic_checks_wait_for_jobs(tmp_path: Path) -> None:
     assert dog._thread is None
     assert during_job <= 1
     # Idle checks are spaced by the period, never closer (the loop waits a full period).
-    gaps = [b - a for a, b in zip(calls, calls[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(calls)]
     assert min(gaps) >= PERIOD_S * 0.9, gaps

@@ -17,8 +17,9 @@ from omnisort_hw.core.blended_path import (
     plan_blended_path,
     resample,
 )
+from omnisort_hw.core.collision import Box, CollisionError, find_collision
 from omnisort_hw.core.kinematics import forward, get_model
-from omnisort_hw.core.motion import Box, CollisionError, MotionLimits, find_collision
+from omnisort_hw.core.motion import MotionLimits
 from omnisort_hw.core.pick_blending import MoveChecks, blend_moves, check_blends
 from omnisort_hw.core.pick_planning import Planner, SortConfig
 
@@ -160,7 +161,7 @@ def test_a_blended_corner_that_would_hit_is_refused_and_the_radius_comes_from_th
 
 
 def test_clearance_is_the_margin_at_which_the_collision_check_first_hits() -> None:
-    from omnisort_hw.core.motion import FloorPlane, clearance, collision_mask
+    from omnisort_hw.core.collision import FloorPlane, clearance, collision_mask
 
     planner, moves, _ = _corner()
     floor = FloorPlane(np.eye(4), "floor")

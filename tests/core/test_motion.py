@@ -6,6 +6,17 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
+from omnisort_hw.core.collision import (
+    Box,
+    Capsule,
+    CollisionError,
+    FloorPlane,
+    arm_capsules,
+    check_collisions,
+    collision_mask,
+    find_collision,
+    require_collision_free,
+)
 from omnisort_hw.core.frames import rotation_angle_deg
 from omnisort_hw.core.kinematics import (
     UR5E,
@@ -19,23 +30,14 @@ from omnisort_hw.core.kinematics import (
     wrap_deg,
 )
 from omnisort_hw.core.motion import (
-    Box,
-    Capsule,
-    CollisionError,
-    FloorPlane,
     MotionLimits,
     Trajectory,
-    arm_capsules,
-    check_collisions,
-    collision_mask,
     concatenate,
-    find_collision,
     offset_pose,
     plan_approach,
     plan_joint_move,
     plan_linear_move,
     plan_retreat,
-    require_collision_free,
 )
 from omnisort_hw.errors import MotionRefusedError
 
@@ -410,7 +412,7 @@ def test_broad_phase_gives_the_answer_of_testing_every_sphere() -> None:
     obstacles.insert(5, FloorPlane(np.eye(4), "floor"))
     tool = (Capsule(6, (0.0, -75.0, 60.0), (0.0, 75.0, 60.0), 38.0, "gripper"),)
     capsules = (*arm_capsules(UR5E), *tool)
-    from omnisort_hw.core.motion import _cover, _hits
+    from omnisort_hw.core.collision import _cover, _hits
 
     sp = _cover(capsules)
     F = joint_frames(UR5E, q)[:, sp.frame]
