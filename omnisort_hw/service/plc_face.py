@@ -15,13 +15,11 @@ reply (ILLEGAL DATA ADDRESS / VALUE, DEVICE BUSY, DEVICE FAILURE) and nothing el
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import threading
 import time
 from collections.abc import Sequence
-from concurrent.futures import TimeoutError as FutureTimeout
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from pymodbus.constants import ExcCodes
 from pymodbus.datastore import ModbusServerContext
@@ -30,10 +28,6 @@ from pymodbus.server import ModbusTcpServer
 from omnisort_hw.config.watchdog import PlcConfig
 from omnisort_hw.errors import ConfigError
 from omnisort_hw.service import protocol as proto
-from omnisort_hw.service.handlers import HANDLERS, Context
-
-if TYPE_CHECKING:
-    from omnisort_hw.service.server import Service
 
 log = logging.getLogger("omnisort.plc")
 
@@ -93,10 +87,21 @@ class _Context(ModbusServerContext):
         return await asyncio.to_thread(self.face.write, func_code, address, list(values))
 
 
+class PlcPort(Protocol):
+    """What the PLC face needs of its service (`server.Service` is one): the `status` reply
+    and a command handed to its dispatcher from this thread."""
+
+    def status_reply(self) -> dict[str, Any]: ...
+
+    def call_from_thread(self, cmd: str, wait_s: float) -> dict[str, Any] | None:
+        """The reply to `cmd`, or None when it still runs after `wait_s` (a job)."""
+        ...
+
+
 class PlcFace:
     """The Modbus TCP server of one service, on its own thread and event loop."""
 
-    def __init__(self, service: Service, config: PlcConfig) -> None:
+    def __init__(self, service: PlcPort, config: PlcConfig) -> None:
         if config.modbus_port is None:
             raise ConfigError("[plc] modbus_port is not set")
         if config.allow_commands and not config.on_loopback:
@@ -125,8 +130,7 @@ class PlcFace:
 
     def snapshot(self) -> list[int]:
         """The input registers now (from the service's status snapshot: no device call)."""
-        svc = self.service
-        st = HANDLERS["status"](Context(svc.cell, threading.Event(), svc.service_status), {})
+        st = self.service.status_reply()
         state = STATES.index(st["state"]) if st["state"] in STATES else 0xFFFF
         run = st.get("last_run") or {}
         counts = {"sorted": 0, "skipped": 0, "failed": 0}
@@ -221,26 +225,14 @@ class PlcFace:
     def _command(self, cmd: str) -> ExcCodes | None:
         """Hand `cmd` to the service's dispatcher like a JSON request; a job that is still
         running after START_WAIT_S was accepted."""
-        svc = self.service
-        loop = getattr(svc, "_loop", None)
-        if loop is None:
-            return self._exc(ExcCodes.DEVICE_FAILURE)
-        line = json.dumps({"id": f"plc-{cmd}", "cmd": cmd}).encode()
-        try:
-            req = proto.parse_request(line, lambda *_a: None)
-        except proto.ProtocolError:
-            return self._exc(ExcCodes.DEVICE_FAILURE)
         log.info("PLC command: %s", cmd)
-        fut = asyncio.run_coroutine_threadsafe(svc.dispatch(req), loop)
         try:
-            reply = fut.result(START_WAIT_S)
-        except FutureTimeout:
-            return None  # the job runs; its end shows in the registers
-        except proto.ProtocolError as exc:  # refused before it started (busy, fault)
-            reply = proto.reply_for(exc)
+            reply = self.service.call_from_thread(cmd, START_WAIT_S)
         except Exception as exc:
             log.warning("PLC command %s failed: %s", cmd, exc)
             return self._exc(ExcCodes.DEVICE_FAILURE)
+        if reply is None:
+            return None  # the job runs; its end shows in the registers
         if reply.get("ok"):
             return None
         code = reply["error"]["code"]
@@ -299,7 +291,7 @@ class PlcFace:
         self._thread.join(5.0)
 
 
-def start_plc_face(service: Service, config: PlcConfig) -> PlcFace | None:
+def start_plc_face(service: PlcPort, config: PlcConfig) -> PlcFace | None:
     """The PLC face of `[plc]`, listening, or None when `modbus_port` is not set."""
     if config.modbus_port is None:
         return None

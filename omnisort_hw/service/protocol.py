@@ -435,6 +435,8 @@ def decode_line(line: bytes) -> Any:
 
 
 Authorizer = Callable[[Command, "str | None", "int | str | None"], None]
+Emit = Callable[[dict[str, Any]], None]
+"""Where a job's progress events go (in the loop thread), before its reply."""
 
 
 def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:

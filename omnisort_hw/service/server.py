@@ -18,12 +18,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hmac
+import json
 import logging
 import os
 import signal
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,57 +36,26 @@ from omnisort_hw.errors import MotionRefusedError, OmnisortError
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.connection import (
     READ_CHUNK,
-    TOO_LONG,
     Admission,
-    IdleTimeoutError,
-    LineReader,
-    LineTimeoutError,
-    peer_host,
 )
+from omnisort_hw.service.error_replies import error_from_exception
 from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.jobs import JobRunner
 from omnisort_hw.service.listener import check_exposure
 from omnisort_hw.service.pool import DaemonPool
+from omnisort_hw.service.protocol import Emit
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
+from omnisort_hw.service.transport import Transport
 
 log = logging.getLogger("omnisort.service")
 
 SWITCH_INTERVAL_S = 0.001
-SAFETY_INFLIGHT_PER_CLIENT = 4
-MAX_SAFETY_LINE_BYTES = 4096
 OVERFLOW_PER_CLIENT = 4
 LOG_CHECK_S = 1.0
-PROGRESS_PERIOD_S = 1.0
-
-Emit = Callable[[dict[str, Any]], None]
 
 
-def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
-    """Map any exception to (protocol code, message, details); unknown ones are `internal`."""
-    if isinstance(exc, proto.ProtocolError):
-        return exc.code, exc.message, dict(exc.details)
-    if isinstance(exc, OmnisortError):
-        return exc.code, str(exc), {}
-    code = getattr(exc, "code", None)
-    if _is_device_error(exc) and isinstance(code, str):
-        details: dict[str, Any] = {"device_code": code}
-        if getattr(exc, "device", None):
-            details["device"] = exc.device  # type: ignore[attr-defined]
-        if code == "motion_refused":
-            return proto.MOTION_REFUSED, str(exc), details
-        return proto.DEVICE_ERROR, str(exc), details
-    return proto.INTERNAL, f"internal error ({type(exc).__name__}): {exc}", {}
-
-
-def _is_device_error(exc: BaseException) -> bool:
-    try:
-        from drivers.errors import DeviceError
-    except ImportError:
-        return isinstance(getattr(exc, "code", None), str)
-    return isinstance(exc, DeviceError)
-
-
-class Service:
+class Service(Transport, JobRunner):
     """One cell behind the line-delimited JSON protocol."""
 
     def __init__(
@@ -169,6 +140,26 @@ class Service:
             **self.counters,
         }
         return out
+
+    def status_reply(self) -> dict[str, Any]:
+        """The `status` reply, from the snapshot (no device call): for the PLC face."""
+        return HANDLERS["status"](Context(self.cell, threading.Event(), self.service_status), {})
+
+    def call_from_thread(self, cmd: str, wait_s: float) -> dict[str, Any] | None:
+        """Hand `cmd` (no arguments) to the dispatcher from another thread (the PLC face's), as
+        a JSON request would come; its reply, or None when it still runs after `wait_s` (an
+        accepted job)."""
+        loop = self._loop
+        if loop is None:
+            raise OmnisortError(f"{cmd}: the service is not running")
+        line = json.dumps({"id": f"plc-{cmd}", "cmd": cmd}).encode()
+        try:
+            req = proto.parse_request(line, lambda *_a: None)
+            return asyncio.run_coroutine_threadsafe(self.dispatch(req), loop).result(wait_s)
+        except FutureTimeout:
+            return None
+        except proto.ProtocolError as exc:  # refused before it started (busy, fault)
+            return proto.reply_for(exc)
 
     # -- life cycle ------------------------------------------------------------------------
 
@@ -282,158 +273,6 @@ class Service:
         self._safety.shutdown()
         log.info("stopped cleanly")
 
-    # -- connections -----------------------------------------------------------------------
-
-    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        host = peer_host(writer.get_extra_info("peername"))
-        self.counters["connections"] += 1
-        refusal = self._admission.admit(host)
-        if refusal is not None:
-            await self._overflow(reader, writer, host, refusal)
-            return
-        write_lock = asyncio.Lock()
-        self._clients.add(writer)
-        slots = asyncio.Semaphore(self.config.max_inflight_per_client)
-        safety_slots = asyncio.Semaphore(SAFETY_INFLIGHT_PER_CLIENT)
-        tasks: set[asyncio.Task[None]] = set()
-        lines = LineReader(
-            reader,
-            self.config.max_line_bytes,
-            self.config.line_timeout_s,
-            self.config.idle_timeout_s or None,
-            busy=lambda: bool(tasks),
-        )
-        try:
-            while (line := await lines.next()) is not None and not writer.is_closing():
-                self.counters["requests"] += 1
-                if line is TOO_LONG:
-                    msg = f"request line longer than {self.config.max_line_bytes} bytes; discarded"
-                    await self._send(
-                        writer, write_lock, proto.error_reply(None, proto.BAD_REQUEST, msg)
-                    )
-                    continue
-                assert isinstance(line, bytes)
-                try:
-                    req = proto.parse_request(line, self._authorize)
-                except proto.ProtocolError as exc:
-                    await self._send(writer, write_lock, proto.reply_for(exc))
-                    continue
-                # Stop and estop never wait behind the client's other requests.
-                slot = safety_slots if req.command.kind == "safety" else slots
-                await slot.acquire()
-                task = asyncio.create_task(self._serve(req, writer, write_lock, slot))
-                tasks.add(task)
-                task.add_done_callback(tasks.discard)
-        except (LineTimeoutError, IdleTimeoutError) as exc:
-            log.info("closing connection from %s: %s", host, exc)
-            await self._send(
-                writer, write_lock, proto.error_reply(None, proto.BAD_REQUEST, f"{exc}; closing")
-            )
-        except (ConnectionError, asyncio.IncompleteReadError):
-            pass
-        except Exception:
-            log.exception("connection from %s failed", host)
-        finally:
-            if tasks:
-                await asyncio.wait(tasks, timeout=self.config.write_timeout_s)
-            self._clients.discard(writer)
-            self._admission.release(host)
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 2.0)
-
-    async def _overflow(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, host: str, refusal: str
-    ) -> None:
-        """A connection over a limit: one `stop`/`estop` line is still served (the reserved
-        path); anything else, or nothing within the grace period, gets `busy` and is closed."""
-        lock = asyncio.Lock()
-        busy = proto.error_reply(
-            None, proto.BUSY, f"{refusal}; try again later (stop and estop are still served)"
-        )
-        if not self._admission.enter_overflow():
-            log.warning("refusing a connection from %s at once: %s", host, refusal)
-            await self._send(writer, lock, busy)
-            writer.close()
-            return
-        try:
-            lines = LineReader(reader, MAX_SAFETY_LINE_BYTES, self.config.overflow_grace_s, None)
-            try:
-                line = await asyncio.wait_for(lines.next(), self.config.overflow_grace_s)
-            except (TimeoutError, LineTimeoutError, ConnectionError):
-                line = None
-            req = None
-            if isinstance(line, bytes):
-                with contextlib.suppress(proto.ProtocolError):
-                    req = proto.parse_request(line, self._authorize)
-            if req is not None and req.command.kind == "safety":
-                self.counters["requests"] += 1
-                log.warning("%s from %s served on the reserved path (%s)", req.cmd, host, refusal)
-                await self._send(writer, lock, await self._reply(req))
-            else:
-                await self._send(writer, lock, busy)
-        finally:
-            self._admission.leave_overflow()
-            writer.close()
-            with contextlib.suppress(Exception):
-                await asyncio.wait_for(writer.wait_closed(), 2.0)
-
-    async def _send(
-        self, writer: asyncio.StreamWriter, lock: asyncio.Lock, reply: dict[str, Any]
-    ) -> None:
-        if reply.get("ok") is False:
-            self.counters["errors"] += 1
-        data = proto.encode(reply)
-        async with lock:
-            if writer.is_closing():
-                return
-            writer.write(data)
-            try:
-                await asyncio.wait_for(writer.drain(), self.config.write_timeout_s)
-            except TimeoutError:
-                self.counters["slow_clients_dropped"] += 1
-                log.warning(
-                    "client %s did not read its replies for %g s; disconnected",
-                    peer_host(writer.get_extra_info("peername")),
-                    self.config.write_timeout_s,
-                )
-                writer.transport.abort()
-            except ConnectionError:
-                writer.close()
-
-    async def _reply(self, req: proto.Request, emit: Emit | None = None) -> dict[str, Any]:
-        try:
-            return await self.dispatch(req, emit)
-        except proto.ProtocolError as exc:
-            return proto.reply_for(exc, req.id)
-        except Exception as exc:
-            log.exception("request %r failed", req.cmd)
-            code, msg, details = error_from_exception(exc)
-            return proto.error_reply(req.id, code, msg, **details)
-
-    async def _serve(
-        self,
-        req: proto.Request,
-        writer: asyncio.StreamWriter,
-        lock: asyncio.Lock,
-        slot: asyncio.Semaphore,
-    ) -> None:
-        """Run one request and write its reply; the client's slot is freed only once the reply
-        is written (or the client dropped), so a client that does not read stops being read."""
-        sent: list[asyncio.Future[None]] = []
-
-        def emit(event: dict[str, Any]) -> None:
-            """Write one progress event (in the loop thread); the reply waits for them all."""
-            line = proto.progress_event(req.id, event)
-            sent.append(asyncio.ensure_future(self._send(writer, lock, line)))
-
-        try:
-            reply = await self._reply(req, emit if req.progress else None)
-            await asyncio.gather(*sent, return_exceptions=True)
-            await self._send(writer, lock, reply)
-        finally:
-            slot.release()
-
     def _authorize(self, spec: proto.Command, token: str | None, rid: int | str | None) -> None:
         """Commands that move, write or change state need the token when one is required."""
         if not (self.config.token_required and spec.needs_token):
@@ -525,23 +364,6 @@ class Service:
             except Exception as exc:
                 log.warning("status refresh failed: %s", exc)
 
-    def _stop(self) -> dict[str, Any]:
-        job = self._job
-        if job is not None:
-            job.stopped_by = "stop"
-            job.cancel.set()
-        problems = self.cell.stop_motion()
-        if job is not None:
-            self._keep_stopping(job)
-        if self.states.state != State.FAULT:
-            what = f"{job.cmd} stopped" if job is not None else "stop requested"
-            self.states.set(State.STOPPED, what)
-        return {
-            "stopped_job": job.cmd if job is not None else None,
-            "state": self.states.state.value,
-            "problems": problems,
-        }
-
     def _check_may_actuate(self) -> None:
         """The state rule of every command that switches something on: none in `fault`."""
         if self.states.state == State.FAULT:
@@ -549,183 +371,6 @@ class Service:
                 f"refused: the cell is in fault ({self.states.reason}); clear the cause and "
                 "send reset"
             )
-
-    def _estop(self) -> dict[str, Any]:
-        job = self._job
-        if job is not None:
-            job.stopped_by = "estop"
-            job.cancel.set()
-        # Fault first: whatever is about to switch on from now is refused by the guard.
-        self.states.set(State.FAULT, "emergency stop requested by a client; send reset")
-        problems = self.cell.emergency_stop()
-        if job is not None:
-            self._keep_stopping(job)
-        return {
-            "stopped_job": job.cmd if job is not None else None,
-            "state": self.states.state.value,
-            "problems": problems,
-        }
-
-    def _keep_stopping(self, job: Job, period_s: float = 0.1, limit_s: float = 10.0) -> None:
-        """Stop the arm again every `period_s` until `job` ends (closes the window in which a
-        cancelled job could still start a motion); runs in its own daemon thread."""
-
-        def loop() -> None:
-            deadline = time.monotonic() + limit_s
-            while self._job is job and time.monotonic() < deadline:
-                time.sleep(period_s)
-                if self._job is job:
-                    self.cell.stop_motion()
-
-        threading.Thread(target=loop, name="keep-stopping", daemon=True).start()
-
-    def _reset(self, gripper_empty: bool = False) -> dict[str, Any]:
-        with self._job_lock:
-            if self._job is not None:
-                raise proto.ProtocolError(
-                    proto.BUSY, f"{self._job.cmd} is running; send stop first"
-                )
-            devices = self.cell.devices.reconnect_lost()
-            safety = self.cell.check_safe_to_resume()
-            if gripper_empty:
-                self.cell.confirm_gripper_empty()
-            old = self.states.state
-            self.states.set(State.IDLE, f"reset from {old.value}")
-        return {"state": State.IDLE.value, "previous": old.value, **safety, **devices}
-
-    async def _run_job(self, req: proto.Request, emit: Emit | None = None) -> dict[str, Any]:
-        spec = req.command
-        with self._job_lock:
-            if self._job is not None:
-                running = self._job
-                raise proto.ProtocolError(
-                    proto.BUSY,
-                    f"{running.cmd} (request {running.request_id}) is running for "
-                    f"{time.monotonic() - running.started:.1f} s; one motion or job at a time: "
-                    "wait for it or send stop",
-                    running=running.cmd,
-                )
-            if self.states.state == State.FAULT:
-                raise proto.ProtocolError(
-                    proto.MOTION_REFUSED,
-                    f"the cell is in fault ({self.states.reason}); clear the cause and send reset",
-                )
-            job = Job(req.cmd, req.id, State(spec.job_state or State.MOVING))
-            self._job = job
-            resting = self.states.state
-            self.states.set(job.state, f"{req.cmd} (request {req.id})")
-        self.cell.runlog.event("service/requests", f"{req.cmd} {req.args}")
-        loop = asyncio.get_running_loop()
-        done: asyncio.Future[dict[str, Any]] = loop.create_future()
-
-        replied = threading.Event()  # set once the reply is decided: no event after it
-
-        def report(event: dict[str, Any]) -> None:
-            job.report(event)
-            self.cell.journal.progress(event)
-            if emit is not None and not replied.is_set():
-                with contextlib.suppress(RuntimeError):  # the loop is gone at shutdown
-                    loop.call_soon_threadsafe(_emit_unless, replied, emit, event)
-
-        ctx = Context(self.cell, job.cancel, self.service_status, report)
-        thread = threading.Thread(
-            target=self._job_thread,
-            args=(job, req, ctx, resting, loop, done),
-            name=f"job-{req.cmd}",
-            daemon=True,
-        )
-        thread.start()
-        beats = asyncio.ensure_future(self._heartbeats(job, emit)) if emit else None
-        try:
-            return await asyncio.wait_for(asyncio.shield(done), self.config.job_timeout_s)
-        except TimeoutError:
-            job.stopped_by = "timeout"
-            job.cancel.set()
-            await asyncio.to_thread(self.cell.stop_motion)
-            return proto.error_reply(
-                req.id,
-                proto.DEVICE_ERROR,
-                f"{req.cmd} did not finish within {self.config.job_timeout_s:g} s; arm stopped",
-                device_code="device_timeout",
-            )
-        finally:
-            replied.set()
-            if beats is not None:
-                beats.cancel()
-
-    async def _heartbeats(self, job: Job, emit: Emit) -> None:
-        """`{"stage": "started"}`, then the running time every PROGRESS_PERIOD_S, so a client
-        shows a job that reports nothing (a calibration) as alive rather than silent."""
-        emit({"stage": "started", "cmd": job.cmd})
-        while True:
-            await asyncio.sleep(PROGRESS_PERIOD_S)
-            emit({"running_s": round(time.monotonic() - job.started, 1)})
-
-    def _job_thread(
-        self,
-        job: Job,
-        req: proto.Request,
-        ctx: Context,
-        resting: State,
-        loop: asyncio.AbstractEventLoop,
-        done: asyncio.Future[dict[str, Any]],
-    ) -> None:
-        reply: dict[str, Any]
-        journal = self.cell.journal
-        journal.start(req.cmd, req.id, req.args)
-        try:
-            result = self._then_refresh(lambda: HANDLERS[req.cmd](ctx, req.args))
-            if job.cancel.is_set():
-                reply = self._stopped_reply(job, req)
-            else:
-                reply = proto.ok_reply(req.id, result)
-                self._end_job(job, State.IDLE, f"{req.cmd} done")
-        except BaseException as exc:
-            code, msg, details = error_from_exception(exc)
-            if job.cancel.is_set():
-                reply = self._stopped_reply(job, req, msg)
-            elif code in (proto.DEVICE_ERROR, proto.INTERNAL) and getattr(exc, "faults_cell", 1):
-                if code == proto.INTERNAL:
-                    log.error("%s failed", req.cmd, exc_info=exc)
-                reply = proto.error_reply(req.id, code, msg, **details)
-                self._end_job(job, State.FAULT, f"{req.cmd} failed: {msg}")
-            else:
-                reply = proto.error_reply(req.id, code, msg, **details)
-                self._end_job(job, resting, f"{req.cmd} refused: {code}")
-        finally:
-            with self._job_lock:
-                if self._job is job:
-                    self._job = None
-        if reply["ok"]:
-            journal.finish("done", f"{req.cmd} done")
-        else:
-            err = reply["error"]
-            stopped = err["code"] == proto.STOPPED
-            journal.finish("stopped" if stopped else "failed", f"{err['code']}: {err['message']}")
-        with contextlib.suppress(RuntimeError):
-            loop.call_soon_threadsafe(_set_if_pending, done, reply)
-
-    def _stopped_reply(self, job: Job, req: proto.Request, detail: str = "") -> dict[str, Any]:
-        by = job.stopped_by or "stop"
-        msg = f"{req.cmd} was stopped by {by}" + (f" ({detail})" if detail else "")
-        return proto.error_reply(req.id, proto.STOPPED, msg, stopped_by=by)
-
-    def _end_job(self, job: Job, new: State, reason: str) -> None:
-        with self._job_lock:
-            if self.states.state == job.state and not job.cancel.is_set():
-                self.states.set(new, reason)
-
-
-def _emit_unless(replied: threading.Event, emit: Emit, event: dict[str, Any]) -> None:
-    """In the loop: forward a job's event unless its reply is already decided (a job that
-    timed out still reports as it winds down; its events must not follow the reply)."""
-    if not replied.is_set():
-        emit(event)
-
-
-def _set_if_pending(fut: asyncio.Future[dict[str, Any]], value: dict[str, Any]) -> None:
-    if not fut.done():
-        fut.set_result(value)
 
 
 @dataclass
