@@ -132,7 +132,12 @@ class CellJobs:
         pose is not carried over: it was registered with the previous camera rotation."""
         from omnisort_hw.core.checkerboard import BoardSpec
         from omnisort_hw.core.overlays import overlay_path, write_picture
-        from omnisort_hw.pipeline.extrinsics import resolve_target, run_extrinsics, system_payload
+        from omnisort_hw.pipeline.extrinsics import (
+            calibration_result,
+            resolve_target,
+            run_extrinsics,
+            system_payload,
+        )
 
         defaults = self.config.target
         field = "separation_mm (or [target] separation_mm in the cell file)"
@@ -167,17 +172,9 @@ class CellJobs:
         _raise_if_cancelled(cancel, "calibration")
         calib = run.calib
         saved = self.store.save_system(system_payload(calib, record))
-        return {  # and the picture of what was detected and fitted (about 11 ms)
-            "path": str(saved),
-            **write_picture(overlay_path(saved), lambda: run.overlay(img, source)),
-            "method": calib.method,
-            "target": target,
-            "parameters": calib.parameters(),
-            "std": calib.std,
-            "residuals": calib.residuals,
-            "image": record,
-            "tone_curve": tone.name,
-        }
+        # and the picture of what was detected and fitted (about 11 ms)
+        picture = write_picture(overlay_path(saved), lambda: run.overlay(img, source))
+        return calibration_result(calib, target, saved, picture, record, tone)
 
     def camera_tone_curve(self) -> ToneCurve:
         """The camera's transfer curve, undone wherever edges are located in its images (the

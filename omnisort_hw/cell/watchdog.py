@@ -33,6 +33,7 @@ from omnisort_hw.pipeline.drift_check import (
     drift_refusal,
     load_drift_state,
     load_reference,
+    registration_for,
     save_reference,
 )
 from omnisort_hw.runlog import RunLog
@@ -150,7 +151,7 @@ class DriftWatchdog:
             img,
             calib,
             payload,
-            self.ports.registration(),
+            registration_for(payload, self.ports.registration()),
             reference,
             self.config,
             image or "capture",

@@ -50,16 +50,19 @@ def cmd_check(args: argparse.Namespace) -> int:
     from omnisort_hw.config.watchdog import WatchdogConfig
     from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
     from omnisort_hw.pipeline.calibration_source import read_system_payload
-    from omnisort_hw.pipeline.drift_check import calibration_key, check_drift, load_reference
+    from omnisort_hw.pipeline.drift_check import (
+        calibration_key,
+        check_drift,
+        load_reference,
+        registration_for,
+    )
     from omnisort_hw.pipeline.image_files import read_image
     from omnisort_hw.runlog import RunLog
 
     payload, _ = read_system_payload(args.system)  # a store file's checksum is verified
     calib = SystemCalibration.from_json(payload, source=str(args.system))
     cfg = load_cell_config(args.config) if args.config else None
-    registration = cfg.registration if cfg is not None else None
-    if registration is None and isinstance(payload.get("robot_base"), dict):
-        registration = _registration_from_record(payload["robot_base"])
+    registration = registration_for(payload, cfg.registration if cfg is not None else None)
     if args.reference is not None:
         reference = read_image(args.reference)
     else:
@@ -93,22 +96,6 @@ def cmd_check(args: argparse.Namespace) -> int:
                 f"{b['base_shift_mm']} mm"
             )
     return 1 if res.drift else 0
-
-
-def _registration_from_record(record: dict[str, Any]) -> Any:
-    """[registration] from system.json's robot_base record (board and offset are stored)."""
-    from omnisort_hw.config.sorting import RegistrationConfig
-    from omnisort_hw.core.checkerboard import BoardSpec
-
-    board, offset = record.get("board"), record.get("offset")
-    if not isinstance(board, dict) or not isinstance(offset, list):
-        return None
-    try:
-        cols, rows = board["inner_corners"]
-        spec = BoardSpec(int(cols), int(rows), float(board["square_mm"]))
-    except (KeyError, TypeError, ValueError):
-        return None
-    return RegistrationConfig(spec, tuple(float(v) for v in offset))  # type: ignore[arg-type]
 
 
 def cmd_evaluate_drift(args: argparse.Namespace) -> int:

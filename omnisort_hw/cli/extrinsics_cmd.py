@@ -143,6 +143,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.fileio import atomic_write_json
     from omnisort_hw.pipeline.extrinsics import (
+        calibration_result,
         image_record,
         resolve_target,
         run_extrinsics,
@@ -191,15 +192,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     picture = write_picture(overlay_path(args.out), lambda: run.overlay(image, source))
     _warn(picture)
     if args.json:
-        out = {
-            "out": str(args.out),
-            **picture,
-            "parameters": calib.parameters(),
-            "std": calib.std,
-            "residuals": calib.residuals,
-            "method": calib.method,
-        }
-        print_result({**out, **(record or {})})
+        print_result(calibration_result(calib, args.target, args.out, picture, image_rec, tone))
     else:
         print(f"system calibration ({calib.method}) written to {args.out}")
         for key, value in calib.parameters().items():

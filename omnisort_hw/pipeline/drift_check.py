@@ -23,6 +23,7 @@ import numpy as np
 from omnisort_hw import fileio
 from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.config.watchdog import WatchdogConfig
+from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.drift import (
     BoardCheck,
     DriftDecision,
@@ -127,6 +128,29 @@ class DriftResult:
         if self.board_problem:
             out["board_problem"] = self.board_problem
         return out
+
+
+def registration_for(
+    system_payload: Mapping[str, Any], configured: RegistrationConfig | None
+) -> RegistrationConfig | None:
+    """The board a drift check compares: the cell file's `[registration]`, else the one
+    system.json's `robot_base` was registered with (its board and offset are recorded), else
+    None (the image check alone)."""
+    if configured is not None:
+        return configured
+    record = system_payload.get("robot_base")
+    if not isinstance(record, Mapping):
+        return None
+    board, offset = record.get("board"), record.get("offset")
+    if not isinstance(board, Mapping) or not isinstance(offset, list) or len(offset) != 6:
+        return None
+    try:
+        cols, rows = board["inner_corners"]
+        spec = BoardSpec(int(cols), int(rows), float(board["square_mm"]))
+        pose = tuple(float(v) for v in offset)
+    except (KeyError, TypeError, ValueError):
+        return None
+    return RegistrationConfig(spec, pose)  # type: ignore[arg-type]
 
 
 def check_drift(

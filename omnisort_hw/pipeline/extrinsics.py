@@ -168,6 +168,29 @@ def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> di
     return payload
 
 
+def calibration_result(
+    calib: SystemCalibration,
+    target: str,
+    saved: Path,
+    picture: dict[str, Any],
+    image: dict[str, Any] | None,
+    tone: ToneCurve,
+) -> dict[str, Any]:
+    """What a calibration answers, at every door (the service's reply, the CLI's `--json`):
+    where it was saved, its picture, the fit and the image it was made from."""
+    return {
+        "path": str(saved),
+        **picture,
+        "method": calib.method,
+        "target": target,
+        "parameters": calib.parameters(),
+        "std": calib.std,
+        "residuals": calib.residuals,
+        "image": image,
+        "tone_curve": tone.name,
+    }
+
+
 def _log_calibration(log: RunLog, calib: SystemCalibration) -> None:
     """Parameters, residuals, and the fitted laser plane drawn back into the image."""
     import json
