@@ -20,6 +20,9 @@ for at most `open_timeout_s` / `read_timeout_s`; a camera that stops delivering 
 `DeviceTimeoutError` instead of hanging. When the source fails (unplugged, file ended), that
 `grab()` raises `DeviceDisconnectedError`; later calls reopen it with exponential back-off
 (logged), re-apply exposure and gain, and refuse a different camera (serial changed).
+
+Over 600 lines: one device and its recorded stand-ins behind one class (opening, formats,
+controls, fresh frames, serial numbers); the fresh-frame rule needs all of them.
 """
 
 from __future__ import annotations

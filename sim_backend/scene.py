@@ -8,6 +8,9 @@ field, a wrong type or an impossible geometry is a `ConfigError` whose message n
 as a dotted path (`target.separation_mm`, `cubes[2].position_mm`). Sections left out take
 their defaults; `target` and `robot` are absent unless given. The shipped scenes live in
 `sim_backend/scenes/` and are documented there.
+
+Over 600 lines: the scene file's schema, mostly declarations (one dataclass per section) and
+the checks that name a bad field by its dotted path.
 """
 
 from __future__ import annotations

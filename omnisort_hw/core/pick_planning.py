@@ -11,6 +11,9 @@ unreachable, no collision-free path) get `PickPlan.refused` with the reason and 
 
 `SortConfig` is the `[sorting]` section as the planner and the location use it (parsed and
 validated by `omnisort_hw.config.sorting`); frames and units are those of docs/frames.md.
+
+Over 600 lines: one planner; the moves of a pick and their collision checks share its state
+(the held cube, the bins' contents, the other cubes) and change together.
 """
 
 from __future__ import annotations

@@ -13,6 +13,9 @@ A path (ur-rtde's `moveJ(path)`, `moveL(path)`, `movePath`: the control script r
 the path's `movej`/`movel` lines injected, then command 45) is planned by the core's blended
 path (`omnisort_hw.core.blended_path`), the same model the simulated arm plays. UR's own
 trapezoidal timing, blend shapes and speed scaling are not modelled (see docs/virtual_cell.md).
+
+Over 600 lines: one state machine under one lock (robot and safety state, the control
+script's handshake, motion playback, I/O); its parts change state together at each tick.
 """
 
 from __future__ import annotations
