@@ -54,11 +54,34 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def sweep_dir(args: argparse.Namespace, experiment: str, trials: Sequence[Any]) -> Path:
-    """--sweep-dir, or a folder named after the trials' keys (the same command resumes)."""
+    """--sweep-dir, or a folder named after the trials' keys and the code's git revision:
+    the same command on the same code resumes; changed code starts afresh instead of
+    reusing rows it did not compute."""
+    from omnisort_hw.sweeps.provenance import git_revision
+
     if args.sweep_dir is not None:
         return Path(args.sweep_dir)
-    digest = hashlib.sha256("".join(t.key for t in trials).encode()).hexdigest()[:12]
-    return DEFAULT_ROOT / f"{experiment}-{digest}"
+    text = "".join(t.key for t in trials) + (git_revision() or "")
+    return DEFAULT_ROOT / f"{experiment}-{hashlib.sha256(text.encode()).hexdigest()[:12]}"
+
+
+def _warn_other_revision(folder: Path) -> None:
+    """A resumed sweep started by other code: say so (its rows carry their revision)."""
+    import json
+
+    from omnisort_hw.sweeps.provenance import git_revision
+
+    try:
+        made_by = json.loads((folder / "manifest.json").read_text()).get("git")
+    except (OSError, ValueError):
+        return
+    now = git_revision()
+    if made_by and now and made_by != now:
+        print(
+            f"warning: {folder} was started by revision {made_by}, this is {now}; "
+            "each row records the revision that computed it",
+            file=sys.stderr,
+        )
 
 
 def run_cli_sweep(
@@ -72,6 +95,7 @@ def run_cli_sweep(
     from omnisort_hw.sweeps.runner import run_sweep
 
     folder = sweep_dir(args, experiment, trials)
+    _warn_other_revision(folder)
     with make_executor(args.executor, args.workers, args.scheduler, args.trial_timeout) as ex:
         print(
             f"{experiment}: {len(trials)} trials on {args.executor} ({ex.workers} workers), "

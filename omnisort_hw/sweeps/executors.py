@@ -114,7 +114,7 @@ def _distributed() -> Any:
 
 class DaskExecutor(_FutureExecutor, AbstractContextManager["DaskExecutor"]):
     """A Dask cluster at `scheduler` (tcp://HOST:PORT), or, without one, a LocalCluster of
-    `workers` single-threaded worker processes on 127.0.0.1 (no dashboard)."""
+    `workers` single-threaded worker processes, every port on 127.0.0.1."""
 
     def __init__(
         self,
@@ -136,7 +136,9 @@ class DaskExecutor(_FutureExecutor, AbstractContextManager["DaskExecutor"]):
                     threads_per_worker=1,
                     processes=True,
                     host="127.0.0.1",
-                    dashboard_address=None,
+                    # The scheduler's HTTP server starts even without a dashboard: on
+                    # loopback, any free port (not a fixed 8787 another user may hold).
+                    dashboard_address="127.0.0.1:0",
                     timeout=connect_timeout_s,
                 )
                 self._client = distributed.Client(self._cluster, timeout=connect_timeout_s)
@@ -145,6 +147,25 @@ class DaskExecutor(_FutureExecutor, AbstractContextManager["DaskExecutor"]):
             where = scheduler or "a local cluster"
             raise InputError(f"--scheduler {where}: cannot connect ({exc})") from None
         self.workers = len(self._client.scheduler_info().get("workers", {}))
+        if scheduler:
+            self._check_versions()
+
+    def _check_versions(self) -> None:
+        """Every worker must run the client's package versions, or the rows would mix
+        numbers of different code (InputError naming the first worker that differs)."""
+        from omnisort_hw.sweeps.provenance import package_versions
+
+        mine = package_versions()
+        for worker, theirs in self._client.run(package_versions).items():
+            if theirs != mine:
+                self.close()
+                diff = {
+                    k: (mine.get(k), theirs.get(k)) for k in mine if mine.get(k) != theirs.get(k)
+                }
+                raise InputError(
+                    f"--scheduler: worker {worker} runs other versions than this client "
+                    f"(client, worker): {diff}; install the same on every worker (docs/sweeps.md)"
+                )
 
     def _submit(self, fn: TrialFn, item: Any) -> Any:
         # pure=False: a trial is never deduplicated or cached by Dask; the sweep's keys do it.

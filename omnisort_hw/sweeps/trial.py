@@ -83,21 +83,22 @@ def trial_function(experiment: str) -> Callable[[Mapping[str, Any], int], TrialO
 
 def run_trial(trial: Mapping[str, Any]) -> dict[str, Any]:
     """Run one trial (a `Trial.to_dict()`) and return its row: the trial, its result, its
-    timing (with the trial's wall time) and the provenance of the process that ran it. The
+    timing (with the trial's wall and CPU time: the CPU time sizes a cluster whatever the
+    machine's load) and the provenance of the process that ran it. The
     executors send this function to their workers."""
     from omnisort_hw.sweeps.provenance import provenance
 
     t = Trial.from_dict(trial)
     fn = trial_function(t.experiment)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     out = fn(t.config, t.seed)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     # A result that cannot round-trip through JSON exactly fails here, not in the file.
     result = json.loads(canonical_json(out.result))
     return {
         **t.to_dict(),
         "result": result,
-        "timing": {**out.timing, "wall_s": round(wall, 4)},
+        "timing": {**out.timing, "wall_s": round(wall, 4), "cpu_s": round(cpu, 4)},
         "provenance": provenance(),
     }
 
@@ -133,10 +134,10 @@ def _prune(d: dict[str, Any]) -> dict[str, Any]:
 
 
 def merge_paths(result: Mapping[str, Any], timing: Mapping[str, Any]) -> dict[str, Any]:
-    """The row `split_paths` split (the trial's own `wall_s`, added by `run_trial`, left
-    out)."""
+    """The row `split_paths` split (the trial's own `wall_s` and `cpu_s`, added by
+    `run_trial`, left out)."""
     row: dict[str, Any] = json.loads(canonical_json(result))
-    _merge(row, {k: v for k, v in timing.items() if k != "wall_s"})
+    _merge(row, {k: v for k, v in timing.items() if k not in ("wall_s", "cpu_s")})
     return row
 
 
