@@ -482,6 +482,17 @@ def summary(r: dict[str, Any]) -> str:
                 "[drift](docs/drift.md)",
             ]
         )
+    if "sweep" in r:
+        sw = r["sweep"]
+        rows.append(
+            [
+                f"sweeps on {sw['cores']} cores: speed-up of a {sw['workers']}-worker pool / "
+                "Dask LocalCluster against serial (shared, loaded machine)",
+                f"{sw['pool_speedup']:.2f}x / {sw['dask_speedup']:.2f}x, results identical: "
+                f"{'yes' if sw['identical_results'] else 'NO'}",
+                "[sweeps](docs/sweeps.md)",
+            ]
+        )
     return _table(["what", "measured", "more"], rows) + f"\nMachine: {_machine(r)}.\n"
 
 
@@ -605,6 +616,37 @@ def table3_capture(r: dict[str, Any]) -> str:
     return _table(["MAE", *PARAM_HEADS.split(" | ")], rows) + note
 
 
+def sweeps(r: dict[str, Any]) -> str:
+    """A small sweep serial, on the pool and on a local Dask cluster: wall time, speed-up,
+    time per trial, and the machine's load around each run."""
+    s = r["sweep"]
+    rows: list[list[Any]] = []
+    for name, label in (
+        ("serial", "serial (this process)"),
+        ("pool", f"local pool, {s['workers']} workers"),
+        ("dask", f"Dask LocalCluster, {s['workers']} workers"),
+    ):
+        speedup = "1" if name == "serial" else f"{s[f'{name}_speedup']:.2f}"
+        rows.append(
+            [
+                label,
+                f"{s[f'{name}_s']:.1f} s ({s[f'{name}_start_s']:.1f} s to start)",
+                f"{speedup}x",
+                f"{s[f'{name}_trial_s_mean']:.1f} s / {s[f'{name}_trial_cpu_s_mean']:.1f} s",
+                f"{s[f'{name}_load_before']:.1f} → {s[f'{name}_load_after']:.1f}",
+            ]
+        )
+    head = ["executor", "sweep", "speed-up", "per trial, wall / CPU", "load average (1 min)"]
+    same = "identical" if s["identical_results"] else "DIFFERENT"
+    return _table(head, rows) + (
+        f"\n{s['trials']} {s['experiment']} trials ({s['width_px']} px, seed {s['seed']}) on "
+        f"{s['cores']} cores ({s['cpu']}); result rows {same} on the three executors. A "
+        f"trial costs a single-thread worker about {s['pool_trial_cpu_s_mean']:.1f} s of CPU "
+        "at this size (the pool's): N trials on W such workers take about N x that / W, plus "
+        "the workers' start.\n"
+    )
+
+
 GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "summary": summary,
     "table3": table3,
@@ -621,6 +663,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "drift": drift,
     "lighting": lighting,
     "table3_capture": table3_capture,
+    "sweeps": sweeps,
 }
 
 

@@ -75,3 +75,17 @@ class CalibrationDriftError(MotionRefusedError):
     the measured angle); cleared by a recalibration or `acknowledge_drift`."""
 
     code = "calibration_drift"
+
+
+class MissingExtraError(OmnisortError):
+    """An optional feature was asked for without its extra installed (the message names the
+    pip extra to install)."""
+
+    code = "missing_extra"
+
+
+class ExecutorTimeoutError(OmnisortError):
+    """A sweep's executor saw no trial finish within its timeout (a hung worker, a cluster
+    gone)."""
+
+    code = "executor_timeout"

@@ -14,7 +14,7 @@ whole field of view, edges included, each fully visible and not too oblique, wri
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -70,6 +70,35 @@ def table3_configs(n: int, seed: int, max_angle_deg: float = 10.0) -> list[Table
     return [Table3Config(i, *(round(float(a), 6) for a in row)) for i, row in enumerate(angles)]
 
 
+def table3_bases(
+    width: int | None = None, tone_curve: str = "srgb", scenes: Sequence[str | Path] = TABLE3_SCENES
+) -> list[tuple[str, Scene]]:
+    """(name, scene) of each target scene of the experiment, at `width`, with the simulated
+    camera's tone curve."""
+    return [
+        (Path(str(s)).stem, sized(load_scene(s), width).replace(render={"tone_curve": tone_curve}))
+        for s in scenes
+    ]
+
+
+def render_config(
+    folder: Path,
+    cfg: Table3Config,
+    bases: Sequence[tuple[str, Scene]],
+    seed: int,
+    degraded: bool,
+    rendered: Callable[[], None] | None = None,
+) -> None:
+    """Render one configuration's images into `folder` (`NAME.png`, `NAME.truth.json`); the
+    noise seed of each image depends on (seed, configuration, scene) only."""
+    for k, (name, base) in enumerate(bases):
+        image_seed = seed * 100003 + cfg.index * 7 + k
+        image, truth = render_scene(cfg.apply(base), seed=image_seed, degraded=degraded)
+        write_render(folder, name, image, truth)
+        if rendered is not None:
+            rendered()
+
+
 def make_dataset(
     out_dir: str | Path,
     experiment: str = "table3",
@@ -88,10 +117,7 @@ def make_dataset(
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     out = Path(out_dir)
-    bases = [
-        (Path(str(s)).stem, sized(load_scene(s), width).replace(render={"tone_curve": tone_curve}))
-        for s in scenes
-    ]
+    bases = table3_bases(width, tone_curve, scenes)
     configs = table3_configs(n, seed)
     index: dict[str, Any] = {
         "experiment": experiment,
@@ -111,12 +137,7 @@ def make_dataset(
         disable=None if progress else True,
     )
     for cfg in configs:
-        folder = out / cfg.folder
-        for k, (name, base) in enumerate(bases):
-            image_seed = seed * 100003 + cfg.index * 7 + k
-            image, truth = render_scene(cfg.apply(base), seed=image_seed, degraded=degraded)
-            write_render(folder, name, image, truth)
-            bar.update(1)
+        render_config(out / cfg.folder, cfg, bases, seed, degraded, lambda: bar.update(1))
         index["configs"].append(
             {
                 "folder": cfg.folder,
@@ -311,6 +332,8 @@ __all__ = [
     "calibration_screen_scene",
     "checkerboard_views",
     "make_dataset",
+    "render_config",
     "sized",
+    "table3_bases",
     "table3_configs",
 ]

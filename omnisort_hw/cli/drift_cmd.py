@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 
 
 def register(sub: Any) -> None:
@@ -41,6 +41,7 @@ def add_drift_evaluation(esub: Any) -> None:
     ev.add_argument("--width", type=int, default=960, help="render size (default 960)")
     ev.add_argument("--out", type=output_file, default=None, help="also write the result JSON here")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
+    add_sweep_arguments(ev)
     ev.set_defaults(func=cmd_evaluate_drift)
 
 
@@ -99,20 +100,21 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate_drift(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
+    import time
 
     from omnisort_hw import fileio
-    from omnisort_hw.evaluation.drift import AXES, BUMPS_DEG, evaluate_drift
+    from omnisort_hw.evaluation.drift import drift_trials, summarize_drift
 
-    total = args.unmoved + args.scenes * 2 * len(BUMPS_DEG) * len(AXES) * 2
-    with tqdm(total=total, desc="drift checks", file=sys.stderr, disable=None) as bar:
-        result = evaluate_drift(
-            seed=args.seed,
-            scenes=args.scenes,
-            unmoved=args.unmoved,
-            width=args.width,
-            progress=lambda _s: bar.update(1),
-        )
+    trials = drift_trials(args.seed, args.scenes, args.unmoved, args.width)
+    t0 = time.perf_counter()
+    run, _ = run_cli_sweep(args, "drift", trials)
+    result = summarize_drift(
+        [row["result"] for row in run.rows],
+        args.seed,
+        args.width,
+        args.scenes,
+        time.perf_counter() - t0,
+    )
     if args.out is not None:
         fileio.atomic_write_json(args.out, result, keep_history=False)
     if args.json:

@@ -10,6 +10,7 @@ from typing import Any
 
 from omnisort_hw.cli import drift_cmd, lighting_cmd, robot_cmd
 from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 
 
 def register(sub: Any) -> None:
@@ -24,7 +25,9 @@ def register(sub: Any) -> None:
         "--data",
         type=Path,
         default=None,
-        help="dataset folder: read it if it holds this experiment, else render into it",
+        help="dataset folder: read it if it holds this experiment, else render into it (then "
+        "the images are kept and calibrated in this process; without it each trial renders "
+        "its configuration on its worker)",
     )
     t3.add_argument(
         "--tone-curve",
@@ -45,6 +48,7 @@ def register(sub: Any) -> None:
         "laser-off frames, uncompressed (default 1: one rendered frame, as before)",
     )
     t3.add_argument("--json", action="store_true", help="print one JSON object")
+    add_sweep_arguments(t3)
     t3.set_defaults(func=cmd_table3)
     for extension in EXTENSIONS:
         extension(esub)
@@ -70,18 +74,36 @@ def _matching(data: Path, n: int, seed: int, degraded: bool, tone_curve: str) ->
 def cmd_table3(args: argparse.Namespace) -> int:
     from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.errors import InputError
-    from omnisort_hw.evaluation.table3 import evaluate_dataset, format_table
+    from omnisort_hw.evaluation.table3 import format_table
 
     if args.n < 1:
         raise InputError(f"--n must be at least 1, got {args.n}")
     if args.frames > 1:
         return lighting_cmd.table3_with_captures(args)
-    data = args.data or Path("build") / (
-        f"table3-n{args.n}-seed{args.seed}"
-        + ("-degraded" if args.degraded else "")
-        + (f"-w{args.width}" if args.width else "")
-        + ("" if args.tone_curve == "srgb" else f"-{args.tone_curve}")
-    )
+    assume = ToneCurve.parse(args.assume_tone_curve) if args.assume_tone_curve else None
+    ToneCurve.parse(args.tone_curve)  # a bad name fails here, not on every worker
+    if args.data is None:
+        from omnisort_hw.evaluation.table3_trials import summarize_rows, table3_trials
+
+        trials = table3_trials(
+            args.n, args.seed, args.width, args.degraded, args.tone_curve, args.assume_tone_curve
+        )
+        run, folder = run_cli_sweep(args, "table3", trials)
+        result = summarize_rows(run.rows, str(folder))
+    else:
+        result = _evaluate_data(args, assume)
+    if args.json:
+        print_result(result)
+    else:
+        print(format_table(result))
+    return 0
+
+
+def _evaluate_data(args: argparse.Namespace, assume: Any) -> dict[str, Any]:
+    """--data: the dataset on disk (rendered into it first when it is not this one)."""
+    from omnisort_hw.evaluation.table3 import evaluate_dataset
+
+    data = args.data
     if not _matching(data, args.n, args.seed, args.degraded, args.tone_curve):
         from sim_backend.dataset import make_dataset
 
@@ -96,10 +118,4 @@ def cmd_table3(args: argparse.Namespace) -> int:
             progress=sys.stderr.isatty() or not args.json,
             tone_curve=args.tone_curve,
         )
-    assume = ToneCurve.parse(args.assume_tone_curve) if args.assume_tone_curve else None
-    result = evaluate_dataset(data, progress=sys.stderr.isatty(), tone=assume)
-    if args.json:
-        print_result(result)
-    else:
-        print(format_table(result))
-    return 0
+    return evaluate_dataset(data, progress=sys.stderr.isatty(), tone=assume)

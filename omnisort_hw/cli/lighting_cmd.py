@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 
 
 def add_lighting_evaluation(esub: Any) -> None:
@@ -22,13 +23,24 @@ def add_lighting_evaluation(esub: Any) -> None:
     p.add_argument(
         "--scenario", action="append", default=None, help="only this scenario (repeatable)"
     )
+    p.add_argument(
+        "--no-calibration",
+        action="store_true",
+        help="leave out the calibrations from each acquisition (the map's figures only)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_sweep_arguments(p)
     p.set_defaults(func=cmd_lighting)
 
 
 def cmd_lighting(args: argparse.Namespace) -> int:
     from omnisort_hw.errors import InputError
-    from omnisort_hw.evaluation.lighting import SCENARIOS, evaluate_lighting, format_lighting
+    from omnisort_hw.evaluation.lighting import (
+        SCENARIOS,
+        format_lighting,
+        lighting_trials,
+        summarize_lighting,
+    )
 
     chosen = tuple(args.scenario or SCENARIOS)
     unknown = [s for s in chosen if s not in SCENARIOS]
@@ -38,9 +50,11 @@ def cmd_lighting(args: argparse.Namespace) -> int:
         raise InputError(f"--frames must be 1..64, got {args.frames}")
     if args.width < 64:
         raise InputError(f"--width must be at least 64, got {args.width}")
-    result = evaluate_lighting(
-        args.seed, args.frames, args.width, chosen, progress=sys.stderr.isatty()
+    trials = lighting_trials(
+        args.seed, args.frames, args.width, chosen, calibrate=not args.no_calibration
     )
+    run, _ = run_cli_sweep(args, "lighting", trials)
+    result = summarize_lighting(run.rows, args.seed, args.frames, args.width)
     if args.json:
         print_result(result)
     else:

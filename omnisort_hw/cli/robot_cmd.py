@@ -24,6 +24,7 @@ from typing import Any
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.cell_file import load_cell, sorting_config
 from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.pipeline.sort import resolve_sorting
 
@@ -128,6 +129,7 @@ def add_sorting_evaluation(esub: Any) -> None:
     ev.add_argument("--max-angle", type=float, default=10.0, help="camera angles, +-deg")
     ev.add_argument("--out", type=output_file, default=None, help="also write the result JSON here")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
+    add_sweep_arguments(ev)
     ev.set_defaults(func=cmd_evaluate_sorting)
 
 
@@ -425,26 +427,25 @@ def _print_report(result: dict[str, Any], as_json: bool) -> None:
 
 
 def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
-    from omnisort_hw.evaluation.sorting import SUMMARY_KEYS, evaluate_sorting
+    import time
+
+    from omnisort_hw.evaluation.sorting import SUMMARY_KEYS, sorting_trials, summarize_rows
     from omnisort_hw.fileio import atomic_write_json
 
     if args.scenes < 1:
         raise InputError(f"--scenes must be at least 1, got {args.scenes}")
 
-    def progress(k: int, row: dict[str, Any]) -> None:
+    def progress(row: dict[str, Any]) -> None:
         if args.json:
             return
-        state = row.get("error") or f"{row['sorted_ok']}/{row['cubes']} sorted"
-        print(f"  scene {k + 1}/{args.scenes}: {state}", file=sys.stderr, flush=True)
+        res = row["result"]
+        state = res.get("error") or f"{res['sorted_ok']}/{res['cubes']} sorted"
+        print(f"  scene {res['scene'] + 1}/{args.scenes}: {state}", file=sys.stderr, flush=True)
 
-    result = evaluate_sorting(
-        scenes=args.scenes,
-        seed=args.seed,
-        width=args.width,
-        calibration=args.calibration,
-        max_angle_deg=args.max_angle,
-        progress=progress,
-    )
+    trials = sorting_trials(args.scenes, args.seed, args.width, args.calibration, args.max_angle)
+    t0 = time.perf_counter()
+    run, _ = run_cli_sweep(args, "sorting", trials, on_row=progress)
+    result = summarize_rows(run.rows, time.perf_counter() - t0)
     if args.out is not None:
         atomic_write_json(args.out, result, keep_history=False)
     if args.json:

@@ -21,6 +21,7 @@ Per scenario and method:
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -39,6 +40,7 @@ from omnisort_hw.pipeline.measurement_capture import (
     capture_measurement,
     single_frame,
 )
+from omnisort_hw.sweeps.trial import Trial, TrialOutput, merge_paths, split_paths
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
 from sim_backend.hostile_light import SCENARIOS
 
@@ -196,6 +198,47 @@ def run_scenario(
     return result
 
 
+# Entries of a scenario's result that depend on the machine: the simulator's wall times and
+# the capture time, whose laser switching is measured on the wall clock.
+_TIMED = ("wall_s", "capture_s", "record.wall_s", "record.capture_s", "record.laser_switching_s")
+LIGHTING_TIMING = tuple(f"{key}.{path}" for key in ("single", "capture") for path in _TIMED)
+
+
+def lighting_trials(
+    seed: int,
+    frames: int = 8,
+    width: int = 1280,
+    scenarios: tuple[str, ...] = SCENARIOS,
+    calibrate: bool = True,
+) -> list[Trial]:
+    """One trial per scenario (the seed: the cell's noise seed, the same for every one);
+    `calibrate=False` leaves out the calibrations (the map's figures alone, faster)."""
+    config = {"frames": frames, "width": width}
+    if not calibrate:
+        config["calibrate"] = False
+    return [Trial("lighting", {"scenario": name, **config}, seed) for name in scenarios]
+
+
+def lighting_trial(config: Mapping[str, Any], seed: int) -> TrialOutput:
+    """`run_scenario` of the configuration, its wall times in timing."""
+    result = run_scenario(
+        config["scenario"],
+        seed,
+        int(config["frames"]),
+        int(config["width"]),
+        calibrate=bool(config.get("calibrate", True)),
+    )
+    return split_paths(result, LIGHTING_TIMING)
+
+
+def summarize_lighting(
+    rows: Sequence[Mapping[str, Any]], seed: int, frames: int, width: int
+) -> dict[str, Any]:
+    """`evaluate_lighting`'s object from a sweep's lighting rows (manifest order)."""
+    scenarios = {r["config"]["scenario"]: merge_paths(r["result"], r["timing"]) for r in rows}
+    return {"seed": seed, "frames": frames, "width": width, "scenarios": scenarios}
+
+
 def evaluate_lighting(
     seed: int,
     frames: int = 8,
@@ -203,7 +246,7 @@ def evaluate_lighting(
     scenarios: tuple[str, ...] = SCENARIOS,
     progress: bool = True,
 ) -> dict[str, Any]:
-    """Every scenario (see the module docstring); JSON-ready."""
+    """Every scenario (see the module docstring), in this process; JSON-ready."""
     from tqdm import tqdm
 
     out: dict[str, Any] = {"seed": seed, "frames": frames, "width": width, "scenarios": {}}

@@ -10,7 +10,7 @@ pipeline's `Sorter`, and the result verified from the simulator's state
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -22,6 +22,7 @@ from omnisort_hw.errors import InputError
 from omnisort_hw.pipeline.calibration_source import MemoryCalibration
 from omnisort_hw.pipeline.sort import Sorter
 from omnisort_hw.runlog import NullLog, RunLog
+from omnisort_hw.sweeps.trial import Trial, TrialOutput, merge_paths, split_paths
 from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
 from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
 from sim_backend.scene import BinSpec as SceneBin
@@ -35,17 +36,16 @@ from sim_backend.sort_harness import (
 EVAL_COLORS = ("red", "green", "blue", "black")
 
 
-def random_scene(
+def draw_layout(
     base: Any,
     rng: np.random.Generator,
     n_cubes: int,
     colors: Sequence[str] = EVAL_COLORS,
     max_angle_deg: float = 10.0,
-    home_deg: Sequence[float] | None = None,
     min_spacing_mm: float = 220.0,
-) -> Any:
-    """The sorting scene with random camera angles (+-max), n cubes of random colours, positions
-    and yaws within reach and apart enough for the open gripper, and bins of `colors`."""
+) -> dict[str, Any]:
+    """A random layout (JSON): camera angles (+-max), n cubes [colour, x, y, yaw] of random
+    colours, positions and yaws within reach and apart enough for the open gripper."""
     robot = base.robot
     bx, by = robot.base_mm
     placed: list[np.ndarray] = []
@@ -66,30 +66,49 @@ def random_scene(
             break
     else:
         raise InputError(f"cannot place {n_cubes} cubes {min_spacing_mm} mm apart")
+    # The draws in the order the experiment always made them: colours, yaws, camera.
+    cubes = [
+        [str(c), float(p[0]), float(p[1]), float(rng.uniform(0.0, 90.0))]
+        for p, c in zip(placed, rng.choice(list(colors), n_cubes), strict=True)
+    ]
+    ang = rng.uniform(-max_angle_deg, max_angle_deg, 3)
+    return {
+        "camera": {"roll_deg": float(ang[0]), "pitch_deg": float(ang[1]), "yaw_deg": float(ang[2])},
+        "cubes": cubes,
+        "bins": list(colors),
+    }
+
+
+def apply_layout(base: Any, layout: dict[str, Any], home_deg: Sequence[float] | None) -> Any:
+    """The base scene with a layout's camera angles, cubes and bins (`draw_layout`)."""
     size = base.cubes[0].size_mm if base.cubes else 100.0
     cubes = tuple(
-        CubeSpec(
-            Color(c, NAMED_COLORS[c]),
-            size,
-            (float(p[0]), float(p[1])),
-            float(rng.uniform(0.0, 90.0)),
-        )
-        for p, c in zip(placed, rng.choice(list(colors), n_cubes), strict=True)
+        CubeSpec(Color(c, NAMED_COLORS[c]), size, (float(x), float(y)), float(yaw))
+        for c, x, y, yaw in layout["cubes"]
     )
     bins = tuple(
         SceneBin(Color(c, NAMED_COLORS[c]), b.position_mm, b.size_mm, b.wall_mm, b.yaw_deg)
-        for b, c in zip(base.bins, colors, strict=False)
+        for b, c in zip(base.bins, layout["bins"], strict=False)
     )
-    ang = rng.uniform(-max_angle_deg, max_angle_deg, 3)
     robot_changes: dict[str, Any] = {}
     if home_deg is not None:
         robot_changes["home_deg"] = tuple(float(v) for v in home_deg)
-    return base.replace(
-        camera={"roll_deg": float(ang[0]), "pitch_deg": float(ang[1]), "yaw_deg": float(ang[2])},
-        cubes=cubes,
-        bins=bins,
-        robot=robot_changes or {},
-    )
+    return base.replace(camera=dict(layout["camera"]), cubes=cubes, bins=bins, robot=robot_changes)
+
+
+def random_scene(
+    base: Any,
+    rng: np.random.Generator,
+    n_cubes: int,
+    colors: Sequence[str] = EVAL_COLORS,
+    max_angle_deg: float = 10.0,
+    home_deg: Sequence[float] | None = None,
+    min_spacing_mm: float = 220.0,
+) -> Any:
+    """The sorting scene with random camera angles (+-max), n cubes of random colours, positions
+    and yaws within reach and apart enough for the open gripper, and bins of `colors`."""
+    layout = draw_layout(base, rng, n_cubes, colors, max_angle_deg, min_spacing_mm)
+    return apply_layout(base, layout, home_deg)
 
 
 # The headline figures of `evaluate_sorting`, in the order people read them (CLI, benchmark).
@@ -115,6 +134,125 @@ SUMMARY_KEYS = (
 )
 
 
+# Entries of a scene's row that depend on the machine (wall and CPU times), kept apart from
+# the result (`split_paths`): everything else depends on the trial's inputs only.
+SORTING_TIMING = (
+    "wall_s_per_pick",
+    "timings_s",
+    "cycle.wait_s",
+    "cycle.locate_s",
+    "cycle.plan_ms_mean",
+    "cycle.plan_ms_max",
+    "cycle.wait_s_per_pick",
+    "cycle.cycle_s_per_pick",
+    "cycle.picks_per_minute",
+)
+
+
+def sorting_trials(
+    scenes: int = 50,
+    seed: int = 0,
+    width: int = 960,
+    calibration: str = "truth",
+    max_angle_deg: float = 10.0,
+    cubes: tuple[int, int] = (3, 6),
+) -> list[Trial]:
+    """The experiment's scenes as trials: the seeded draws (cube count, layout, calibration
+    errors) are made here, in the order the experiment always made them, and written into
+    each trial's configuration; a trial's seed is its simulated cell's noise seed."""
+    if calibration not in ("truth", "perturbed"):
+        raise InputError(f"--calibration must be truth or perturbed, got {calibration!r}")
+    rng = np.random.default_rng(seed)
+    base = sized(load_scene("sorting"), width)
+    trials = []
+    for k in range(scenes):
+        n = int(rng.integers(cubes[0], cubes[1] + 1))
+        config: dict[str, Any] = {
+            "scene": k,
+            "sweep_seed": seed,
+            "width": width,
+            "calibration": calibration,
+            "layout": draw_layout(base, rng, n, max_angle_deg=max_angle_deg),
+        }
+        if calibration == "perturbed":
+            config["calibration_errors"] = draw_calibration_errors(rng)
+        trials.append(Trial("sorting", config, seed * 1000 + k))
+    return trials
+
+
+def sorting_trial(config: Mapping[str, Any], seed: int) -> TrialOutput:
+    """One scene: register the robot from the image, locate, sort, verify (the row of
+    `summarize_sorting`, its machine-dependent entries in timing)."""
+    row = sort_scene(config, seed, NullLog)
+    return split_paths(row, SORTING_TIMING)
+
+
+def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, Any]:
+    """The scene of `config` sorted on a simulated cell seeded with `seed`; its row."""
+    base = sized(load_scene("sorting"), int(config["width"]))
+    cfg0 = SortConfig()
+    scene = apply_layout(base, config["layout"], cfg0.home_deg)
+    k, n = int(config["scene"]), len(config["layout"]["cubes"])
+    cfg = sim_sort_config(scene, cfg0)
+    reg_cfg = sim_registration_config(scene)
+    cell = SimCell(scene, seed=seed)
+    cam, laser, arm = SimCamera(cell), SimLaserSwitch(cell), SimArm(cell)
+    row: dict[str, Any] = {"scene": k, "cubes": n}
+    try:
+        for d in (cam, laser, arm):
+            d.connect()
+        truth = cam.grab(with_truth=True) and cam.last_truth
+        assert truth is not None
+        calib = SystemCalibration.from_json(truth, source="truth")
+        if "calibration_errors" in config:
+            calib = perturbed(calib, config["calibration_errors"])
+        verifier = SimVerifier(arm)
+        verifier.start()
+        sorter = Sorter(
+            cam,
+            arm,
+            laser,
+            MemoryCalibration(calib),
+            cfg,
+            reg_cfg,
+            log,
+            clock=lambda cell=cell: cell.world.sim_time,  # the arm's time, not the PC's
+        )
+        t0 = time.perf_counter()
+        report = sorter.run(register=True, on_located=verifier.on_located, on_done=verifier.on_done)
+        wall = time.perf_counter() - t0
+        verifier.stop()
+        assert report.registration is not None
+        T_est = np.asarray(report.registration["matrix"], float)
+        reg_mm, reg_deg = pose_error(T_est, verifier.T_SB())
+        tot = report.totals()
+        picks = max(1, tot["sorted"])
+        row.update(
+            sorted_ok=tot["sorted_ok"],
+            collisions=tot["collisions"],
+            position_errors_mm=[o.error_mm for o in report.outcomes if o.error_mm is not None],
+            position_errors_B_mm=report.extra.get("errors_B_mm", []),
+            registration_error_mm=reg_mm,
+            registration_error_deg=reg_deg,
+            motion_s_per_pick=tot["motion_s_per_pick"],
+            cycle=report.extra.get("cycle", {}),
+            wall_s_per_pick=wall / picks,
+            skipped=[
+                o.reason for o in report.outcomes if o.status in ("skipped", "missed", "failed")
+            ],
+            collision_events=report.extra.get("collision_events", []),
+            timings_s=report.extra.get("timings_s", {}),
+            checks=report.extra.get("checks", []),
+        )
+    except Exception as exc:
+        row.update(sorted_ok=0, collisions=None, error=f"{type(exc).__name__}: {exc}")
+    finally:
+        for d in (arm, laser, cam):
+            d.close()
+        cell.close()
+    return row
+
+
 def evaluate_sorting(
     scenes: int = 50,
     seed: int = 0,
@@ -125,86 +263,31 @@ def evaluate_sorting(
     progress: Callable[[int, dict[str, Any]], None] | None = None,
     log: RunLog = NullLog,
 ) -> dict[str, Any]:
-    """The random-scene experiment on the simulated cell: per scene, register the robot from the
-    image, locate, sort, verify against the simulator's state; returns the totals.
+    """The random-scene experiment on the simulated cell, in this process: per scene,
+    register the robot from the image, locate, sort, verify against the simulator's state;
+    returns the totals (a sweep runs the same trials elsewhere: `sorting_trials`).
 
     `calibration`: "truth" uses the true camera rotation and laser plane; "perturbed" adds the
     joint method's typical errors (0.1 deg per camera angle, 0.15 deg per laser angle, 3 mm
     laser distance, Gaussian) to emulate a calibrated cell.
     """
-    if calibration not in ("truth", "perturbed"):
-        raise InputError(f"--calibration must be truth or perturbed, got {calibration!r}")
-    rng = np.random.default_rng(seed)
-    base = sized(load_scene("sorting"), width)
-    cfg0 = SortConfig()
+    trials = sorting_trials(scenes, seed, width, calibration, max_angle_deg, cubes)
     rows: list[dict[str, Any]] = []
     t_all = time.perf_counter()
-    for k in range(scenes):
-        n = int(rng.integers(cubes[0], cubes[1] + 1))
-        scene = random_scene(base, rng, n, max_angle_deg=max_angle_deg, home_deg=cfg0.home_deg)
-        cfg = sim_sort_config(scene, cfg0)
-        reg_cfg = sim_registration_config(scene)
-        cell = SimCell(scene, seed=seed * 1000 + k)
-        cam, laser, arm = SimCamera(cell), SimLaserSwitch(cell), SimArm(cell)
-        row: dict[str, Any] = {"scene": k, "cubes": n}
-        try:
-            for d in (cam, laser, arm):
-                d.connect()
-            truth = cam.grab(with_truth=True) and cam.last_truth
-            assert truth is not None
-            calib = SystemCalibration.from_json(truth, source="truth")
-            if calibration == "perturbed":
-                calib = perturb_calibration(calib, rng)
-            verifier = SimVerifier(arm)
-            verifier.start()
-            sorter = Sorter(
-                cam,
-                arm,
-                laser,
-                MemoryCalibration(calib),
-                cfg,
-                reg_cfg,
-                log,
-                clock=lambda cell=cell: cell.world.sim_time,  # the arm's time, not the PC's
-            )
-            t0 = time.perf_counter()
-            report = sorter.run(
-                register=True, on_located=verifier.on_located, on_done=verifier.on_done
-            )
-            wall = time.perf_counter() - t0
-            verifier.stop()
-            assert report.registration is not None
-            T_est = np.asarray(report.registration["matrix"], float)
-            reg_mm, reg_deg = pose_error(T_est, verifier.T_SB())
-            tot = report.totals()
-            picks = max(1, tot["sorted"])
-            row.update(
-                sorted_ok=tot["sorted_ok"],
-                collisions=tot["collisions"],
-                position_errors_mm=[o.error_mm for o in report.outcomes if o.error_mm is not None],
-                position_errors_B_mm=report.extra.get("errors_B_mm", []),
-                registration_error_mm=reg_mm,
-                registration_error_deg=reg_deg,
-                motion_s_per_pick=tot["motion_s_per_pick"],
-                cycle=report.extra.get("cycle", {}),
-                wall_s_per_pick=wall / picks,
-                skipped=[
-                    o.reason for o in report.outcomes if o.status in ("skipped", "missed", "failed")
-                ],
-                collision_events=report.extra.get("collision_events", []),
-                timings_s=report.extra.get("timings_s", {}),
-                checks=report.extra.get("checks", []),
-            )
-        except Exception as exc:
-            row.update(sorted_ok=0, collisions=None, error=f"{type(exc).__name__}: {exc}")
-        finally:
-            for d in (arm, laser, cam):
-                d.close()
-            cell.close()
-        rows.append(row)
+    for trial in trials:
+        rows.append(sort_scene(trial.config, trial.seed, log))
         if progress is not None:
-            progress(k, row)
+            progress(len(rows) - 1, rows[-1])
     return summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration)
+
+
+def summarize_rows(rows: Sequence[Mapping[str, Any]], wall_s: float) -> dict[str, Any]:
+    """`evaluate_sorting`'s totals from a sweep's sorting rows (manifest order)."""
+    if not rows:
+        raise InputError("no sorting rows to summarise")
+    c = rows[0]["config"]
+    scene_rows = [merge_paths(r["result"], r["timing"]) for r in rows]
+    return summarize_sorting(scene_rows, wall_s, c["sweep_seed"], c["width"], c["calibration"])
 
 
 def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
@@ -261,21 +344,32 @@ def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
     }
 
 
+CALIBRATION_ERROR_SD = {
+    "cam_roll_deg": 0.1,
+    "cam_pitch_deg": 0.1,
+    "cam_yaw_deg": 0.1,
+    "laser_roll_deg": 0.15,
+    "laser_pitch_deg": 0.15,
+    "laser_distance_mm": 3.0,
+}
+
+
+def draw_calibration_errors(rng: np.random.Generator) -> dict[str, float]:
+    """Gaussian errors of the joint method's typical size, one per calibrated figure."""
+    return {k: float(rng.normal(0.0, sd)) for k, sd in CALIBRATION_ERROR_SD.items()}
+
+
+def perturbed(calib: SystemCalibration, errors: Mapping[str, float]) -> SystemCalibration:
+    """The calibration with `errors` added to its figures (`draw_calibration_errors`)."""
+    noisy = {k: v + float(errors[k]) for k, v in calib.parameters().items()}
+    return SystemCalibration.from_angles(
+        calib.model, noisy, "perturbed", target=calib.target, std=dict(CALIBRATION_ERROR_SD)
+    )
+
+
 def perturb_calibration(calib: SystemCalibration, rng: np.random.Generator) -> SystemCalibration:
     """The calibration with Gaussian errors of the joint method's typical size."""
-    p = calib.parameters()
-    sd = {
-        "cam_roll_deg": 0.1,
-        "cam_pitch_deg": 0.1,
-        "cam_yaw_deg": 0.1,
-        "laser_roll_deg": 0.15,
-        "laser_pitch_deg": 0.15,
-        "laser_distance_mm": 3.0,
-    }
-    noisy = {k: v + float(rng.normal(0.0, sd[k])) for k, v in p.items()}
-    return SystemCalibration.from_angles(
-        calib.model, noisy, "perturbed", target=calib.target, std=dict(sd)
-    )
+    return perturbed(calib, draw_calibration_errors(rng))
 
 
 def summarize_sorting(

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -101,6 +102,16 @@ def truth_parameters(truth: dict[str, Any]) -> dict[str, float]:
     }
 
 
+def run_entry(calib: SystemCalibration, truth: dict[str, Any]) -> dict[str, Any]:
+    """One calibration against truth: signed errors in PARAMETERS' order, and the reported
+    std where the method gives one for every parameter."""
+    want, got = truth_parameters(truth), calib.parameters()
+    entry: dict[str, Any] = {"error": [got[k] - want[k] for k in PARAMETERS]}
+    if all(k in calib.std for k in PARAMETERS):
+        entry["std"] = [float(calib.std[k]) for k in PARAMETERS]
+    return entry
+
+
 @dataclass
 class MethodStats:
     errors: list[np.ndarray] = field(default_factory=list)
@@ -110,12 +121,18 @@ class MethodStats:
 
     def add(self, calib: SystemCalibration, truth: dict[str, Any], seconds: float) -> None:
         """Count one calibration: its time, its signed errors and its reported std."""
-        self.times.append(seconds)
-        want = truth_parameters(truth)
-        got = calib.parameters()
-        self.errors.append(np.array([got[k] - want[k] for k in PARAMETERS]))
-        if all(k in calib.std for k in PARAMETERS):
-            self.stds.append(np.array([calib.std[k] for k in PARAMETERS]))
+        self.add_run(run_entry(calib, truth), seconds)
+
+    def add_run(self, run: dict[str, Any], seconds: float | None) -> None:
+        """Count one calibration of a configuration's row (`calibrate_config`)."""
+        if "failure" in run:
+            self.failures.append(run["failure"])
+            return
+        if seconds is not None:
+            self.times.append(seconds)
+        self.errors.append(np.asarray(run["error"], float))
+        if "std" in run:
+            self.stds.append(np.asarray(run["std"], float))
 
     def summary(self) -> dict[str, Any]:
         out: dict[str, Any] = {"n": len(self.errors), "failures": self.failures}
@@ -126,7 +143,8 @@ class MethodStats:
                 k: float(v) for k, v in zip(PARAMETERS, np.sqrt((e**2).mean(axis=0)), strict=True)
             }
             out["max"] = {k: float(v) for k, v in zip(PARAMETERS, e.max(axis=0), strict=True)}
-            out["mean_time_s"] = float(np.mean(self.times))
+            if self.times:
+                out["mean_time_s"] = float(np.mean(self.times))
         if self.stds and len(self.stds) == len(self.errors):
             # Normalised errors: ~1 when the reported standard deviations are honest.
             z = np.array(self.errors) / np.maximum(np.array(self.stds), 1e-12)
@@ -193,6 +211,70 @@ def _calibrate(
     )
 
 
+def calibrate_config(
+    folder: Path, tone: ToneCurve, calibrated: Callable[[], None] | None = None
+) -> tuple[dict[str, Any], dict[str, float]]:
+    """Every run of RUNS on one configuration's images: (result, seconds per run). The
+    result holds, per run, the signed errors against truth in PARAMETERS' order, the reported
+    std where the method has one, and for `joint` the mapping check's relative errors; or the
+    failure. Paths inside messages are made relative to `folder`, so the result does not
+    depend on where the images were."""
+    runs: dict[str, Any] = {}
+    seconds: dict[str, float] = {}
+    for row, (method, scene) in RUNS.items():
+        truth = json.loads((folder / f"{scene}.truth.json").read_text())
+        model = OcamModel.from_dict(truth["camera"], source=str(folder / scene))
+        t0 = time.perf_counter()
+        try:
+            calib = _calibrate(method, scene, folder / f"{scene}.png", model, truth, tone)
+        except OmnisortError as exc:
+            text = str(exc).replace(str(folder.parent) + "/", "")
+            runs[row] = {"failure": f"{folder.name}: {text}"}
+        else:
+            seconds[row] = time.perf_counter() - t0
+            entry = run_entry(calib, truth)
+            if row == "joint":
+                rel = mapping_errors(calib, SystemCalibration.from_json(truth))
+                entry["mapping_rel"] = [float(v) for v in rel]
+            runs[row] = entry
+        if calibrated is not None:
+            calibrated()
+    return {"folder": folder.name, "runs": runs}, seconds
+
+
+def summarize_table3(
+    rows: Sequence[tuple[dict[str, Any], dict[str, float] | None]],
+    dataset: str,
+    seed: int | None,
+    degraded: bool,
+) -> dict[str, Any]:
+    """The comparison's summary from `calibrate_config` rows (result, seconds), in
+    configuration order: per method MAE, RMSE, max, z_rms, mean time, failures; the mapping
+    check's worst and mean relative errors."""
+    stats = {m: MethodStats() for m in RUNS}
+    mapping: list[np.ndarray] = []
+    for result, seconds in rows:
+        for name in RUNS:
+            run = result["runs"][name]
+            stats[name].add_run(run, None if seconds is None else seconds.get(name))
+            if name == "joint" and "mapping_rel" in run:
+                mapping.append(np.asarray(run["mapping_rel"], float))
+    rel = np.concatenate(mapping) if mapping else np.zeros(0)
+    return {
+        "dataset": dataset,
+        "n": len(rows),
+        "seed": seed,
+        "degraded": degraded,
+        "methods": {m: s.summary() for m, s in stats.items()},
+        "mapping": {
+            "distances_mm": list(MAPPING_DISTANCES_MM),
+            "max_rel_error": float(rel.max()) if rel.size else None,
+            "mean_rel_error": float(rel.mean()) if rel.size else None,
+            "samples": int(rel.size),
+        },
+    }
+
+
 def evaluate_dataset(
     data_dir: str | Path,
     progress: bool = True,
@@ -211,46 +293,15 @@ def evaluate_dataset(
         raise InputError(f"{index_path}: no dataset here (render one with omnisort sim dataset)")
     index = json.loads(index_path.read_text())
     tone = tone or ToneCurve.parse(index.get("tone_curve", "linear"))
-    stats = {m: MethodStats() for m in RUNS}
-    mapping: list[np.ndarray] = []
     configs = index["configs"][:first]
-    bar = tqdm(
-        total=len(configs) * len(RUNS),
-        desc="calibrating",
-        unit="cal",
-        disable=not progress,
-    )
-    for cfg in configs:
-        folder = root / cfg["folder"]
-        for row, (method, scene) in RUNS.items():
-            truth = json.loads((folder / f"{scene}.truth.json").read_text())
-            model = OcamModel.from_dict(truth["camera"], source=str(folder / scene))
-            t0 = time.perf_counter()
-            try:
-                calib = _calibrate(method, scene, folder / f"{scene}.png", model, truth, tone)
-            except OmnisortError as exc:
-                stats[row].failures.append(f"{cfg['folder']}: {exc}")
-                bar.update(1)
-                continue
-            stats[row].add(calib, truth, time.perf_counter() - t0)
-            if row == "joint":
-                mapping.append(mapping_errors(calib, SystemCalibration.from_json(truth)))
-            bar.update(1)
-    bar.close()
-    rel = np.concatenate(mapping) if mapping else np.zeros(0)
-    return {
-        "dataset": str(root),
-        "n": len(configs),
-        "seed": index.get("seed"),
-        "degraded": index.get("degraded", False),
-        "methods": {m: s.summary() for m, s in stats.items()},
-        "mapping": {
-            "distances_mm": list(MAPPING_DISTANCES_MM),
-            "max_rel_error": float(rel.max()) if rel.size else None,
-            "mean_rel_error": float(rel.mean()) if rel.size else None,
-            "samples": int(rel.size),
-        },
-    }
+    with tqdm(
+        total=len(configs) * len(RUNS), desc="calibrating", unit="cal", disable=not progress
+    ) as bar:
+        rows = [
+            calibrate_config(root / cfg["folder"], tone, lambda: bar.update(1))
+            for cfg in configs
+        ]
+    return summarize_table3(rows, str(root), index.get("seed"), index.get("degraded", False))
 
 
 PUBLISHED_MAE = {

@@ -11,7 +11,7 @@ import pytest
 pytestmark = pytest.mark.timeout(600)
 
 
-def test_lighting_json_has_the_keys_and_the_capture_maps_no_spurious_point() -> None:
+def test_lighting_json_has_the_keys_and_the_capture_maps_no_spurious_point(tmp_path) -> None:
     proc = subprocess.run(
         [
             sys.executable,
@@ -27,6 +27,10 @@ def test_lighting_json_has_the_keys_and_the_capture_maps_no_spurious_point() -> 
             "640",
             "--scenario",
             "red_objects",
+            "--executor",
+            "serial",
+            "--sweep-dir",
+            str(tmp_path / "sweep"),
             "--json",
         ],
         capture_output=True,
