@@ -131,7 +131,8 @@ def test_extrinsics_calibrate_without_an_image_measures_with_the_configured_cell
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     res = json.loads(proc.stdout)["result"]
-    assert res["capture"]["frames"] == 8 and res["capture"]["pixel_format"] == "BGR3"
+    capture = res["image"]["capture"]  # the image record, as the service replies it
+    assert capture["frames"] == 8 and capture["pixel_format"] == "BGR3"
     saved = json.loads(out.read_text())
     assert saved["image"]["capture"]["method"] == "laser on/off difference"
     want = truth_parameters(truth)
