@@ -40,7 +40,10 @@ def main() -> int:
     if args.only:
         names = [n for n in names if n.removeprefix("bench_") in args.only]
     out_path = HERE / "results.json"
-    results: dict[str, Any] = {"machine": machine()}
+    # The shared record describes the machine of a full run; a partial run (--only) names
+    # its own in each section it writes, so the other sections keep theirs.
+    here = machine()
+    results: dict[str, Any] = {} if args.only else {"machine": here}
     failed = 0
     for name in names:
         module = importlib.import_module(f"benchmarks.{name}")
@@ -54,6 +57,8 @@ def main() -> int:
             continue
         figures["_wall_s"] = round(time.perf_counter() - t0, 2)
         figures["_date"] = datetime.now(UTC).isoformat(timespec="seconds")
+        if args.only:
+            figures["_machine"] = here
         results[name.removeprefix("bench_")] = figures
         for key, value in figures.items():
             print(f"   {key:<44} {value}", flush=True)
