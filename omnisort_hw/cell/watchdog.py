@@ -57,7 +57,6 @@ class DriftWatchdog:
 
     def __init__(self, ports: WatchdogPorts, config: WatchdogConfig | None = None) -> None:
         self.ports = ports
-        self.store = ports.store
         self.config = config or WatchdogConfig()
         self._lock = threading.Lock()
         self._path = Path(ports.store.state_dir) / DRIFT_STATE_NAME
@@ -66,6 +65,10 @@ class DriftWatchdog:
         self._stop = threading.Event()
         # Set by the service: True while a job runs (the periodic check then waits).
         self.busy: Callable[[], bool] = lambda: False
+
+    @property
+    def store(self) -> CalibrationStore:
+        return self.ports.store
 
     # -- state -------------------------------------------------------------------------------
 

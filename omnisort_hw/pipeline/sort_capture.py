@@ -32,7 +32,6 @@ def sort_capture_for(
 ) -> Callable[[], tuple[np.ndarray, np.ndarray | None, dict[str, Any]]] | None:
     """The capture the cell's sort uses, or None (single frames) without a laser or with
     `[capture].differencing = false`."""
-    settings = getattr(cell.config, "capture", None)
-    if cell.devices.laser is None or (settings is not None and not settings.differencing):
+    if cell.devices.laser is None or not cell.capture_settings.differencing:
         return None
     return lambda: cell_sort_capture(cell)
