@@ -171,24 +171,24 @@ def _registration(args: argparse.Namespace) -> Any:
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    from omnisort_hw.cli.extrinsics_cmd import laser_off_frame, load_system
-    from omnisort_hw.pipeline.image_files import read_image
-    from omnisort_hw.pipeline.registration import (
-        register_from_image,
-        robot_base_record,
-        write_robot_base,
-    )
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import registration
+    from omnisort_hw.pipeline.requests import RegisterRequest
     from omnisort_hw.runlog import RunLog
 
-    rc = _registration(args)
-    calib = load_system(args.system)
-    image = read_image(args.image) if args.image else laser_off_frame(args.config)
-    source = str(args.image) if args.image else "capture"
+    request = RegisterRequest(
+        image=str(args.image) if args.image else None, save=not args.dry_run, model=args.model
+    )
     with RunLog(args.log) as log:
-        log.image("registration/image", image)
-        reg = register_from_image(image, calib, rc, log)
-    record = robot_base_record(reg, rc, source, args.model)
-    written = None if args.dry_run else write_robot_base(args.system, record)
+        rig = FileRig(
+            config=args.config,
+            system=args.system,
+            log=log,
+            sort_config=None,
+            registration_config=_registration(args),
+        )
+        result = registration.run(rig, request)
+    record, reg, written = result.record, result.registration, result.path
     if args.json:
         print_result({**record, "written": str(written) if written else None})
     else:
@@ -234,36 +234,28 @@ def _locate_config(args: argparse.Namespace) -> Any:
 
 
 def cmd_locate(args: argparse.Namespace) -> int:
-    from omnisort_hw.cli.extrinsics_cmd import laser_off_frame, load_system, measure
-    from omnisort_hw.pipeline.calibration_source import robot_base_T
-    from omnisort_hw.pipeline.image_files import read_image
-    from omnisort_hw.pipeline.locate import locate_in_images
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import locate
+    from omnisort_hw.pipeline.requests import LocateRequest
     from omnisort_hw.runlog import RunLog
 
-    calib = load_system(args.system)
-    T_SB = robot_base_T(calib, str(args.system), for_motion=False)
-    cfg = _locate_config(args)
-    laser_image = read_image(args.laser_image) if args.laser_image is not None else None
+    request = LocateRequest(
+        image=str(args.image) if args.image is not None else None,
+        laser_image=str(args.laser_image) if args.laser_image is not None else None,
+    )
     with RunLog(args.log) as log:
-        if args.image is not None:
-            image = read_image(args.image)
-        elif cfg.use_laser and laser_image is None:
-            # As the service: the capture's averaged laser-off image and its laser light.
-            cap = measure(args.config, log, board=True)
-            image, laser_image = cap.board_image, cap.stripe_image
-        else:
-            image = laser_off_frame(args.config)
-        log.image("locate/image", image)
-        cubes, diag = locate_in_images(
-            image, laser_image, calib, cfg, T_SB, calib.robot_base, log, prefix="locate"
+        rig = FileRig(
+            config=args.config,
+            system=args.system,
+            log=log,
+            sort_config=_locate_config(args),
+            registration_config=None,
         )
-    result = {
-        "cubes": [c.summary() for c in cubes],
-        "rejected": [r for r in diag["rejected"] if r["reason"] != "outside the search region"],
-    }
+        result = locate.run(rig, request)
     if args.json:
-        print_result(result)
+        print_result(result.reply())
         return 0
+    cubes = result.cubes
     print(f"{len(cubes)} cubes")
     for i, c in enumerate(cubes):
         s, b = c.center_S, c.center_B

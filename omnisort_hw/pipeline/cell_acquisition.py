@@ -23,8 +23,7 @@ from omnisort_hw import fileio
 from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import OmnisortError
-from omnisort_hw.pipeline.extrinsics import image_record
-from omnisort_hw.pipeline.image_files import read_image
+from omnisort_hw.pipeline.image_files import image_record, read_image
 from omnisort_hw.pipeline.measurement_capture import capture_measurement
 from omnisort_hw.runlog import RunLog
 

@@ -21,6 +21,7 @@ from omnisort_hw.pipeline.calibration_source import (
     MemoryCalibration,
     StoreCalibration,
 )
+from omnisort_hw.pipeline.requests import LocateRequest, RegisterRequest
 from omnisort_hw.pipeline.sort import Sorter
 from omnisort_hw.runlog import RunLog, entity_paths
 from sim_backend.sort_harness import SimScene, SimVerifier, sim_registration_config, sim_sort_config
@@ -214,11 +215,11 @@ def test_service_commands_through_the_cell(tmp_path: Path) -> None:
     cell.connect()
     try:
         cancel = threading.Event()
-        reg = cell.register_robot(None, cancel)
+        reg = cell.register_robot(RegisterRequest(), cancel)
         rb = store.load_system()["robot_base"]
         assert rb == json.loads(json.dumps(reg["robot_base"]))
         np.testing.assert_allclose(rb["xyz_mm"], truth["robot_base"]["xyz_mm"], atol=3.0)
-        located = cell.locate(None, None, cancel)
+        located = cell.locate(LocateRequest(), cancel)
         assert located["count"] == 1 and located["cubes"][0]["color"] == "blue"
         np.testing.assert_allclose(
             located["cubes"][0]["center_B_mm"], truth["cubes"][0]["center_B_mm"], atol=3.0
