@@ -10,7 +10,8 @@ cell it uses. A command whose section is missing raises `NotAvailableError` nami
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -19,7 +20,7 @@ import numpy as np
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.errors import MotionRefusedError, NotAvailableError
+from omnisort_hw.errors import MotionRefusedError
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.requests import (
     ExtrinsicsRequest,
@@ -27,6 +28,7 @@ from omnisort_hw.pipeline.requests import (
     LocateRequest,
     MapRequest,
     RegisterRequest,
+    SortRequest,
 )
 
 if TYPE_CHECKING:
@@ -40,6 +42,8 @@ if TYPE_CHECKING:
     from omnisort_hw.config.sorting import RegistrationConfig
     from omnisort_hw.core.camera_model import OcamModel
     from omnisort_hw.core.radiometry import ToneCurve
+    from omnisort_hw.pipeline.calibration_source import CalibrationSource
+    from omnisort_hw.pipeline.sort_run import SortSession
     from omnisort_hw.runlog import RunLog
 
 
@@ -205,54 +209,51 @@ class CellJobs:
     def map_picture_path(self, image: str | None) -> Path:
         return self.store.path("system").with_name("map_overlay.png")
 
-    def _sorting(self, what: str) -> SortConfig:
-        if self.sort_config is None:
-            raise NotAvailableError(
-                f"{what} needs a [sorting] section in the cell configuration (bins, obstacles, "
-                "cube size, home pose; or from_scene = true)"
-            )
-        return self.sort_config
-
     def sort(
         self,
-        max_objects: int | None,
-        colors: list[str] | None,
+        request: SortRequest,
         cancel: threading.Event,
         progress: Callable[[dict[str, Any]], None] | None = None,
     ) -> dict[str, Any]:
         """Locate, pick and place every object by colour until done, `max_objects` or cancel;
-        gated by the calibration store."""
-        from omnisort_hw.pipeline.calibration_source import StoreCalibration, robot_base_T
-        from omnisort_hw.pipeline.gripper_load import resolve_before_sort
-        from omnisort_hw.pipeline.sort import Sorter
-        from omnisort_hw.pipeline.sort_capture import sort_capture_for
+        gated by the calibration store and the drift watchdog (`pipeline.sort_run`)."""
+        from omnisort_hw.pipeline import sort_run
 
-        cfg = self._sorting("the sorting pipeline")
-        if self.devices.camera is None or self.devices.arm is None:
+        return sort_run.run(self, request, cancel, progress).to_dict()
+
+    # -- and a `pipeline.sort_run.SortRig` -------------------------------------------------
+
+    def laser_off(self) -> None:
+        """Switch the laser off (how a sort's capture ends)."""
+        self.set_laser(False)
+
+    def calibration_source(self) -> CalibrationSource:
+        from omnisort_hw.pipeline.calibration_source import StoreCalibration
+
+        return StoreCalibration(self.store)
+
+    def check_drift(self) -> None:
+        self.drift.before_sort()
+
+    @contextmanager
+    def sorting(self, request: SortRequest) -> Iterator[SortSession]:
+        """The cell's devices, connected since start, through its locks; its compute worker
+        and its measurement capture (the service's job runner journals the job itself)."""
+        from omnisort_hw.pipeline.sort_capture import sort_capture_for
+        from omnisort_hw.pipeline.sort_run import SortSession
+
+        arm = self.devices.arm
+        if self.devices.camera is None or arm is None:
             raise MotionRefusedError("sort: the cell needs a camera and an arm")
         laser = _CellLaser(self) if self.devices.laser is not None else None
-        sorter = Sorter(
+        yield SortSession(
             _CellCamera(self),  # type: ignore[arg-type]
-            self.devices.arm,
             laser,  # type: ignore[arg-type]
-            StoreCalibration(self.store),
-            cfg,
-            self.registration_config,
-            log=self.runlog,
-            cancel=cancel,
-            progress=progress,
-            on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
+            arm,
+            self.journal,
             compute=self.compute,
-            acquire=sort_capture_for(self),
+            acquire=sort_capture_for(self, self.laser_off if laser is not None else None),
         )
-        sorter.calibration.check_motion_allowed()
-        self.drift.before_sort()
-        T_SB = robot_base_T(sorter.calibration.system())
-        held = resolve_before_sort(sorter, self.journal, T_SB)
-        report = sorter.run(max_objects, colors)
-        if held is not None:
-            report.outcomes.insert(0, held)
-        return report.to_dict()
 
 
 class _CellCamera:

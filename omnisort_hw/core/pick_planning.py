@@ -220,7 +220,7 @@ class Planner:
         cfg: SortConfig,
         T_SB: np.ndarray,
         joint_limits_deg: np.ndarray | None = None,
-        workspace_check: Callable[[np.ndarray], None] | None = None,
+        workspace_check: Callable[[np.ndarray], object] | None = None,
         linear_joint_caps: tuple[float, float] | None = None,
     ) -> None:
         """`linear_joint_caps`: the joints' speed (deg/s) and acceleration (deg/s^2) a linear

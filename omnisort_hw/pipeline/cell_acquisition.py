@@ -32,7 +32,10 @@ class CaptureRig(Protocol):
     """What a measurement capture needs of a cell (`cell.Cell` is one): its camera and laser
     held for the capture, where the images go, the `[capture]` settings and the run log."""
 
-    capture_dir: Path
+    @property
+    def capture_dir(self) -> Path:
+        """Where the capture's images are kept."""
+        ...
 
     @property
     def runlog(self) -> RunLog: ...

@@ -90,3 +90,17 @@ class RegisterRequest:
     image: str | None = None
     save: bool = True
     model: str | None = None  # the arm's model, kept in the record
+
+
+@dataclass(frozen=True)
+class SortRequest:
+    """Sort the cubes: all, or `max_objects`, or those of `colors`; `register` registers the
+    robot base from the floor board of the first capture."""
+
+    max_objects: int | None = None
+    colors: tuple[str, ...] | None = None
+    register: bool = False
+
+    def __post_init__(self) -> None:
+        if self.max_objects is not None and self.max_objects < 1:
+            raise InputError(f"max_objects must be at least 1, got {self.max_objects}")

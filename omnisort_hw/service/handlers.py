@@ -19,6 +19,7 @@ from omnisort_hw.pipeline.requests import (
     LocateRequest,
     MapRequest,
     RegisterRequest,
+    SortRequest,
 )
 
 
@@ -104,7 +105,9 @@ def move(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def sort(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.sort(args["max_objects"], args["colors"], ctx.cancel, ctx.progress)
+    colors = tuple(args["colors"]) if args["colors"] is not None else None
+    request = SortRequest(args["max_objects"], colors)
+    return ctx.cell.sort(request, ctx.cancel, ctx.progress)
 
 
 def check(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
