@@ -285,7 +285,7 @@ class Cell(CellJobs):
 
     def calibration_status(self) -> dict[str, Any]:
         """`CalibrationStore.status()`, recomputed when a file changes or after one second."""
-        key = []
+        key: list[tuple[int, int, int] | None] = []
         for kind in ("camera", "system"):
             try:
                 st = self.store.path(kind).stat()

@@ -81,7 +81,13 @@ class ArmMover:
         traj = plan_joint_move(start, target, limits)
         self._log_joint_series(rl, "arm/planned", traj.t, traj.q)
 
-    def _log_joint_series(self, rl: RunLog, prefix: str, t: Sequence[float], q: np.ndarray) -> None:
+    def _log_joint_series(
+        self,
+        rl: RunLog,
+        prefix: str,
+        t: Sequence[float] | np.ndarray,
+        q: Sequence[np.ndarray] | np.ndarray,
+    ) -> None:
         """Joint angles as scalars `PREFIX/q1..q6` on the `motion_ms` timeline, which counts
         milliseconds since the move began plus 10^6 times the move's number (one segment per
         move, planned and executed side by side)."""

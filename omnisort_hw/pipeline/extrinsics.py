@@ -144,7 +144,8 @@ def run_extrinsics(
         solver = {"joint": calibrate_joint, "paper": calibrate_paper, "method1": calibrate_method1}[
             method
         ]
-        run = ExtrinsicsRun(solver(features, model, float(separation_mm)), features)
+        wall_mm = check_separation_mm(separation_mm, "separation_mm")  # a float for the walls
+        run = ExtrinsicsRun(solver(features, model, wall_mm), features)
     _log_calibration(log, run.calib)
     if log.enabled:
         log.image("extrinsics/overlay", run.overlay(image, source))
