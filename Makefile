@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SHARED ?= ../shared
 
-.PHONY: demo test bench lint clean venv wheelhouse
+.PHONY: demo test check timings bench lint clean venv wheelhouse
 
 venv: $(STAMP)
 
@@ -19,9 +19,19 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/omnisort demo --out build/demo
 
-test: $(STAMP)
-	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q -ra
+# Every test on every core (pytest-xdist; a module's tests stay on one worker, so its
+# fixtures are built once).
+test: lint
+	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile
+
+# The edit loop: lint, types and the quick test modules (under 5 s each in tests/timings.json),
+# stopping at the first failure.
+check: lint
+	$(BIN)/python -m pytest -q -x -n auto --dist loadfile --quick
+
+# Every test, recording each module's time in tests/timings.json (what `check` selects by).
+timings: lint
+	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --record-timings tests/timings.json
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks --shared $(SHARED)
@@ -36,6 +46,7 @@ wheelhouse: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/mypy
 
 clean:
 	rm -rf build .pytest_cache

@@ -16,3 +16,57 @@ def reference_dir() -> Path:
     if not REFERENCE_DIR.is_dir():
         pytest.skip(f"third-party reference images not found at {REFERENCE_DIR}")
     return REFERENCE_DIR
+
+
+# -- the edit loop's selection (`make check`) -------------------------------------------------
+
+TIMINGS = Path(__file__).with_name("timings.json")
+QUICK_MODULE_S = 5.0
+"""A test module whose tests took longer than this (setup, call and teardown summed over its
+tests, on the run that recorded `timings.json`) is left out of `--quick`."""
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--quick",
+        action="store_true",
+        help=f"only the test modules that took under {QUICK_MODULE_S:g} s in tests/timings.json "
+        "(a module not recorded there runs)",
+    )
+    parser.addoption(
+        "--record-timings",
+        metavar="FILE",
+        default=None,
+        help="write each test module's time (s, setup + call + teardown) to FILE as JSON",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not config.getoption("--quick"):
+        return
+    import json
+
+    timings = json.loads(TIMINGS.read_text(encoding="utf-8")) if TIMINGS.is_file() else {}
+    slow = [i for i in items if timings.get(i.nodeid.split("::")[0], 0.0) > QUICK_MODULE_S]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        left_out = {id(i) for i in slow}
+        items[:] = [i for i in items if id(i) not in left_out]
+
+
+_module_seconds: dict[str, float] = {}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    module = report.nodeid.split("::")[0]
+    _module_seconds[module] = _module_seconds.get(module, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    path = session.config.getoption("--record-timings")
+    if path is None or hasattr(session.config, "workerinput"):  # the controller writes it
+        return
+    import json
+
+    rounded = {k: round(v, 2) for k, v in sorted(_module_seconds.items())}
+    Path(path).write_text(json.dumps(rounded, indent=1) + "\n", encoding="utf-8")

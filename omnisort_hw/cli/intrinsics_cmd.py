@@ -53,7 +53,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.core.intrinsics_report import OUTER_BAND
     from omnisort_hw.pipeline import intrinsics
-    from omnisort_hw.pipeline.requests import IntrinsicsRequest
+    from omnisort_hw.pipeline.requests import IntrinsicsRequest, board_spec
     from omnisort_hw.runlog import RunLog
 
     request = IntrinsicsRequest(
@@ -63,7 +63,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         degree=args.degree,
         refinement=args.refinement,
     )
-    request.board_spec()  # a bad board is refused before the images are read
+    board_spec(request.board, request.square_mm, "--board/--square")  # before any image
     with (
         tqdm(
             total=len(request.images),

@@ -13,6 +13,10 @@ As OCamCalib does, and further:
 
 Sensor coordinates here follow the camera frame C: with the stretch undone, a pixel offset
 (du, dv) belongs to the ray (du, dv, g(rho)), g = -f (g > 0 near the centre).
+
+Over 600 lines: one estimation in three stages that share the corner arrays, the parameter
+layout and the image bookkeeping (rejections, per-image RMS); the report and the board-plane
+refinement are modules of their own.
 """
 
 from __future__ import annotations

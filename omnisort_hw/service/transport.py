@@ -99,15 +99,21 @@ class Transport:
             )
         except (ConnectionError, asyncio.IncompleteReadError):
             pass
+        except asyncio.CancelledError:
+            # The shutdown cancels the open connections. The handler ends normally after its
+            # clean-up: on Python 3.11 asyncio's stream callback asks a cancelled handler
+            # task for its exception, which raises and is logged as a traceback.
+            log.info("closing connection from %s: the service is stopping", host)
         except Exception:
             log.exception("connection from %s failed", host)
         finally:
             if tasks:
-                await asyncio.wait(tasks, timeout=self.config.write_timeout_s)
+                with contextlib.suppress(asyncio.CancelledError):  # cancelled while waiting
+                    await asyncio.wait(tasks, timeout=self.config.write_timeout_s)
             self._clients.discard(writer)
             self._admission.release(host)
             writer.close()
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception, asyncio.CancelledError):
                 await asyncio.wait_for(writer.wait_closed(), 2.0)
 
     async def _overflow(

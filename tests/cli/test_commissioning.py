@@ -53,6 +53,7 @@ def test_the_doc_gives_these_steps() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # seven commands, each with its own 600 s bound
 def test_commissioning_steps_run_on_the_shipped_sim_cell(tmp_path: Path) -> None:
     shutil.copytree(ROOT / "deploy", tmp_path / "deploy")
     outputs = []
