@@ -21,6 +21,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
 from omnisort_hw.core.overlays import draw_extrinsics
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
+from omnisort_hw.core.target_layout import TargetLayout
 from omnisort_hw.errors import InputError
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -102,10 +103,13 @@ def run_extrinsics(
     log: RunLog = NullLog,
     tone: ToneCurve = SRGB,
     stripe_px: np.ndarray | None = None,
+    layout: TargetLayout | None = None,
 ) -> ExtrinsicsRun:
     """Extract the target's features from one image and run the chosen method on them;
     `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise);
-    `stripe_px` the laser points of a measurement capture (else found in the image). With the
+    `stripe_px` the laser points of a measurement capture (else found in the image); `layout`
+    the target as measured (`config.target.load_target_description`; its separation is then
+    the one used), else the symmetric paper target. With the
     log on, the overlay picture (`ExtrinsicsRun.overlay`) goes to it as well."""
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
@@ -121,7 +125,9 @@ def run_extrinsics(
             f"--method {method} does not work with the {target} target "
             f"(use {' or '.join(METHODS_FOR[target])})"
         )
-    if target != "checkerboards":
+    if layout is not None and layout.kind != target:
+        raise InputError(f"{layout.source}: describes a {layout.kind} target, not {target}")
+    if target != "checkerboards" and layout is None:
         separation_mm = check_separation_mm(separation_mm, "separation_mm")
     check_image_size(image, model, source)
     log.image("extrinsics/image", image)
@@ -153,7 +159,9 @@ def run_extrinsics(
         solver = {"joint": calibrate_joint, "paper": calibrate_paper, "method1": calibrate_method1}[
             method
         ]
-        run = ExtrinsicsRun(solver(features, model, float(separation_mm)), features)
+        if layout is not None:
+            separation_mm = layout.separation_mm
+        run = ExtrinsicsRun(solver(features, model, float(separation_mm), layout), features)
     _log_calibration(log, run.calib)
     if log.enabled:
         log.image("extrinsics/overlay", run.overlay(image, source))

@@ -47,6 +47,7 @@ from omnisort_hw.core.frames import (
     nearest_rotation,
     rays_to_plane,
 )
+from omnisort_hw.core.target_layout import TargetLayout, image_centroid_shift, side_marker_centres
 from omnisort_hw.errors import CalibrationError
 
 SIDES = ("left", "right")
@@ -105,8 +106,9 @@ def _ad_direction(a: np.ndarray, d: np.ndarray, y: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
-    """Initial estimate of all unknowns from the target's geometry (no iteration)."""
+def closed_form(obs: _Obs, separation: float, layout: TargetLayout | None = None) -> dict[str, Any]:
+    """Initial estimate of all unknowns from the target's geometry (no iteration); with a
+    measured `layout` the marker unknowns are the walls' near end Y0 alone (JointProblem)."""
     m = {s: great_circle_normal(obs.border[s]) for s in SIDES}
     y = np.cross(m["left"], m["right"])
     y /= np.linalg.norm(y)
@@ -139,6 +141,10 @@ def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
     roll, pitch, yaw = camera_angles(R)
     l_roll, l_pitch = laser_angles(n)
     x0 = [roll, pitch, yaw, l_roll, l_pitch, d, x_left, z_b, y_near, y_far, z_top, z_floor]
+    if layout is not None:
+        keys = sorted(marker_pts)
+        along = layout.marker_offsets(keys)[:, 0]
+        x0 = [*x0[:8], float(np.mean([marker_pts[k][1] for k in keys] - along)), 0.0]
     if len(obs.floor["left"]):
         # The wall/floor line: its plane normal in S is ~ (-z_f, 0, x_w), as for the border.
         mf = R @ great_circle_normal(obs.floor["left"])
@@ -290,9 +296,10 @@ class _WeightedProblem:
 class JointProblem(_WeightedProblem):
     """Residuals (pixels) of all observations for a parameter vector (see NAMES)."""
 
-    def __init__(self, obs: _Obs, separation: float) -> None:
+    def __init__(self, obs: _Obs, separation: float, layout: TargetLayout | None = None) -> None:
         self.obs = obs
         self.separation = separation
+        self.layout = layout
         self.has_floor = len(obs.floor["left"]) > 0
         # Per kind of observation, 1 / its noise in pixels (estimate_weights sets them).
         self.weights = {"border": 1.0, "floor": 1.0, "laser": 1.0, "markers": 1.0}
@@ -305,10 +312,21 @@ class JointProblem(_WeightedProblem):
         self.marker_top = np.array([name.startswith("border") for _, name in self.marker_keys])
         self.marker_basis = _tangent_basis(self.marker_rays)
         self.marker_scale = np.array([obs.scale_markers[k] for k in self.marker_keys])
+        # With a measured layout: each marker's (along, height above the left border) and the
+        # right border's height above the left one; the unknowns are then the left wall's X,
+        # the left border's Z and the walls' near end Y0 (see target_layout).
+        self.marker_offsets = layout.marker_offsets(self.marker_keys) if layout else None
+        self.border_step = layout.border_offset_mm("right") if layout else 0.0
 
     def split(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, float]]:
         R = camera_rotation(p[0], p[1], p[2])
         n = laser_normal(p[3], p[4])
+        if self.layout is not None:
+            geom = {"left": p[6], "right": p[6] + self.separation, "z_b": p[7], "y0": p[8]}
+            geom["edge_step"] = p[9]
+            if len(p) > 10:
+                geom["z_f"] = p[10]
+            return R, n, float(p[5]), geom
         geom = {
             "left": p[6],
             "right": p[6] + self.separation,
@@ -331,7 +349,8 @@ class JointProblem(_WeightedProblem):
         z_laser = -d - n[0] * xs / n[2]
         u = np.array([0.0, -n[2], n[1]])
         p0 = np.stack([xs, np.zeros(2), z_laser], axis=1)
-        rows = [np.stack([-np.full(2, g["z_b"]), np.zeros(2), xs], axis=1)]
+        z_border = g["z_b"] + np.array([0.0, self.border_step + g.get("edge_step", 0.0)])
+        rows = [np.stack([-z_border, np.zeros(2), xs], axis=1)]
         if self.has_floor:
             rows.append(np.stack([-np.full(2, g["z_f"]), np.zeros(2), xs], axis=1))
         rows.append(np.cross(p0, u))
@@ -347,7 +366,18 @@ class JointProblem(_WeightedProblem):
             out[f"laser_{s}"] = (self.obs.laser[s] @ in_C[2 * (k - 1) + i]) * self.obs.scale_laser[
                 s
             ]
-        pts = np.stack(
+        dirs = self.marker_centres(g) @ R  # rows: R^T p
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        out["markers"] = (
+            np.einsum("nkj,nj->nk", self.marker_basis, dirs) * self.marker_scale[:, None]
+        ).ravel()
+        return out
+
+    def marker_centres(self, g: dict[str, float]) -> np.ndarray:
+        """(K, 3) marker centres in S, in `marker_keys` order, for the geometry `g`."""
+        if self.marker_offsets is not None:
+            return side_marker_centres(self.marker_keys, self.marker_offsets, g, g["y0"], g["z_b"])
+        return np.stack(
             [
                 np.where(self.marker_right, g["right"], g["left"]),
                 np.where(self.marker_far, g["y_far"], g["y_near"]),
@@ -355,12 +385,6 @@ class JointProblem(_WeightedProblem):
             ],
             axis=1,
         )
-        dirs = pts @ R  # rows: R^T p
-        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-        out["markers"] = (
-            np.einsum("nkj,nj->nk", self.marker_basis, dirs) * self.marker_scale[:, None]
-        ).ravel()
-        return out
 
     def line_store(self) -> LineStore:
         """Border, laser (and wall/floor) rays and scales of each side, by block name."""
@@ -374,14 +398,39 @@ class JointProblem(_WeightedProblem):
         return out
 
 
-def _solve(obs: _Obs, separation_mm: float) -> tuple[Any, JointProblem, dict[str, float]]:
+def _solve(
+    obs: _Obs,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
+    model: OcamModel | None = None,
+) -> tuple[Any, JointProblem, dict[str, float]]:
     """LM from the closed-form start; then each kind of observation is weighted by its own
     noise (degraded laser points are noisier than border edges), points beyond 4 sigmas of
     their kind are dropped, and the weighted solve repeated: the maximum-likelihood fit, whose
-    covariance gives the standard deviations."""
-    start = closed_form(obs, separation_mm)
-    prob = JointProblem(obs, separation_mm)
+    covariance gives the standard deviations.
+
+    With a layout that gives the markers' sizes, a marker's blob centroid is compared with the
+    centroid of its rectangle's image rather than with the image of its centre: the shift
+    (up to half a pixel for 50 mm markers at 1 m) is computed at the solution's pose and the
+    solve repeated until it moves no marker by more than 0.005 px."""
+    start = closed_form(obs, separation_mm, layout)
+    prob = JointProblem(obs, separation_mm, layout)
     sol, noise = _refine(prob, start["x"])
+    sizes = layout.marker_sizes(prob.marker_keys) if layout is not None else None
+    if sizes is None or model is None:
+        return sol, prob, noise
+    observed = model.ray_to_pixel(prob.marker_rays)
+    shift = np.zeros_like(observed)
+    for _ in range(3):
+        R, _, _, g = prob.split(sol.x)
+        new = image_centroid_shift(model, R, prob.marker_centres(g), sizes)
+        if np.max(np.abs(new - shift)) < 0.005:
+            break
+        shift = new
+        rays = model.pixel_to_ray(observed - shift)
+        moved = _Obs(**{**obs.__dict__, "markers": dict(zip(prob.marker_keys, rays, strict=True))})
+        prob = JointProblem(moved, separation_mm, layout)
+        sol, noise = _refine(prob, sol.x)
     return sol, prob, noise
 
 
@@ -436,7 +485,10 @@ def _without_floor(obs: _Obs) -> _Obs:
 
 
 def calibrate_joint(
-    features: TargetFeatures, model: OcamModel, separation_mm: float
+    features: TargetFeatures,
+    model: OcamModel,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
 ) -> SystemCalibration:
     """The default method: closed-form start, then one robust joint refinement (on the
     three-sided target too, where it refines method1's closed form on all three walls).
@@ -446,16 +498,21 @@ def calibrate_joint(
     own plane on one side (a plinth, an uneven floor) would otherwise bias the pitch by about
     0.07 degree per millimetre. The fit without them is compared with the fit with them on the
     markers' residuals.
+
+    `layout`: the target as measured (markers' positions and sizes, border heights); without
+    it the symmetric paper target is assumed. Its separation is the one used.
     """
+    if layout is not None:
+        separation_mm = layout.separation_mm
     if features.kind == "three-sided":
-        return _calibrate_three_sided(features, model, separation_mm)
+        return _calibrate_three_sided(features, model, separation_mm, layout)
     t0 = time.perf_counter()
     obs = observations(features, model)
     floor_note = "not extracted"
-    sol, prob, noise = _solve(_without_floor(obs), separation_mm)
+    sol, prob, noise = _solve(_without_floor(obs), separation_mm, layout, model)
     if len(obs.floor["left"]):
         markers_alone = float(np.sqrt(np.mean(prob.residual_blocks(sol.x)["markers"] ** 2)))
-        sol_f, prob_f, noise_f = _solve(obs, separation_mm)
+        sol_f, prob_f, noise_f = _solve(obs, separation_mm, layout, model)
         markers_with = float(np.sqrt(np.mean(prob_f.residual_blocks(sol_f.x)["markers"] ** 2)))
         # Consistent lines leave the markers' fit as it was (ratio <= 1.04 on every simulated
         # image, clean or degraded); a 1.5 mm asymmetric offset of one line already exceeds
@@ -506,7 +563,9 @@ class ThreeSidedProblem(_WeightedProblem):
         laser: dict[str, np.ndarray],
         model: OcamModel,
         separation: float,
+        border_steps: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
+        self.border_steps = np.asarray(border_steps, float)
         self.border = dict(border)
         self.laser = dict(laser)
         self.scale_border = {w: pixel_scale(model, r) for w, r in border.items()}
@@ -520,7 +579,8 @@ class ThreeSidedProblem(_WeightedProblem):
         n = laser_normal(p[3], p[4])
         d, x_left, z_b, y_far = p[5], p[6], p[7], p[8]
         xs = np.array([x_left, x_left + self.separation])
-        border = np.array([[-z_b, 0.0, xs[0]], [-z_b, 0.0, xs[1]], [0.0, z_b, -y_far]])
+        zb = z_b + self.border_steps  # each wall's border height above the left one's
+        border = np.array([[-zb[0], 0.0, xs[0]], [-zb[1], 0.0, xs[1]], [0.0, zb[2], -y_far]])
         # Side walls X = x: the laser line runs along u = (0, -n_z, n_y) through (x, 0, z).
         z_side = -d - n[0] * xs / n[2]
         side = np.cross(np.stack([xs, np.zeros(2), z_side], axis=1), np.array([0.0, -n[2], n[1]]))
@@ -553,10 +613,14 @@ class ThreeSidedProblem(_WeightedProblem):
 
 
 def _calibrate_three_sided(
-    features: TargetFeatures, model: OcamModel, separation_mm: float
+    features: TargetFeatures,
+    model: OcamModel,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
 ) -> SystemCalibration:
     """`joint` for the three-sided target: method1's closed form, then the robust weighted
-    refinement of all unknowns on the three walls' borders and laser lines."""
+    refinement of all unknowns on the three walls' borders and laser lines (with a layout,
+    each wall's border at its measured height)."""
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
 
     t0 = time.perf_counter()
@@ -578,7 +642,10 @@ def _calibrate_three_sided(
     )
     border = {w: model.pixel_to_ray(features.walls[w].border_px) for w in WALLS3}
     laser = {w: model.pixel_to_ray(features.walls[w].laser_px) for w in WALLS3}
-    prob = ThreeSidedProblem(border, laser, model, separation_mm)
+    steps = (0.0, 0.0, 0.0)
+    if layout is not None and all(w in layout.walls for w in WALLS3):
+        steps = tuple(layout.border_offset_mm(w) for w in WALLS3)
+    prob = ThreeSidedProblem(border, laser, model, separation_mm, steps)
     sol, noise = _refine(prob, x0)
     p = sol.x
     std, residuals, calib_std = _outcome(prob, sol, noise)

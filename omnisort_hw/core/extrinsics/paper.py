@@ -17,6 +17,11 @@ camera roll, camera yaw, camera pitch, laser roll, laser pitch, laser distance; 
 about the wall direction leaves the projected borders parallel, which is why pitch comes from
 the ends. The chain is repeated (at most `passes` times) until no angle moves by more than
 0.001 degree, since each step is solved with the later angles still at their old values.
+
+With a measured target description (`core.target_layout`), steps 3 and 5 line the ends up
+where the description puts them: a marker measured d mm further along the left wall than its
+partner on the right one is expected d mm further in the projection too (scaled, as the
+projection is, by the walls' projected separation over their measured separation).
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from omnisort_hw.core.extrinsics.joint import observations
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import camera_rotation, great_circle_normal, laser_normal
+from omnisort_hw.core.target_layout import TargetLayout
 
 BOUND = np.radians(20.0)
 SIDES = ("left", "right")
@@ -82,9 +88,19 @@ def _laser_ends(
 class _Chain:
     """The measures of the chain, each a function of the angles it is minimised over."""
 
-    def __init__(self, obs: Any, ends: dict[str, np.ndarray]) -> None:
+    def __init__(
+        self,
+        obs: Any,
+        ends: dict[str, np.ndarray],
+        stagger: dict[str, float] | None = None,
+        separation: float = 1.0,
+    ) -> None:
         self.obs = obs
         self.ends = ends
+        # per marker name: how much further along (mm) the left wall's marker is than the
+        # right wall's (0 for the symmetric target), and per laser end (near, far) the same
+        self.stagger = stagger or {}
+        self.separation = separation
 
     def _borders(self, r: float, p: float, y: float) -> list[np.ndarray]:
         R = camera_rotation(r, p, y)
@@ -102,7 +118,12 @@ class _Chain:
         R = camera_rotation(r, p, y)
         c = {k: _project_horizontal((R @ v)[None, :])[0] for k, v in self.obs.markers.items()}
         names = ("border_near", "border_far", "floor_near", "floor_far")
-        return float(sum((c[("left", n)][1] - c[("right", n)][1]) ** 2 for n in names))
+        total = 0.0
+        for nm in names:
+            scale = (c[("right", nm)][0] - c[("left", nm)][0]) / self.separation
+            want = self.stagger.get(nm, 0.0) * scale
+            total += (c[("left", nm)][1] - c[("right", nm)][1] - want) ** 2
+        return float(total)
 
     @staticmethod
     def plane_coords(R: np.ndarray, lr: float, lp: float, rays: np.ndarray) -> np.ndarray:
@@ -120,13 +141,35 @@ class _Chain:
 
     def laser_ends_mismatch(self, R: np.ndarray, lr: float, lp: float) -> float:
         e = {s: self.plane_coords(R, lr, lp, self.ends[s]) for s in SIDES}
-        return float(np.sum((e["left"][:, 1] - e["right"][:, 1]) ** 2))
+        scale = (e["right"][:, 0] - e["left"][:, 0]) / self.separation
+        want = np.array([self.stagger.get("near", 0.0), self.stagger.get("far", 0.0)]) * scale
+        return float(np.sum((e["left"][:, 1] - e["right"][:, 1] - want) ** 2))
+
+
+def _stagger(layout: TargetLayout | None) -> dict[str, float]:
+    """Per marker name, and per end for the laser ends (the mean of the end's two markers),
+    the left marker's position along the wall minus the right one's (mm)."""
+    if layout is None:
+        return {}
+    left, right = layout.walls["left"].markers, layout.walls["right"].markers
+    out = {n: left[n].along_mm - right[n].along_mm for n in left}
+    for end in ("near", "far"):
+        out[end] = 0.5 * (out[f"border_{end}"] + out[f"floor_{end}"])
+    return out
 
 
 def calibrate_paper(
-    features: TargetFeatures, model: OcamModel, separation_mm: float, passes: int = 5
+    features: TargetFeatures,
+    model: OcamModel,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
+    passes: int = 5,
 ) -> SystemCalibration:
+    """The published chain; `layout`: the target as measured (its separation is then used),
+    else the symmetric paper target."""
     t0 = time.perf_counter()
+    if layout is not None:
+        separation_mm = layout.separation_mm
     obs = observations(features, model)
     mk = obs.markers
     ends = {
@@ -139,7 +182,7 @@ def calibrate_paper(
         )
         for s in SIDES
     }
-    chain = _Chain(obs, ends)
+    chain = _Chain(obs, ends, _stagger(layout), separation_mm)
     roll = pitch = yaw = l_roll = l_pitch = 0.0
     for _ in range(passes):
         before = np.array([roll, pitch, yaw, l_roll, l_pitch])
