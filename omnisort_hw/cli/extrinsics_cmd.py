@@ -35,6 +35,13 @@ def register(sub: Any) -> None:
         help="measured inner distance between the walls, mm (required for the wall targets, "
         "or [target] separation_mm of --config)",
     )
+    cal.add_argument(
+        "--target-file",
+        type=Path,
+        default=None,
+        help="target description TOML (deploy/target.example.toml): the wall target as "
+        "measured, separation and markers; default: the symmetric paper target",
+    )
     cal.add_argument("--board", default="9x6", help="inner corners COLSxROWS (checkerboards)")
     cal.add_argument("--square", type=float, default=97.0, help="square size mm (checkerboards)")
     cal.add_argument(
@@ -153,7 +160,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.runlog import RunLog
 
     default, field = None, "--separation"
-    if args.separation is None and args.config is not None and args.target != "checkerboards":
+    layout = None
+    if args.target_file is not None:
+        from omnisort_hw.config.target import load_target_description
+
+        layout = load_target_description(args.target_file)
+        default, field = layout.separation_mm, f"separation_mm of {args.target_file}"
+    elif args.separation is None and args.config is not None and args.target != "checkerboards":
         from omnisort_hw.config.cell import load_cell_config
 
         default = load_cell_config(args.config).target.separation_mm
@@ -185,6 +198,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             log=log,
             tone=tone,
             stripe_px=stripe_px,
+            layout=layout,
         )
     calib = run.calib
     image_rec = image_record(args.image) if args.image is not None else record

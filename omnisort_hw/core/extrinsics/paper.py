@@ -146,15 +146,27 @@ class _Chain:
         return float(np.sum((e["left"][:, 1] - e["right"][:, 1] - want) ** 2))
 
 
-def _stagger(layout: TargetLayout | None) -> dict[str, float]:
-    """Per marker name, and per end for the laser ends (the mean of the end's two markers),
-    the left marker's position along the wall minus the right one's (mm)."""
+def _stagger(layout: TargetLayout | None, obs: Any, ends: dict[str, np.ndarray]) -> dict:
+    """Per marker name the left marker's position along the wall minus the right one's (mm),
+    and per end ("near", "far") the same for the laser's end: the point of the line from the
+    end's border marker to its floor marker where the laser crosses it (its fraction of the
+    way down measured as an angle in the image), so a slanting marker pair is followed."""
     if layout is None:
         return {}
-    left, right = layout.walls["left"].markers, layout.walls["right"].markers
-    out = {n: left[n].along_mm - right[n].along_mm for n in left}
-    for end in ("near", "far"):
-        out[end] = 0.5 * (out[f"border_{end}"] + out[f"floor_{end}"])
+    out: dict[str, float] = {}
+    for n in layout.walls["left"].markers:
+        out[n] = (
+            layout.walls["left"].markers[n].along_mm - layout.walls["right"].markers[n].along_mm
+        )
+    for i, end in enumerate(("near", "far")):
+        at = []
+        for side in SIDES:
+            m = layout.walls[side].markers
+            top, low = obs.markers[(side, f"border_{end}")], obs.markers[(side, f"floor_{end}")]
+            r = ends[side][i]
+            t = np.arccos(np.clip(top @ r, -1, 1)) / np.arccos(np.clip(top @ low, -1, 1))
+            at.append((1 - t) * m[f"border_{end}"].along_mm + t * m[f"floor_{end}"].along_mm)
+        out[end] = float(at[0] - at[1])
     return out
 
 
@@ -182,7 +194,7 @@ def calibrate_paper(
         )
         for s in SIDES
     }
-    chain = _Chain(obs, ends, _stagger(layout), separation_mm)
+    chain = _Chain(obs, ends, _stagger(layout, obs, ends), separation_mm)
     roll = pitch = yaw = l_roll = l_pitch = 0.0
     for _ in range(passes):
         before = np.array([roll, pitch, yaw, l_roll, l_pitch])
