@@ -93,8 +93,9 @@ def side_marker_centres(
     return np.stack([xs, y0 + offsets[:, 0], z_border + offsets[:, 1]], axis=1)
 
 
-def _outline(centres: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """(K, 4 * steps, 3) outlines of rectangles on walls X = const (along Y, up Z)."""
+def _outline(centres: np.ndarray, sizes: np.ndarray, along_axis: np.ndarray) -> np.ndarray:
+    """(K, 4 * steps, 3) outlines of rectangles on vertical walls, each along S axis
+    `along_axis` (1: a side wall X = const, along Y; 0: the far wall Y = const, along X)."""
     t = np.linspace(-0.5, 0.5, _OUTLINE_STEPS, endpoint=False)
     one = np.ones_like(t)
     # counter-clockwise in (along, up): bottom, right, top, left sides
@@ -107,17 +108,26 @@ def _outline(centres: np.ndarray, sizes: np.ndarray) -> np.ndarray:
         ]
     )
     pts = np.repeat(centres[:, None, :], unit.shape[0], axis=1)
-    pts[..., 1] += unit[None, :, 0] * sizes[:, None, 0]
+    rows = np.arange(centres.shape[0])
+    pts[rows, :, along_axis] += unit[None, :, 0] * sizes[:, None, 0]
     pts[..., 2] += unit[None, :, 1] * sizes[:, None, 1]
     return pts
 
 
 def image_centroid_shift(
-    model: OcamModel, R_SC: np.ndarray, centres: np.ndarray, sizes: np.ndarray
+    model: OcamModel,
+    R_SC: np.ndarray,
+    centres: np.ndarray,
+    sizes: np.ndarray,
+    along_axis: np.ndarray | None = None,
+    reference: np.ndarray | None = None,
 ) -> np.ndarray:
     """(K, 2) pixels from the image of each marker's centre to the centroid of its imaged
-    rectangle (what a blob's centroid measures), for the camera rotation R_SC."""
-    outline = _outline(centres, sizes)
+    rectangle (what a blob's centroid measures), for the camera rotation R_SC; `along_axis`
+    per marker as in `_outline` (default: side walls); `reference`: the points whose images
+    the shift is from, when the rectangles given are the visible parts of the markers."""
+    axis = np.ones(len(centres), int) if along_axis is None else np.asarray(along_axis, int)
+    outline = _outline(centres, sizes, axis)
     k, m, _ = outline.shape
     rays = outline.reshape(-1, 3) @ R_SC  # rows: R^T p, in C
     uv = model.ray_to_pixel(rays / np.linalg.norm(rays, axis=1, keepdims=True)).reshape(k, m, 2)
@@ -127,6 +137,6 @@ def image_centroid_shift(
     area = 0.5 * cross.sum(axis=1)
     cx = ((x + x1) * cross).sum(axis=1) / (6.0 * area)
     cy = ((y + y1) * cross).sum(axis=1) / (6.0 * area)
-    c_rays = centres @ R_SC
+    c_rays = (centres if reference is None else reference) @ R_SC
     centre_uv = model.ray_to_pixel(c_rays / np.linalg.norm(c_rays, axis=1, keepdims=True))
     return np.stack([cx, cy], axis=1) - centre_uv
