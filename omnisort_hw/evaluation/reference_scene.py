@@ -79,3 +79,60 @@ def scene_description(ref_dir: Path, kind: str, out_dir: Path) -> TargetLayout:
     )
     path.write_text(target_description_toml(layout, header), encoding="utf-8")
     return load_target_description(path)
+
+
+def _on_wall(wall: dict[str, Any], rays_S: np.ndarray) -> np.ndarray:
+    """Points where rays (S) meet the wall's plane."""
+    c, n = np.asarray(wall["centre_S"]), np.asarray(wall["normal_S"])
+    return rays_S * ((n @ c) / (rays_S @ n))[:, None]
+
+
+def _line_stats(along: np.ndarray, dz: np.ndarray) -> dict[str, float]:
+    """Median height offset (mm), its slope along the wall (deg) and the scatter about it."""
+    k = np.polyfit(along, dz, 1)
+    resid = dz - np.polyval(k, along)
+    return {
+        "offset_mm": round(float(np.median(dz)), 2),
+        "slope_deg": round(float(np.degrees(np.arctan(k[0]))), 4),
+        "rms_about_line_mm": round(float(np.sqrt(np.mean(resid**2))), 2),
+        "points": int(dz.size),
+    }
+
+
+def feature_offsets(ref_dir: Path, images: dict[str, str]) -> dict[str, Any]:
+    """The extracted borders and laser stripes against the scene, seen through the scene's own
+    camera (its exact equidistant intrinsics and rotation): per image and wall, how far the
+    border stands above the scene's border (mm) and how it slopes along the wall, and how far
+    the stripe's points stand above the true laser line and how they slope against it. What
+    the renderer puts in the pixels (the band below the line, its staircase, the filtered
+    border) shows here; nothing is fitted. `images`: file name -> target kind."""
+    import cv2
+
+    from omnisort_hw.core.camera_model import OcamModel
+    from omnisort_hw.core.target_features import extract_target_features
+
+    scene = load_scene(ref_dir)
+    cam = scene["camera"]
+    R = np.asarray(cam["R_SC"])
+    f_px = scene["fisheye_pipeline"]["intrinsics"]
+    size = 2 * round(f_px["centre_px"][0] + 0.5)
+    model = OcamModel.equidistant(size, size, float(f_px["fov_deg"]))
+    n = np.asarray(scene["laser"]["normal_S"])
+    offset = float(scene["laser"]["offset_mm"])
+    border_z = float(scene["derived"]["border_Z_mm"])
+    out: dict[str, Any] = {}
+    for name, kind in images.items():
+        feats = extract_target_features(cv2.imread(str(Path(ref_dir) / name)), model, kind)
+        entry: dict[str, Any] = {}
+        for wall_name, wall in feats.walls.items():
+            w = scene["walls"][wall_name]
+            along = 0 if wall_name == "far" else 1
+            B = _on_wall(w, model.pixel_to_ray(wall.border_px) @ R.T)
+            L = _on_wall(w, model.pixel_to_ray(wall.laser_px) @ R.T)
+            z_line = (offset - n[0] * L[:, 0] - n[1] * L[:, 1]) / n[2]
+            entry[wall_name] = {
+                "border": _line_stats(B[:, along], B[:, 2] - border_z),
+                "laser": _line_stats(L[:, along], L[:, 2] - z_line),
+            }
+        out[name] = entry
+    return out
