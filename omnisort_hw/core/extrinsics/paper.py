@@ -27,6 +27,7 @@ projection is, by the walls' projected separation over their measured separation
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -34,10 +35,19 @@ from scipy.optimize import minimize_scalar
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.joint import observations
-from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration, place_side_walls
 from omnisort_hw.core.features import TargetFeatures
-from omnisort_hw.core.frames import camera_rotation, great_circle_normal, laser_normal
-from omnisort_hw.core.target_layout import TargetLayout
+from omnisort_hw.core.frames import (
+    camera_rotation,
+    great_circle_normal,
+    laser_normal,
+    rays_to_plane,
+)
+from omnisort_hw.core.target_layout import (
+    TargetLayout,
+    image_centroid_shift,
+    side_marker_centres,
+)
 
 BOUND = np.radians(20.0)
 SIDES = ("left", "right")
@@ -170,19 +180,10 @@ def _stagger(layout: TargetLayout | None, obs: Any, ends: dict[str, np.ndarray])
     return out
 
 
-def calibrate_paper(
-    features: TargetFeatures,
-    model: OcamModel,
-    separation_mm: float,
-    layout: TargetLayout | None = None,
-    passes: int = 5,
-) -> SystemCalibration:
-    """The published chain; `layout`: the target as measured (its separation is then used),
-    else the symmetric paper target."""
-    t0 = time.perf_counter()
-    if layout is not None:
-        separation_mm = layout.separation_mm
-    obs = observations(features, model)
+def _chain(
+    obs: Any, layout: TargetLayout | None, separation_mm: float, passes: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The chain of one-dimensional minimisations: camera rotation and laser normal."""
     mk = obs.markers
     ends = {
         s: _laser_ends(
@@ -209,8 +210,53 @@ def calibrate_paper(
         moved = np.abs(np.array([roll, pitch, yaw, l_roll, l_pitch]) - before)
         if moved.max() < np.radians(1e-3):
             break
-    R = camera_rotation(roll, pitch, yaw)
-    n = laser_normal(l_roll, l_pitch)
+    return camera_rotation(roll, pitch, yaw), laser_normal(l_roll, l_pitch)
+
+
+def _marker_centres(
+    obs: Any, layout: TargetLayout, keys: list, R: np.ndarray, separation_mm: float
+) -> np.ndarray:
+    """The markers' centres in S at the pose R: walls placed by their borders (the known
+    separation sets the scale), markers at their described places along and up the walls,
+    the walls' near end where the markers' rays put it."""
+    x_left, z_b = place_side_walls(
+        R, *(great_circle_normal(obs.border[s]) for s in SIDES), separation_mm
+    )
+    walls = {"left": x_left, "right": x_left + separation_mm}
+    offsets = layout.marker_offsets(keys)
+    hit = [
+        rays_to_plane((R @ obs.markers[k])[None, :], np.array([1.0, 0.0, 0.0]), walls[k[0]])[0]
+        for k in keys
+    ]
+    y0 = float(np.mean([p[1] for p in hit] - offsets[:, 0]))
+    return side_marker_centres(keys, offsets, walls, y0, z_b)
+
+
+def calibrate_paper(
+    features: TargetFeatures,
+    model: OcamModel,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
+    passes: int = 5,
+) -> SystemCalibration:
+    """The published chain; `layout`: the target as measured (its separation is then used),
+    else the symmetric paper target."""
+    t0 = time.perf_counter()
+    if layout is not None:
+        separation_mm = layout.separation_mm
+    obs = observations(features, model)
+    R, n = _chain(obs, layout, separation_mm, passes)
+    sizes = None if layout is None else layout.marker_sizes(sorted(obs.markers))
+    if layout is not None and sizes is not None:
+        # blob centroids against the centroids of the markers' images at the chain's pose
+        keys = sorted(obs.markers)
+        observed = model.ray_to_pixel(np.array([obs.markers[k] for k in keys]))
+        for _ in range(2):
+            centres = _marker_centres(obs, layout, keys, R, separation_mm)
+            shift = image_centroid_shift(model, R, centres, sizes)
+            rays = model.pixel_to_ray(observed - shift)
+            obs = replace(obs, markers=dict(zip(keys, rays, strict=True)))
+            R, n = _chain(obs, layout, separation_mm, passes)
 
     def separation_error(d: float) -> float:
         pts = {}
