@@ -13,7 +13,7 @@ import hashlib
 import json
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import cv2
 import numpy as np
@@ -112,6 +112,27 @@ def render_world(
     return image, truth
 
 
+@overload
+def render_scene(
+    scene: Scene | str | Path,
+    seed: int = ...,
+    degraded: bool | None = ...,
+    laser_on: bool | None = ...,
+    with_truth: Literal[True] = ...,
+) -> tuple[np.ndarray, dict[str, Any]]: ...
+
+
+@overload
+def render_scene(
+    scene: Scene | str | Path,
+    seed: int = ...,
+    degraded: bool | None = ...,
+    laser_on: bool | None = ...,
+    *,
+    with_truth: bool,
+) -> tuple[np.ndarray, dict[str, Any] | None]: ...
+
+
 def render_scene(
     scene: Scene | str | Path,
     seed: int = 0,
@@ -119,7 +140,8 @@ def render_scene(
     laser_on: bool | None = None,
     with_truth: bool = True,
 ) -> tuple[np.ndarray, dict[str, Any] | None]:
-    """Build the scene's world, render it once and return (BGR uint8 image, truth)."""
+    """Build the scene's world, render it once and return (BGR uint8 image, truth; the truth
+    is None only with `with_truth=False`)."""
     sc = _as_scene(scene)
     world = SimWorld(sc)
     try:

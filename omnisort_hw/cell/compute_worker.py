@@ -165,7 +165,7 @@ class ComputeWorker:
                     except (EOFError, OSError):
                         status, value = "died", None
                     if status == "ok":
-                        return value  # type: ignore[no-any-return]
+                        return value
                     if status == "raised":
                         raise value
                 if cancel is not None and cancel.is_set():
@@ -202,7 +202,7 @@ class ComputeWorker:
         if getattr(log, "enabled", False):
             for name, a, k in calls:
                 getattr(log, name)(*a, **k)
-        return result  # type: ignore[no-any-return]
+        return result
 
     def close(self) -> None:
         """End the child (waits up to 5 s)."""

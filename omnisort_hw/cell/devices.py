@@ -31,6 +31,7 @@ from drivers.errors import DeviceError
 from omnisort_hw.cell.status import error_text
 from omnisort_hw.config.devices import (
     CellDeviceConfig,
+    DeviceKind,
     DeviceSection,
     config_error,
     parse_device_config,
@@ -71,7 +72,7 @@ class Devices:
 
 
 def _open_sim(
-    sections: dict[str, DeviceSection], base_dir: Path | None, in_child: bool = False
+    sections: Mapping[DeviceKind, DeviceSection], base_dir: Path | None, in_child: bool = False
 ) -> tuple[dict[str, Any], SceneLayout | None]:
     """Build the `backend = "sim"` devices through `sim_backend.devices.open_devices` (or, with
     `in_child`, `sim_backend.device_proxies.open_devices`: the same devices in a child process),
@@ -174,10 +175,10 @@ def open_devices(
         if not section.is_sim:
             made[kind] = _open_real(section)
     expected = {"camera": Camera, "laser": LaserSwitch, "arm": Arm}
-    for kind, device in made.items():
-        if not isinstance(device, expected[kind]):
+    for name, device in made.items():
+        if not isinstance(device, expected[name]):
             raise config_error(
-                f"[{kind}].backend", f"{type(device).__name__} is not a {expected[kind].__name__}"
+                f"[{name}].backend", f"{type(device).__name__} is not a {expected[name].__name__}"
             )
     return Devices(made.get("camera"), made.get("laser"), made.get("arm"), scene)
 

@@ -48,7 +48,7 @@ class WatchdogPorts:
 
     store: CalibrationStore
     capture_dark: Callable[[], np.ndarray]
-    registration: Callable[[], RegistrationConfig]
+    registration: Callable[[], RegistrationConfig | None]
     runlog: Callable[[], RunLog]
 
 

@@ -60,12 +60,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     with RunLog(rrd) as log:
         _step("1. fisheye intrinsics (OCamCalib model)")
-        import cv2
-
+        from omnisort_hw.pipeline.image_files import read_image
         from sim_backend.dataset import checkerboard_views
 
         views = checkerboard_views(out / "views", n=10, seed=args.seed, progress=True)
-        images = [(p.name, cv2.imread(str(p))) for p in views]
+        images = [(p.name, read_image(p)) for p in views]
         board = BoardSpec(9, 6, 116.0)
         source = f"{len(views)} simulated calibration views"
         t0 = time.perf_counter()

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(sub: Any) -> None:
@@ -64,6 +67,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     calib = SystemCalibration.from_json(payload, source=str(args.system))
     cfg = load_cell_config(args.config) if args.config else None
     registration = registration_for(payload, cfg.registration if cfg is not None else None)
+    reference: np.ndarray | None
     if args.reference is not None:
         reference = read_image(args.reference)
     else:

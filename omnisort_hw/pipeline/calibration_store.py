@@ -22,7 +22,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypedDict
 
 from omnisort_hw import fileio
 from omnisort_hw.config.storage import StorageConfig
@@ -103,6 +103,16 @@ class CalibrationRecord:
     camera_serial: str | None
     saved: datetime
     checksum: str
+
+
+class _Stamp(TypedDict):
+    """The `FileHealth` fields of a file that could be read (what `status()` passes to each)."""
+
+    saved: str
+    age_days: float
+    camera_serial: str | None
+    checksum: str
+    history: int
 
 
 @dataclass(frozen=True)
@@ -260,7 +270,7 @@ class CalibrationStore:
         except CalibrationFileError as exc:
             return FileHealth(kind, str(path), "corrupt", str(exc), history=n_hist)
         age_days = (self.clock() - rec.saved.timestamp()) / 86400.0
-        common = {
+        common: _Stamp = {
             "saved": rec.saved.isoformat(),
             "age_days": round(age_days, 4),
             "camera_serial": rec.camera_serial,

@@ -140,8 +140,8 @@ def pictures(rec: Recorded) -> dict[str, np.ndarray]:
         for child, (lines, cols) in rec.strips.items():
             if child.startswith(prefix):
                 for k, line in enumerate(lines):
-                    colour = tuple(int(c) for c in cols[min(k, len(cols) - 1)])
-                    draw_polyline(pic, line, colour, max(1, round(pic.shape[1] / 1000)))
+                    b, g, r = (int(c) for c in cols[min(k, len(cols) - 1)])
+                    draw_polyline(pic, line, (b, g, r), max(1, round(pic.shape[1] / 1000)))
         out[entity] = pic
     return out
 

@@ -206,7 +206,7 @@ class SceneCheck:
         todo = [k for k in indices if k in self.ref]
         arm_px = arm_pixels(self.planner, self.calib, self.T_SB, list(q_deg))
         covered_by_arm = _boxes_hit({k: self.ref[k][1] for k in todo}, arm_px)
-        changed = []
+        changed: list[int] = []
         for k in todo:
             if k in covered_by_arm:
                 out.hidden.append(k)

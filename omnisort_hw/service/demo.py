@@ -39,14 +39,22 @@ def calibrate_from_truth(config: Path) -> None:
 
     from omnisort_hw.cell.cell import Cell
     from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.errors import NotAvailableError
+    from sim_backend.devices import SimCamera
 
     cell = Cell.from_settings(load_cell_config(config))
     try:
         cell.connect()
         cam = cell.devices.camera
-        assert cam is not None
+        if not isinstance(cam, SimCamera):
+            raise NotAvailableError(
+                f"{config}: [camera] is {type(cam).__name__}, not the simulated camera "
+                '(backend = "sim"), so there is no truth to calibrate from'
+            )
         cam.grab(with_truth=True)
-        truth = cam.last_truth  # type: ignore[attr-defined]
+        truth = cam.last_truth
+        if truth is None:
+            raise NotAvailableError(f"{config}: the simulated camera kept no truth of its frame")
         system = {k: truth[k] for k in ("camera", "camera_rotation", "laser_plane", "target")}
         system.update(
             method="truth",

@@ -199,7 +199,7 @@ class JobRunner:
             code, msg, details = error_from_exception(exc)
             if job.cancel.is_set():
                 reply = self._stopped_reply(job, req, msg)
-            elif code in (proto.DEVICE_ERROR, proto.INTERNAL) and getattr(exc, "faults_cell", 1):
+            elif code in (proto.DEVICE_ERROR, proto.INTERNAL) and getattr(exc, "faults_cell", True):
                 if code == proto.INTERNAL:
                     log.error("%s failed", req.cmd, exc_info=exc)
                 reply = proto.error_reply(req.id, code, msg, **details)

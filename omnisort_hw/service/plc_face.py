@@ -252,7 +252,9 @@ class PlcFace:
                     _Context(self), address=(self.config.host, int(self.config.modbus_port or 0))
                 )
                 await self._server.serve_forever(background=True)
-                sock = self._server.transport.sockets[0].getsockname()  # type: ignore[union-attr]
+                # pymodbus annotates `transport` as BaseTransport, but a listening server's is
+                # the asyncio.Server of loop.create_server (which has `sockets`)
+                sock = self._server.transport.sockets[0].getsockname()  # type: ignore[attr-defined]
                 self.address = (str(sock[0]), int(sock[1]))
             except BaseException as exc:
                 self._error = exc

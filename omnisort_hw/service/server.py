@@ -96,7 +96,7 @@ class Service(Transport, JobRunner):
         )
         self.exit_problems: list[str] = []
         self.log_check_s = LOG_CHECK_S
-        self._roll: asyncio.Future[None] | None = None  # the run log roll in flight
+        self._roll: asyncio.Future[bool] | None = None  # the run log roll in flight
 
     # -- state -----------------------------------------------------------------------------
 
