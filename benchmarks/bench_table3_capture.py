@@ -64,10 +64,6 @@ def _unseen(frames: int, width: int) -> dict[str, Any]:
             "mae" in joint and not joint["failures"] and _goal(joint["mae"])
         )
         out[str(seed)] = entry
-    if os.environ.get("OMNISORT_BENCH_UNSEEN_SEEDS") != "":
-        out["unseen_seeds"] = _unseen(frames, width)
-    if "capture_joint_mae" in out:
-        out["joint_goal_met_seed0"] = _goal(out["capture_joint_mae"])
     return out
 
 
