@@ -67,16 +67,21 @@ def _reference(shared: Path) -> dict[str, Any]:
 
 
 def _reference_accuracy(shared: Path) -> dict[str, Any]:
-    """Signed errors against the authors' settings, with the camera's tone curve modelled
-    (sRGB, `after`) and ignored (values taken as light, as before: `before`)."""
+    """Signed errors against the exact scene (its angles, the rendered stripe's 953.5 mm), the
+    wall targets as the scene's target description gives them, with the camera's tone curve
+    modelled (sRGB, `after`) and ignored (values taken as light: `before`); `symmetric`: sRGB
+    with the symmetric paper target assumed instead of the description. And the extracted
+    borders and stripes against the scene through its own camera (the renderer's effects)."""
     from omnisort_hw.core.radiometry import SRGB, ToneCurve
     from omnisort_hw.evaluation.reference_accuracy import (
+        RUNS,
         intrinsics_model,
         intrinsics_spread,
         run_reference,
         scene_check,
         summary,
     )
+    from omnisort_hw.evaluation.reference_scene import feature_offsets
 
     ref = shared / "reference" / "unity"
     if not (ref / "intrinsics").is_dir():
@@ -85,6 +90,12 @@ def _reference_accuracy(shared: Path) -> dict[str, Any]:
     return {
         "reference_errors_before": summary(run_reference(ref, model, ToneCurve.identity())),
         "reference_errors_after": summary(run_reference(ref, model, SRGB)),
+        "reference_errors_symmetric_target": summary(
+            run_reference(ref, model, SRGB, described=False)
+        ),
+        "reference_features_vs_scene": feature_offsets(
+            ref, {name: kind for _, name, kind in RUNS.values() if kind != "checkerboards"}
+        ),
         "reference_intrinsics_jackknife_half_range": intrinsics_spread(ref, SRGB),
         "reference_scene_with_authors_settings": scene_check(ref, model, SRGB),
     }

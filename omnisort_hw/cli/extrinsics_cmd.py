@@ -36,6 +36,13 @@ def register(sub: Any) -> None:
         "or [target] separation_mm of --config)",
     )
     cal.add_argument(
+        "--target-file",
+        type=Path,
+        default=None,
+        help="target description TOML (deploy/target.example.toml): the wall target as "
+        "measured, separation and markers; default: the symmetric paper target",
+    )
+    cal.add_argument(
         "--board", default=None, help=f"inner corners COLSxROWS (checkerboards; {DEFAULT_BOARD})"
     )
     cal.add_argument(
@@ -106,6 +113,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         separation_mm=args.separation,
         board=args.board,
         square_mm=args.square,
+        target_file=str(args.target_file) if args.target_file is not None else None,
     )
     with RunLog(args.log) as log:
         rig = FileRig(

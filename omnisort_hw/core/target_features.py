@@ -12,7 +12,8 @@ What is extracted (records in `features.py`, the contract with the calibration m
 - Laser: `laser_stripe_points` once for the image, then the points whose rays fall inside the
   wall's white face (the spherical quadrilateral bounded by the border, the floor line or the
   floor markers, and the great circles through each end's two markers), and of those the
-  inliers of one great circle (the stripe on a flat wall is a straight 3D line).
+  inliers of one great circle (the stripe on a flat wall is a straight 3D line); a stepped
+  (aliased) stripe is put back on the line through its risers' midpoints (`stripe_steps`).
 
 Three-sided target: walls "left", "right" and "far". Two marker layouts are understood:
 the published one (8 markers; the side walls' far markers stand at the corners with the far
@@ -46,6 +47,7 @@ from omnisort_hw.core.features import (
 from omnisort_hw.core.great_circles import _fmt, _nominal_S, _unit, fit_great_circle, pixel_scale
 from omnisort_hw.core.laser_stripe import check_bgr, laser_stripe_points
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
+from omnisort_hw.core.stripe_steps import unstep_stripe
 from omnisort_hw.core.target_edges import LineEdge, find_line_edge
 from omnisort_hw.core.target_markers import SIDES, Blob, assign_markers, find_blue_markers
 from omnisort_hw.errors import FeatureNotFoundError, InputError
@@ -105,13 +107,13 @@ def _laser_on_face(
             f"{what}: no laser stripe on {where} ({pts.shape[0]} stripe points there, at least "
             f"{_LASER_MIN_POINTS} needed); is the laser on and crossing the wall?"
         )
-    _, inl, _ = fit_great_circle(model, pts, _LASER_TOL_PX)
+    normal, inl, _ = fit_great_circle(model, pts, _LASER_TOL_PX)
     if inl.sum() < _LASER_MIN_POINTS:
         raise FeatureNotFoundError(
             f"{what}: the {pts.shape[0]} stripe points on {where} do not form one straight laser "
             f"line ({int(inl.sum())} on one great circle)"
         )
-    return pts[inl]
+    return unstep_stripe(model, pts[inl], normal)
 
 
 def check_image(image_bgr: np.ndarray, model: OcamModel) -> np.ndarray:

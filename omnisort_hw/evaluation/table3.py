@@ -298,8 +298,7 @@ def evaluate_dataset(
         total=len(configs) * len(RUNS), desc="calibrating", unit="cal", disable=not progress
     ) as bar:
         rows = [
-            calibrate_config(root / cfg["folder"], tone, lambda: bar.update(1))
-            for cfg in configs
+            calibrate_config(root / cfg["folder"], tone, lambda: bar.update(1)) for cfg in configs
         ]
     return summarize_table3(rows, str(root), index.get("seed"), index.get("degraded", False))
 

@@ -22,6 +22,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
 from omnisort_hw.core.overlays import draw_extrinsics, overlay_path, write_picture
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
+from omnisort_hw.core.target_layout import TargetLayout
 from omnisort_hw.errors import InputError
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
@@ -93,10 +94,13 @@ def run_extrinsics(
     log: RunLog = NullLog,
     tone: ToneCurve = SRGB,
     stripe_px: np.ndarray | None = None,
+    layout: TargetLayout | None = None,
 ) -> ExtrinsicsRun:
     """Extract the target's features from one image and run the chosen method on them;
     `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise);
-    `stripe_px` the laser points of a measurement capture (else found in the image). With the
+    `stripe_px` the laser points of a measurement capture (else found in the image); `layout`
+    the target as measured (`config.target.load_target_description`; its separation is then
+    the one used), else the symmetric paper target. With the
     log on, the overlay picture (`ExtrinsicsRun.overlay`) goes to it as well."""
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
@@ -112,7 +116,9 @@ def run_extrinsics(
             f"--method {method} does not work with the {target} target "
             f"(use {' or '.join(METHODS_FOR[target])})"
         )
-    if target != "checkerboards":
+    if layout is not None and layout.kind != target:
+        raise InputError(f"{layout.source}: describes a {layout.kind} target, not {target}")
+    if target != "checkerboards" and layout is None:
         separation_mm = check_separation_mm(separation_mm, "separation_mm")
     check_image_size(image, model, source)
     log.image("extrinsics/image", image)
@@ -144,8 +150,10 @@ def run_extrinsics(
         solver = {"joint": calibrate_joint, "paper": calibrate_paper, "method1": calibrate_method1}[
             method
         ]
+        if layout is not None:
+            separation_mm = layout.separation_mm
         wall_mm = check_separation_mm(separation_mm, "separation_mm")  # a float for the walls
-        run = ExtrinsicsRun(solver(features, model, wall_mm), features)
+        run = ExtrinsicsRun(solver(features, model, wall_mm, layout), features)
     _log_calibration(log, run.calib)
     if log.enabled:
         log.image("extrinsics/overlay", run.overlay(image, source))
@@ -161,6 +169,13 @@ def run(
     result is saved as the rig's system.json with the picture of what was detected and fitted
     beside it; the answer is `calibration_result`'s."""
     kind, separation_default, field = rig.target_defaults()
+    layout = None
+    if request.target_file is not None:
+        from omnisort_hw.config.target import load_target_description
+
+        layout = load_target_description(request.target_file)
+        kind, separation_default = kind or layout.kind, layout.separation_mm
+        field = f"separation_mm of {request.target_file}"
     target, separation = resolve_target(
         request.target, request.separation_mm, kind, separation_default, field
     )
@@ -181,6 +196,7 @@ def run(
         source=acq.source,
         tone=tone,
         stripe_px=acq.stripe_px,
+        layout=layout,
         cancel=cancel,
         what="calibration",
     )

@@ -59,6 +59,7 @@ class ExtrinsicsRequest:
     separation_mm: float | None = None
     board: str | None = None
     square_mm: float | None = None
+    target_file: str | None = None  # a target description (TOML): the wall target as measured
 
     def board_spec(self) -> BoardSpec:
         """The checkerboards target's boards (9x6 of 97 mm unless given)."""

@@ -241,3 +241,30 @@ def test_evaluate_table3_json(tmp_path: Path) -> None:
         assert mae["laser_distance_mm"] < 2.0, (name, mae)
     assert 0 <= result["mapping"]["max_rel_error"] < 0.004
     assert (data / "dataset.json").is_file()
+
+
+def test_a_wrong_target_description_is_a_config_error(
+    rendered: dict[str, Path], tmp_path: Path
+) -> None:
+    """--target-file is checked before anything is measured: a misspelt key stops the command
+    with the configuration exit status and names the file and the key."""
+    example = Path(__file__).resolve().parents[2] / "deploy" / "target.example.toml"
+    bad = tmp_path / "target.toml"
+    bad.write_text(example.read_text().replace("border_height_mm = ", "border_hieght_mm = ", 1))
+    d = rendered["dir"]
+    proc = run_cli(
+        "extrinsics",
+        "calibrate",
+        str(d / "on.png"),
+        "--camera",
+        str(d / "camera.json"),
+        "--target",
+        "two-sided",
+        "--target-file",
+        str(bad),
+        "--out",
+        str(tmp_path / "system.json"),
+    )
+    assert proc.returncode == 78, (proc.returncode, proc.stderr)
+    assert "walls.left.border_hieght_mm: unknown key" in proc.stderr, proc.stderr
+    assert str(bad) in proc.stderr

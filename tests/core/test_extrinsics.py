@@ -6,12 +6,8 @@ import numpy as np
 import pytest
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.extrinsics.joint import (
-    calibrate_joint,
-    closed_form,
-    correlation_inflation,
-    observations,
-)
+from omnisort_hw.core.extrinsics.joint import calibrate_joint, closed_form, observations
+from omnisort_hw.core.extrinsics.joint_weighted import correlation_inflation
 from omnisort_hw.core.extrinsics.method1 import calibrate_method1
 from omnisort_hw.core.extrinsics.method2 import calibrate_method2
 from omnisort_hw.core.extrinsics.paper import calibrate_paper

@@ -13,14 +13,20 @@
    points really are (neighbours share pixels: the inflation is measured from the residuals'
    correlation along the line). The covariance of the solution gives each parameter's standard
    deviation.
-3. The same refinement runs on the three-sided target (`ThreeSidedProblem`), started from
+3. The same refinement runs on the three-sided target (`joint_three_sided`), started from
    method1's closed form, with the far wall's border and laser line in place of the markers.
 
 Observability: pitch (about Y, the wall direction) is fixed only through the A-D / B-C
 markers and the equal height of the borders; its standard deviation is reported as measured.
 
-Over 600 lines: the two-sided and the three-sided problems share one parameter layout, one
-residual model and one covariance; apart, each would carry a copy of the other's half.
+With a target description (`core.target_layout`) the markers stand at their measured places
+(the unknowns of the markers reduce to the walls' near end Y0), each marker's blob centroid is
+compared with the centroid of its rectangle's image, and the right border's height above the
+left one is an unknown too (`edge_step`): a border is a printed or textured edge whose imaged
+height differs between the walls by about a millimetre on the authors' renders (texture
+filtering; the geometry has one height), which through the equal-height assumption alone
+tilted pitch by 0.04 degree and laser pitch by 0.09. The borders then give the walls'
+direction, and the measured markers (and the wall/floor lines, geometric edges) their tilt.
 """
 
 from __future__ import annotations
@@ -30,11 +36,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.extrinsics.joint_three_sided import calibrate_three_sided
+from omnisort_hw.core.extrinsics.joint_weighted import (
+    LineStore,
+    _outcome,
+    _refine,
+    _tangent_basis,
+    _WeightedProblem,
+)
 from omnisort_hw.core.extrinsics.system_calibration import (
-    PARAMETERS,
     SystemCalibration,
     fit_laser_plane,
     pixel_scale,
@@ -50,6 +62,7 @@ from omnisort_hw.core.frames import (
     nearest_rotation,
     rays_to_plane,
 )
+from omnisort_hw.core.target_layout import TargetLayout, image_centroid_shift, side_marker_centres
 from omnisort_hw.errors import CalibrationError
 
 SIDES = ("left", "right")
@@ -108,8 +121,9 @@ def _ad_direction(a: np.ndarray, d: np.ndarray, y: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
-    """Initial estimate of all unknowns from the target's geometry (no iteration)."""
+def closed_form(obs: _Obs, separation: float, layout: TargetLayout | None = None) -> dict[str, Any]:
+    """Initial estimate of all unknowns from the target's geometry (no iteration); with a
+    measured `layout` the marker unknowns are the walls' near end Y0 alone (JointProblem)."""
     m = {s: great_circle_normal(obs.border[s]) for s in SIDES}
     y = np.cross(m["left"], m["right"])
     y /= np.linalg.norm(y)
@@ -142,6 +156,10 @@ def closed_form(obs: _Obs, separation: float) -> dict[str, Any]:
     roll, pitch, yaw = camera_angles(R)
     l_roll, l_pitch = laser_angles(n)
     x0 = [roll, pitch, yaw, l_roll, l_pitch, d, x_left, z_b, y_near, y_far, z_top, z_floor]
+    if layout is not None:
+        keys = sorted(marker_pts)
+        along = layout.marker_offsets(keys)[:, 0]
+        x0 = [*x0[:8], float(np.mean([marker_pts[k][1] for k in keys] - along)), 0.0]
     if len(obs.floor["left"]):
         # The wall/floor line: its plane normal in S is ~ (-z_f, 0, x_w), as for the border.
         mf = R @ great_circle_normal(obs.floor["left"])
@@ -171,131 +189,13 @@ NAMES = (
 )  # floor_z only when the wall/floor lines were extracted
 
 
-def _order_along(rays: np.ndarray) -> np.ndarray:
-    """Indices that sort rays lying near one great circle along it."""
-    m = great_circle_normal(rays)
-    e1 = rays.mean(axis=0)
-    e1 -= (e1 @ m) * m
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(m, e1)
-    return np.argsort(np.arctan2(rays @ e2, rays @ e1))
-
-
-def correlation_inflation(residuals: np.ndarray, max_lag: int = 10) -> float:
-    """Variance inflation 1 + 2 sum(rho_k) of an average of residuals ordered along a line,
-    from their autocorrelation up to the first lag within the noise of an estimate from n
-    points (2 / sqrt(n)); 1 for independent points, about the number of points sharing each
-    pixel otherwise."""
-    r = np.asarray(residuals, float) - np.mean(residuals)
-    n = r.size
-    denom = float(r @ r)
-    if n < 8 or denom <= 0:
-        return 1.0
-    total = 0.0
-    for k in range(1, min(max_lag, n // 4) + 1):
-        rho = float(r[:-k] @ r[k:]) / denom
-        if rho <= 2.0 / np.sqrt(n):  # indistinguishable from no correlation
-            break
-        total += rho
-    return float(np.clip(1.0 + 2.0 * total, 1.0, 10.0))
-
-
-def line_inflation(blocks: dict[str, np.ndarray], rays: dict[str, np.ndarray]) -> dict[str, float]:
-    """Per kind of line observation, the point-weighted mean of its lines' inflations."""
-    acc: dict[str, list[tuple[float, int]]] = {}
-    for name, ray in rays.items():
-        if len(ray) == 0:
-            continue
-        f = correlation_inflation(blocks[name][_order_along(ray)])
-        acc.setdefault(name.split("_")[0], []).append((f, len(ray)))
-    return {k: sum(f * n for f, n in v) / sum(n for _, n in v) for k, v in acc.items()}
-
-
-def _tangent_basis(rays: np.ndarray) -> np.ndarray:
-    """Two unit vectors perpendicular to each ray, (N, 2, 3)."""
-    helper = np.where(np.abs(rays[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(rays, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(rays, t1)
-    return np.stack([t1, t2], axis=1)
-
-
-# Block name -> (the dict holding its rays, the dict holding their pixel scales, its key).
-LineStore = dict[str, tuple[dict[str, np.ndarray], dict[str, np.ndarray], str]]
-
-
-class _WeightedProblem:
-    """What both targets' problems share: residual blocks named "<kind>_<line>", each kind
-    weighted by its measured noise and correlation, stray line points dropped. Subclasses give
-    `residual_blocks(p)` and `line_store()` (block name -> (rays dict, scales dict, key))."""
-
-    weights: dict[str, float]
-    inflation: dict[str, float]
-
-    def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
-        raise NotImplementedError
-
-    def line_store(self) -> LineStore:
-        raise NotImplementedError
-
-    def line_rays(self) -> dict[str, np.ndarray]:
-        """The observed rays behind each line block of `residual_blocks` (for their order)."""
-        return {name: rays[key] for name, (rays, _, key) in self.line_store().items()}
-
-    def residuals(self, p: np.ndarray) -> np.ndarray:
-        """Weighted residuals: each kind divided by its noise, so the sum is the likelihood."""
-        return np.concatenate(
-            [
-                block * self.weights[name.split("_")[0]]
-                for name, block in self.residual_blocks(p).items()
-            ]
-        )
-
-    def noise_px(self, p: np.ndarray) -> dict[str, float]:
-        """Robust noise estimate (px) of each kind of observation at parameters p: 1.4826 MAD
-        for the line points, RMS for the few marker coordinates; floored at 0.02 px."""
-        kinds: dict[str, list[np.ndarray]] = {}
-        for name, block in self.residual_blocks(p).items():
-            kinds.setdefault(name.split("_")[0], []).append(block)
-        out = {}
-        for kind, blocks in kinds.items():
-            r = np.concatenate(blocks)
-            sigma = np.sqrt(np.mean(r**2)) if kind == "markers" else 1.4826 * np.median(np.abs(r))
-            out[kind] = max(float(sigma), 0.02)
-        return out
-
-    def estimate_weights(self, p: np.ndarray) -> dict[str, float]:
-        """Weight each kind by 1 / (noise * sqrt(inflation)): neighbouring line points share
-        pixels (overlapping fit windows, blur), so N of them carry less than N independent
-        measurements; the inflation is measured from the residuals' correlation along each
-        line, which keeps the kinds' relative weights and the covariance honest."""
-        noise = self.noise_px(p)
-        self.inflation = line_inflation(self.residual_blocks(p), self.line_rays())
-        self.weights.update(
-            {k: 1.0 / (v * np.sqrt(self.inflation.get(k, 1.0))) for k, v in noise.items()}
-        )
-        return noise
-
-    def reject_outliers(self, p: np.ndarray, k: float = 4.0) -> int:
-        """Drop line points further than k noise sigmas of their kind from the fit (stray
-        extracted points), keeping at least 5 a line; markers are kept (each one is needed)."""
-        noise = self.noise_px(p)
-        blocks = self.residual_blocks(p)
-        dropped = 0
-        for name, (rays, scale, key) in self.line_store().items():
-            keep = np.abs(blocks[name]) <= k * noise[name.split("_")[0]]
-            if not keep.all() and keep.sum() >= 5:
-                rays[key], scale[key] = rays[key][keep], scale[key][keep]
-                dropped += int((~keep).sum())
-        return dropped
-
-
 class JointProblem(_WeightedProblem):
     """Residuals (pixels) of all observations for a parameter vector (see NAMES)."""
 
-    def __init__(self, obs: _Obs, separation: float) -> None:
+    def __init__(self, obs: _Obs, separation: float, layout: TargetLayout | None = None) -> None:
         self.obs = obs
         self.separation = separation
+        self.layout = layout
         self.has_floor = len(obs.floor["left"]) > 0
         # Per kind of observation, 1 / its noise in pixels (estimate_weights sets them).
         self.weights = {"border": 1.0, "floor": 1.0, "laser": 1.0, "markers": 1.0}
@@ -308,10 +208,21 @@ class JointProblem(_WeightedProblem):
         self.marker_top = np.array([name.startswith("border") for _, name in self.marker_keys])
         self.marker_basis = _tangent_basis(self.marker_rays)
         self.marker_scale = np.array([obs.scale_markers[k] for k in self.marker_keys])
+        # With a measured layout: each marker's (along, height above the left border) and the
+        # right border's height above the left one; the unknowns are then the left wall's X,
+        # the left border's Z and the walls' near end Y0 (see target_layout).
+        self.marker_offsets = layout.marker_offsets(self.marker_keys) if layout else None
+        self.border_step = layout.border_offset_mm("right") if layout else 0.0
 
     def split(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, float]]:
         R = camera_rotation(p[0], p[1], p[2])
         n = laser_normal(p[3], p[4])
+        if self.layout is not None:
+            geom = {"left": p[6], "right": p[6] + self.separation, "z_b": p[7], "y0": p[8]}
+            geom["edge_step"] = p[9]
+            if len(p) > 10:
+                geom["z_f"] = p[10]
+            return R, n, float(p[5]), geom
         geom = {
             "left": p[6],
             "right": p[6] + self.separation,
@@ -334,7 +245,8 @@ class JointProblem(_WeightedProblem):
         z_laser = -d - n[0] * xs / n[2]
         u = np.array([0.0, -n[2], n[1]])
         p0 = np.stack([xs, np.zeros(2), z_laser], axis=1)
-        rows = [np.stack([-np.full(2, g["z_b"]), np.zeros(2), xs], axis=1)]
+        z_border = g["z_b"] + np.array([0.0, self.border_step + g.get("edge_step", 0.0)])
+        rows = [np.stack([-z_border, np.zeros(2), xs], axis=1)]
         if self.has_floor:
             rows.append(np.stack([-np.full(2, g["z_f"]), np.zeros(2), xs], axis=1))
         rows.append(np.cross(p0, u))
@@ -350,7 +262,18 @@ class JointProblem(_WeightedProblem):
             out[f"laser_{s}"] = (self.obs.laser[s] @ in_C[2 * (k - 1) + i]) * self.obs.scale_laser[
                 s
             ]
-        pts = np.stack(
+        dirs = self.marker_centres(g) @ R  # rows: R^T p
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        out["markers"] = (
+            np.einsum("nkj,nj->nk", self.marker_basis, dirs) * self.marker_scale[:, None]
+        ).ravel()
+        return out
+
+    def marker_centres(self, g: dict[str, float]) -> np.ndarray:
+        """(K, 3) marker centres in S, in `marker_keys` order, for the geometry `g`."""
+        if self.marker_offsets is not None:
+            return side_marker_centres(self.marker_keys, self.marker_offsets, g, g["y0"], g["z_b"])
+        return np.stack(
             [
                 np.where(self.marker_right, g["right"], g["left"]),
                 np.where(self.marker_far, g["y_far"], g["y_near"]),
@@ -358,12 +281,6 @@ class JointProblem(_WeightedProblem):
             ],
             axis=1,
         )
-        dirs = pts @ R  # rows: R^T p
-        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-        out["markers"] = (
-            np.einsum("nkj,nj->nk", self.marker_basis, dirs) * self.marker_scale[:, None]
-        ).ravel()
-        return out
 
     def line_store(self) -> LineStore:
         """Border, laser (and wall/floor) rays and scales of each side, by block name."""
@@ -377,52 +294,40 @@ class JointProblem(_WeightedProblem):
         return out
 
 
-def _solve(obs: _Obs, separation_mm: float) -> tuple[Any, JointProblem, dict[str, float]]:
+def _solve(
+    obs: _Obs,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
+    model: OcamModel | None = None,
+) -> tuple[Any, JointProblem, dict[str, float]]:
     """LM from the closed-form start; then each kind of observation is weighted by its own
     noise (degraded laser points are noisier than border edges), points beyond 4 sigmas of
     their kind are dropped, and the weighted solve repeated: the maximum-likelihood fit, whose
-    covariance gives the standard deviations."""
-    start = closed_form(obs, separation_mm)
-    prob = JointProblem(obs, separation_mm)
+    covariance gives the standard deviations.
+
+    With a layout that gives the markers' sizes, a marker's blob centroid is compared with the
+    centroid of its rectangle's image rather than with the image of its centre: the shift
+    (up to half a pixel for 50 mm markers at 1 m) is computed at the solution's pose and the
+    solve repeated until it moves no marker by more than 0.005 px."""
+    start = closed_form(obs, separation_mm, layout)
+    prob = JointProblem(obs, separation_mm, layout)
     sol, noise = _refine(prob, start["x"])
+    sizes = layout.marker_sizes(prob.marker_keys) if layout is not None else None
+    if sizes is None or model is None:
+        return sol, prob, noise
+    observed = model.ray_to_pixel(prob.marker_rays)
+    shift = np.zeros_like(observed)
+    for _ in range(3):
+        R, _, _, g = prob.split(sol.x)
+        new = image_centroid_shift(model, R, prob.marker_centres(g), sizes)
+        if np.max(np.abs(new - shift)) < 0.005:
+            break
+        shift = new
+        rays = model.pixel_to_ray(observed - shift)
+        moved = _Obs(**{**obs.__dict__, "markers": dict(zip(prob.marker_keys, rays, strict=True))})
+        prob = JointProblem(moved, separation_mm, layout)
+        sol, noise = _refine(prob, sol.x)
     return sol, prob, noise
-
-
-def _refine(prob: _WeightedProblem, x0: np.ndarray) -> tuple[Any, dict[str, float]]:
-    """LM from x0, then twice: drop points beyond 4 sigmas of their kind, weight each kind by
-    its measured noise and correlation, solve again. Returns the solution and the noise."""
-    sol = least_squares(prob.residuals, x0, method="lm", x_scale="jac", max_nfev=400)
-    noise: dict[str, float] = {}
-    for _ in range(2):
-        prob.reject_outliers(sol.x)
-        noise = prob.estimate_weights(sol.x)
-        sol = least_squares(prob.residuals, sol.x, method="lm", x_scale="jac", max_nfev=400)
-    return sol, noise
-
-
-def _outcome(
-    prob: _WeightedProblem, sol: Any, noise: dict[str, float]
-) -> tuple[np.ndarray, dict[str, Any], dict[str, float]]:
-    """What both targets report of a refinement: every parameter's standard deviation, the
-    residual summary, and the std record of the parameters they share (degrees, mm). The
-    residuals are weighted by their measured noise and correlation, so the covariance of the
-    maximum-likelihood fit is (J^T J)^-1 without rescaling."""
-    std = np.sqrt(np.clip(np.diag(np.linalg.pinv(sol.jac.T @ sol.jac)), 0.0, None))
-    blocks = prob.residual_blocks(sol.x)
-    residuals = {
-        "rms_px": float(np.sqrt(np.mean(np.concatenate(list(blocks.values())) ** 2))),
-        **{f"{k}_rms_px": float(np.sqrt(np.mean(v**2))) for k, v in blocks.items()},
-        "noise_px": noise,
-        "correlation_inflation": dict(prob.inflation),
-        "observations": int(sol.fun.size),
-    }
-    record = {
-        **{PARAMETERS[i]: float(np.degrees(std[i])) for i in range(5)},
-        PARAMETERS[5]: float(std[5]),
-        "border_z_mm": float(std[7]),
-        "wall_left_x_mm": float(std[6]),
-    }
-    return std, residuals, record
 
 
 def _without_floor(obs: _Obs) -> _Obs:
@@ -439,7 +344,10 @@ def _without_floor(obs: _Obs) -> _Obs:
 
 
 def calibrate_joint(
-    features: TargetFeatures, model: OcamModel, separation_mm: float
+    features: TargetFeatures,
+    model: OcamModel,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
 ) -> SystemCalibration:
     """The default method: closed-form start, then one robust joint refinement (on the
     three-sided target too, where it refines method1's closed form on all three walls).
@@ -449,16 +357,21 @@ def calibrate_joint(
     own plane on one side (a plinth, an uneven floor) would otherwise bias the pitch by about
     0.07 degree per millimetre. The fit without them is compared with the fit with them on the
     markers' residuals.
+
+    `layout`: the target as measured (markers' positions and sizes, border heights); without
+    it the symmetric paper target is assumed. Its separation is the one used.
     """
+    if layout is not None:
+        separation_mm = layout.separation_mm
     if features.kind == "three-sided":
-        return _calibrate_three_sided(features, model, separation_mm)
+        return calibrate_three_sided(features, model, separation_mm, layout)
     t0 = time.perf_counter()
     obs = observations(features, model)
     floor_note = "not extracted"
-    sol, prob, noise = _solve(_without_floor(obs), separation_mm)
+    sol, prob, noise = _solve(_without_floor(obs), separation_mm, layout, model)
     if len(obs.floor["left"]):
         markers_alone = float(np.sqrt(np.mean(prob.residual_blocks(sol.x)["markers"] ** 2)))
-        sol_f, prob_f, noise_f = _solve(obs, separation_mm)
+        sol_f, prob_f, noise_f = _solve(obs, separation_mm, layout, model)
         markers_with = float(np.sqrt(np.mean(prob_f.residual_blocks(sol_f.x)["markers"] ** 2)))
         # Consistent lines leave the markers' fit as it was (ratio <= 1.04 on every simulated
         # image, clean or degraded); a 1.5 mm asymmetric offset of one line already exceeds
@@ -489,118 +402,6 @@ def calibrate_joint(
         },
         residuals={**residuals, "floor_lines": floor_note},
         std=calib_std,
-    )
-    calib.elapsed_s = time.perf_counter() - t0
-    return calib
-
-
-WALLS3 = ("left", "right", "far")
-
-
-class ThreeSidedProblem(_WeightedProblem):
-    """`joint` on the three-sided target: residuals (pixels) of the three borders and the
-    three laser lines for (camera roll/pitch/yaw, laser roll/pitch/distance, left wall X,
-    border height, far wall Y). The far wall (along X at Y = y_far) supplies what the markers
-    supply on the two-sided target, so markers are not needed (both marker layouts work)."""
-
-    def __init__(
-        self,
-        border: dict[str, np.ndarray],
-        laser: dict[str, np.ndarray],
-        model: OcamModel,
-        separation: float,
-    ) -> None:
-        self.border = dict(border)
-        self.laser = dict(laser)
-        self.scale_border = {w: pixel_scale(model, r) for w, r in border.items()}
-        self.scale_laser = {w: pixel_scale(model, r) for w, r in laser.items()}
-        self.separation = separation
-        self.weights = {"border": 1.0, "laser": 1.0}
-        self.inflation: dict[str, float] = {}
-
-    def normals_S(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Great-circle normals in S of the borders and laser lines, rows in WALLS3 order."""
-        n = laser_normal(p[3], p[4])
-        d, x_left, z_b, y_far = p[5], p[6], p[7], p[8]
-        xs = np.array([x_left, x_left + self.separation])
-        border = np.array([[-z_b, 0.0, xs[0]], [-z_b, 0.0, xs[1]], [0.0, z_b, -y_far]])
-        # Side walls X = x: the laser line runs along u = (0, -n_z, n_y) through (x, 0, z).
-        z_side = -d - n[0] * xs / n[2]
-        side = np.cross(np.stack([xs, np.zeros(2), z_side], axis=1), np.array([0.0, -n[2], n[1]]))
-        # Far wall Y = y_far: along u = (-n_z, 0, n_x) through (0, y_far, z).
-        far = np.cross(
-            np.array([0.0, y_far, -d - n[1] * y_far / n[2]]), np.array([-n[2], 0.0, n[0]])
-        )
-        laser = np.vstack([side, far])
-        border /= np.linalg.norm(border, axis=1, keepdims=True)
-        laser /= np.linalg.norm(laser, axis=1, keepdims=True)
-        return border, laser
-
-    def residual_blocks(self, p: np.ndarray) -> dict[str, np.ndarray]:
-        """Signed distances (px) of every border and laser point from its model line."""
-        R = camera_rotation(p[0], p[1], p[2])
-        border, laser = (m @ R for m in self.normals_S(p))
-        out = {}
-        for i, w in enumerate(WALLS3):
-            out[f"border_{w}"] = (self.border[w] @ border[i]) * self.scale_border[w]
-            out[f"laser_{w}"] = (self.laser[w] @ laser[i]) * self.scale_laser[w]
-        return out
-
-    def line_store(self) -> LineStore:
-        """Border and laser rays and scales of each wall, by block name."""
-        out = {}
-        for w in WALLS3:
-            out[f"border_{w}"] = (self.border, self.scale_border, w)
-            out[f"laser_{w}"] = (self.laser, self.scale_laser, w)
-        return out
-
-
-def _calibrate_three_sided(
-    features: TargetFeatures, model: OcamModel, separation_mm: float
-) -> SystemCalibration:
-    """`joint` for the three-sided target: method1's closed form, then the robust weighted
-    refinement of all unknowns on the three walls' borders and laser lines."""
-    from omnisort_hw.core.extrinsics.method1 import calibrate_method1
-
-    t0 = time.perf_counter()
-    start = calibrate_method1(features, model, separation_mm)
-    roll, pitch, yaw = camera_angles(start.R_SC)
-    l_roll, l_pitch = laser_angles(start.laser_normal)
-    x0 = np.array(
-        [
-            roll,
-            pitch,
-            yaw,
-            l_roll,
-            l_pitch,
-            start.laser_distance_mm,
-            start.target["wall_left_x_mm"],
-            start.target["border_z_mm"],
-            start.target["far_wall_y_mm"],
-        ]
-    )
-    border = {w: model.pixel_to_ray(features.walls[w].border_px) for w in WALLS3}
-    laser = {w: model.pixel_to_ray(features.walls[w].laser_px) for w in WALLS3}
-    prob = ThreeSidedProblem(border, laser, model, separation_mm)
-    sol, noise = _refine(prob, x0)
-    p = sol.x
-    std, residuals, calib_std = _outcome(prob, sol, noise)
-    calib = SystemCalibration(
-        model=model,
-        R_SC=camera_rotation(p[0], p[1], p[2]),
-        laser_normal=laser_normal(p[3], p[4]),
-        laser_distance_mm=float(p[5]),
-        method="joint",
-        target={
-            "kind": features.kind,
-            "separation_mm": separation_mm,
-            "wall_left_x_mm": float(p[6]),
-            "wall_right_x_mm": float(p[6] + separation_mm),
-            "far_wall_y_mm": float(p[8]),
-            "border_z_mm": float(p[7]),
-        },
-        residuals=residuals,
-        std={**calib_std, "far_wall_y_mm": float(std[8])},
     )
     calib.elapsed_s = time.perf_counter() - t0
     return calib

@@ -22,15 +22,23 @@ from omnisort_hw.core.extrinsics.system_calibration import (
 )
 from omnisort_hw.core.features import TargetFeatures
 from omnisort_hw.core.frames import great_circle_normal, nearest_rotation, rays_to_plane
+from omnisort_hw.core.target_layout import TargetLayout
 from omnisort_hw.errors import CalibrationError
 
 WALLS = ("left", "right", "far")
 
 
 def calibrate_method1(
-    features: TargetFeatures, model: OcamModel, separation_mm: float
+    features: TargetFeatures,
+    model: OcamModel,
+    separation_mm: float,
+    layout: TargetLayout | None = None,
 ) -> SystemCalibration:
+    """The closed form; `layout`: the target as measured (its separation is then used; the
+    closed form has no use for the markers)."""
     t0 = time.perf_counter()
+    if layout is not None:
+        separation_mm = layout.separation_mm
     missing = [w for w in WALLS if w not in features.walls]
     if missing:
         raise CalibrationError(f"three-sided target: no features for wall(s) {', '.join(missing)}")
