@@ -18,7 +18,16 @@ from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import CalibrationFileError, InputError
 from omnisort_hw.fileio import atomic_write_bytes, atomic_write_json
 
-MODEL_KEYS = ("model", "image_size", "center_uv", "stretch", "poly", "inv_poly", "theta_max_deg")
+MODEL_KEYS = (
+    "model",
+    "image_size",
+    "center_uv",
+    "stretch",
+    "poly",
+    "inv_poly",
+    "theta_max_deg",
+    "uncertainty",
+)
 
 
 def camera_record(model: OcamModel, **meta: Any) -> dict[str, Any]:
