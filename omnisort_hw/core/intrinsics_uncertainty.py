@@ -20,7 +20,7 @@ repeated views.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -90,21 +90,33 @@ def model_uncertainty(result: IntrinsicResult) -> dict[str, Any]:
 def perturbed_models(model: OcamModel, k_sigma: float = 1.0) -> list[tuple[OcamModel, OcamModel]]:
     """Pairs of models +-k_sigma along each principal direction of the model's intrinsic
     covariance (none without one): central differences of anything computed with the model
-    then give its covariance from the intrinsics."""
+    then give its covariance from the intrinsics. They are for `pixel_to_ray` only: their
+    inverse polynomial is the nominal model's (refitting it would cost more than a map)."""
     unc = model.uncertainty
     if not unc:
         return []
     vec = np.asarray(unc["parameters"], float)
     cov = np.asarray(unc["covariance"], float)
     w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    rho_scale, degree = float(unc["rho_scale"]), int(unc["poly_degree"])
     out = []
     for lam, v in zip(w, V.T, strict=True):
         if lam <= 0:
             continue
         step = k_sigma * np.sqrt(lam) * v
-        args = (float(unc["rho_scale"]), model.image_size, int(unc["poly_degree"]))
-        out.append((model_from_vector(vec + step, *args), model_from_vector(vec - step, *args)))
-    return out
+        out.append(tuple(_unprojection(model, vec + s, rho_scale, degree) for s in (step, -step)))
+    return out  # type: ignore[return-value]
+
+
+def _unprojection(model: OcamModel, vec: np.ndarray, rho_scale: float, degree: int) -> OcamModel:
+    g = _g_full(vec[4:]) / rho_scale ** np.arange(degree + 1)
+    return replace(
+        model,
+        poly=-g,
+        center_uv=(float(vec[0]), float(vec[1])),
+        stretch=(float(vec[2]), float(vec[3]), float(vec[3])),
+        uncertainty=None,
+    )
 
 
 def model_from_vector(

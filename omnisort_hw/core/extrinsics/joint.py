@@ -30,6 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.extrinsics.covariance import fit_covariance
 from omnisort_hw.core.extrinsics.system_calibration import (
     PARAMETERS,
     SystemCalibration,
@@ -46,6 +47,7 @@ from omnisort_hw.core.frames import (
     laser_normal,
     nearest_rotation,
     rays_to_plane,
+    tangent_basis,
 )
 from omnisort_hw.errors import CalibrationError
 
@@ -208,15 +210,6 @@ def line_inflation(blocks: dict[str, np.ndarray], rays: dict[str, np.ndarray]) -
     return {k: sum(f * n for f, n in v) / sum(n for _, n in v) for k, v in acc.items()}
 
 
-def _tangent_basis(rays: np.ndarray) -> np.ndarray:
-    """Two unit vectors perpendicular to each ray, (N, 2, 3)."""
-    helper = np.where(np.abs(rays[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(rays, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(rays, t1)
-    return np.stack([t1, t2], axis=1)
-
-
 # Block name -> (the dict holding its rays, the dict holding their pixel scales, its key).
 LineStore = dict[str, tuple[dict[str, np.ndarray], dict[str, np.ndarray], str]]
 
@@ -303,7 +296,7 @@ class JointProblem(_WeightedProblem):
         self.marker_right = np.array([side == "right" for side, _ in self.marker_keys])
         self.marker_far = np.array([name.endswith("far") for _, name in self.marker_keys])
         self.marker_top = np.array([name.startswith("border") for _, name in self.marker_keys])
-        self.marker_basis = _tangent_basis(self.marker_rays)
+        self.marker_basis = tangent_basis(self.marker_rays)
         self.marker_scale = np.array([obs.scale_markers[k] for k in self.marker_keys])
 
     def split(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, float]]:
@@ -486,6 +479,7 @@ def calibrate_joint(
         },
         residuals={**residuals, "floor_lines": floor_note},
         std=calib_std,
+        covariance=fit_covariance(prob, sol, model).to_json(),
     )
     calib.elapsed_s = time.perf_counter() - t0
     return calib
@@ -598,6 +592,7 @@ def _calibrate_three_sided(
         },
         residuals=residuals,
         std={**calib_std, "far_wall_y_mm": float(std[8])},
+        covariance=fit_covariance(prob, sol, model).to_json(),
     )
     calib.elapsed_s = time.perf_counter() - t0
     return calib
