@@ -26,7 +26,6 @@ MODEL_KEYS = (
     "poly",
     "inv_poly",
     "theta_max_deg",
-    "uncertainty",
 )
 
 
@@ -53,7 +52,8 @@ def load_camera_json(path: str | Path) -> tuple[OcamModel, dict[str, Any]]:
         model = OcamModel.from_dict(data, source=str(p))
     except InputError as exc:
         raise CalibrationFileError(str(exc)) from exc
-    meta = {k: v for k, v in data.items() if k not in MODEL_KEYS and k != "inv_error_px"}
+    model_only = {*MODEL_KEYS, "inv_error_px", "uncertainty"}
+    meta = {k: v for k, v in data.items() if k not in model_only}
     return model, meta
 
 

@@ -59,7 +59,8 @@ def test_without_intrinsic_covariance_only_the_noise_counts() -> None:
     calib = calibrate_joint(two_sided(model, sc, seed=1, noise=0.2), model, sc.separation)
     c = ExtrinsicCovariance.from_json(calib.covariance)
     assert c.modes.shape == (0, 6)
-    # The noise part is the fit's: its diagonal gives the std the fit reports.
+    # The noise part is never below the fit's own; with independent noise, as here, the
+    # sandwich estimate agrees with the model's, within its spread (8 markers: ~25 %).
     std = c.std()
     for k in PARAMETERS:
-        assert np.isclose(std[k], calib.std[k], rtol=1e-6), k
+        assert calib.std[k] * (1 - 1e-9) <= std[k] < 1.6 * calib.std[k], k
