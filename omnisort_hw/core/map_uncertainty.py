@@ -238,3 +238,15 @@ def point_sigmas(
     return PointSigmas(
         cov, s_normal, s_along, off, np.asarray(pixel_sigma_px, float), normals, sources
     )
+
+
+def sigma_colours(sigma_mm: np.ndarray) -> np.ndarray:
+    """(N, 3) RGB colours of sigmas: blue 0 to red at their 95th percentile (the viewer's)."""
+    import cv2
+
+    sig = np.asarray(sigma_mm, float)
+    if not np.isfinite(sig).any():
+        return np.zeros((len(sig), 3), np.uint8)
+    hi = float(np.nanpercentile(sig, 95)) or 1.0
+    level = np.clip(np.nan_to_num(sig / hi) * 255, 0, 255).astype(np.uint8)
+    return cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_JET).reshape(-1, 3)[:, ::-1]

@@ -13,7 +13,12 @@ import numpy as np
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_echoes import direct_hits, floor_echoes
 from omnisort_hw.core.laser_stripe import laser_stripe_points_stats, stripe_interior
-from omnisort_hw.core.map_uncertainty import PointSigmas, point_sigmas, stripe_pixel_sigma
+from omnisort_hw.core.map_uncertainty import (
+    PointSigmas,
+    point_sigmas,
+    sigma_colours,
+    stripe_pixel_sigma,
+)
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
 from omnisort_hw.core.overlays import draw_map
 from omnisort_hw.pipeline.extrinsics import check_image_size
@@ -103,7 +108,12 @@ def map_laser(
     )
     log.image("map/image", image)
     log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
-    log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))
+    if sigmas is None:
+        log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))
+    else:
+        finite = np.all(np.isfinite(points), axis=1)
+        log.points3d("map/points_S", points[finite], color=sigma_colours(sigmas.normal_mm[finite]))
+        log.scalar("map/sigma_normal_mm_median", float(np.nanmedian(sigmas.normal_mm)))
     for i, seg in enumerate(result.segments):
         log.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
     return result
@@ -114,7 +124,10 @@ def map_overlay(
 ) -> np.ndarray:
     """The map's picture: the image with its laser points beside their top view on the laser
     plane (mm), segments in matching colours. Drawn only when asked: `map_laser` stays fast."""
-    return draw_map(image, laser_map.pixels, laser_map.points_S, laser_map.segments, calib, title)
+    sigma = None if laser_map.sigmas is None else laser_map.sigmas.normal_mm
+    return draw_map(
+        image, laser_map.pixels, laser_map.points_S, laser_map.segments, calib, title, sigma
+    )
 
 
 def floor_plane_S(
