@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import prose
+from benchmarks.figures_uncertainty import uncertainty
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -664,6 +665,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "lighting": lighting,
     "table3_capture": table3_capture,
     "sweeps": sweeps,
+    "uncertainty": uncertainty,
 }
 
 
