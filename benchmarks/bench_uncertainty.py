@@ -123,9 +123,17 @@ def _cost() -> dict[str, Any]:
         **calib.covariance,
         "intrinsics_modes": np.zeros((len(vec), 6)).tolist(),
     }
+    px0, st0 = laser_stripe_points_stats(image)
+    pts0 = pixels_to_plane(px0, calib)
+
+    def sigmas_only() -> Any:
+        return point_sigmas(px0, calib, stripe_pixel_sigma(px0, st0.chains), pts0)
+
     cv2.setNumThreads(1)
     try:
         out = {
+            "sigmas_only_ms_one_core": _best_ms(sigmas_only),
+            "points": len(px0),
             "map_1920_ms_one_core": _best_ms(plain),
             "map_1920_with_sigmas_ms_one_core": _best_ms(with_sigmas),
             "map_laser_1920_ms_one_core": _best_ms(

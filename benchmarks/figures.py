@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import prose
-from benchmarks.figures_uncertainty import uncertainty
+from benchmarks.figures_uncertainty import uncertainty, uncertainty_rows
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -483,6 +483,8 @@ def summary(r: dict[str, Any]) -> str:
                 "[drift](docs/drift.md)",
             ]
         )
+    if "uncertainty" in r:
+        rows += uncertainty_rows(r["uncertainty"])
     if "sweep" in r:
         sw = r["sweep"]
         rows.append(

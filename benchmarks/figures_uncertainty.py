@@ -76,9 +76,15 @@ def uncertainty(r: dict[str, Any]) -> str:
         + "; ".join(f"{x['color']} ({x['reason']})" for x in refused)
         + ".",
         "",
-        f"Cost, 1920 px frame, one core: map {c['map_1920_ms_one_core']} ms, with every point's "
-        f"sigma {c['map_1920_with_sigmas_ms_one_core']} ms; the whole `map_laser` (echoes, stripe "
-        f"ends) {c['map_laser_1920_ms_one_core']} / "
+        (
+            f"Cost, 1920 px frame, one core: the sigmas of its {c['points']} points "
+            f"{c['sigmas_only_ms_one_core']} ms; "
+            if "points" in c
+            else "Cost, 1920 px frame, one core: "
+        )
+        + f"map {c['map_1920_ms_one_core']} ms, with every "
+        f"point's sigma {c['map_1920_with_sigmas_ms_one_core']} ms; the whole `map_laser` "
+        f"(echoes, stripe ends) {c['map_laser_1920_ms_one_core']} / "
         f"{c['map_laser_1920_with_sigmas_ms_one_core']} ms,"
         f" with {c['intrinsic_modes']} intrinsic modes too "
         f"{c['map_laser_1920_with_sigmas_and_intrinsic_modes_ms_one_core']} ms "
@@ -87,3 +93,30 @@ def uncertainty(r: dict[str, Any]) -> str:
         f"was built on 0-3), {u['width_px']} px.",
     ]
     return "\n".join(out + lines) + "\n"
+
+
+def uncertainty_rows(u: dict[str, Any]) -> list[list[str]]:
+    """The summary table's rows: the sigmas' calibration against truth, the real lens."""
+    w, c = u["map"]["walls"], u["cubes"]
+    rows = [
+        [
+            "predicted sigma against truth, held-out seeds: map points on walls / cube centres "
+            "(target: z std 0.8-1.25, 90-98 % in the 95 % interval)",
+            f"z std {w['z_std']:.2f}, {100 * w['within_95_fraction']:.1f} % ({w['n']} points) / "
+            f"{c['z_std']:.2f}, {100 * c['within_95_fraction']:.1f} % ({c['n']} coordinates)",
+            "[uncertainty](docs/uncertainty.md)",
+        ]
+    ]
+    f2 = u["fisheye2"]
+    if "skipped" not in f2:
+        at = f2["projection_px_at_deg"]
+        rows.append(
+            [
+                "fisheye2 projection uncertainty at 0 / 45-70 / 80° (mrcal: 0.06 / 0.08-0.16 / "
+                "0.25-0.88 px); held-out / in-sample RMS",
+                f"{at['0']:.3f} / {at['45']:.3f}-{at['70']:.3f} / {at['80']:.3f} px; "
+                f"{f2['cross_validation_rms_px']:.3f} / {f2['in_sample_rms_px']:.3f} px",
+                "[uncertainty](docs/uncertainty.md)",
+            ]
+        )
+    return rows
