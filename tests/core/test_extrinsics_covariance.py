@@ -64,3 +64,27 @@ def test_without_intrinsic_covariance_only_the_noise_counts() -> None:
     std = c.std()
     for k in PARAMETERS:
         assert calib.std[k] * (1 - 1e-9) <= std[k] < 1.6 * calib.std[k], k
+
+
+def test_the_intrinsics_covariance_travels_from_camera_json_to_the_map(tmp_path) -> None:
+    """camera.json keeps the covariance with the model; the joint fit turns it into one mode
+    per intrinsic direction in system.json; the map's sigmas then count it."""
+    from omnisort_hw.core.camera_io import load_camera_json, save_camera_json
+    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+    from omnisort_hw.core.map_uncertainty import point_sigmas
+
+    model = _calibrated_model()
+    path = save_camera_json(tmp_path / "camera.json", model, rms_px=0.1)
+    loaded, meta = load_camera_json(path)
+    assert "uncertainty" not in meta and loaded.uncertainty == model.uncertainty
+    sc = Scene(random_angles(np.random.default_rng(6)))
+    calib = calibrate_joint(two_sided(loaded, sc, seed=2, noise=0.1), loaded, sc.separation)
+    again = SystemCalibration.from_json(calib.to_json())
+    modes = ExtrinsicCovariance.from_json(again.covariance).modes
+    assert modes.shape == (len(model.uncertainty["parameters"]), 6)
+    px = np.array([[700.0, 1500.0], [1300.0, 1450.0]])
+    with_i = point_sigmas(px, again, np.full(2, 0.05))
+    assert "intrinsics (camera.json covariance)" in with_i.sources
+    again.model = replace(again.model, uncertainty=None)
+    without = point_sigmas(px, again, np.full(2, 0.05))
+    assert np.all(with_i.normal_mm >= without.normal_mm * (1 - 1e-9))
