@@ -116,4 +116,4 @@ def call_with_timeout(fn: Callable[[], T], timeout_s: float, thread_name: str) -
         raise StillRunningError(worker)
     if "error" in box:
         raise box["error"]
-    return box["value"]  # type: ignore[no-any-return]
+    return box["value"]

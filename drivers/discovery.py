@@ -157,6 +157,7 @@ def list_cameras(
             name = (sysfs / node.name / "name").read_text().strip()
         except OSError:
             name = "?"
+        formats: dict[str, list[tuple[int, int]]]
         driver, bus, is_capture, formats, error = "", "", True, {}, ""
         try:
             fd = os.open(node, os.O_RDWR | os.O_NONBLOCK)

@@ -143,7 +143,7 @@ class SerialLaser(LaserSwitch):
         log.warning("%s: connection was lost, reopening the port", self.name)
         self._open()
         log.info("%s: port reopened", self.name)
-        return self._ser  # type: ignore[return-value]
+        return self._ser
 
     def _lose(self, exc: BaseException, doing: str) -> DeviceDisconnectedError:
         ser, self._ser = self._ser, None

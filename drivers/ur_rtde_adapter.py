@@ -195,9 +195,9 @@ class RTDELink:
     def _rejected(self, what: str) -> DeviceError:
         robot, safety = self._call("modes")
         if safety != 1:
-            from drivers.errors import SafetyStopError
+            from drivers.errors import SafetyStopError, SafetyStopKind
 
-            kind = "emergency" if safety in (6, 7) else "protective"
+            kind: SafetyStopKind = "emergency" if safety in (6, 7) else "protective"
             return SafetyStopError(
                 f"UR controller at {self.host} rejected {what}: safety mode {safety}",
                 kind=kind,

@@ -226,7 +226,7 @@ class V4L2Camera(Camera):
             cap = self._connected_cap()
             if fourcc == self._pixel_format:
                 return
-            cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fourcc))
+            cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*fourcc))
             code = int(cap.get(cv2.CAP_PROP_FOURCC))
             got = "".join(chr((code >> (8 * i)) & 0xFF) for i in range(4))
             if got != fourcc:
@@ -347,7 +347,7 @@ class V4L2Camera(Camera):
 
     def _configure_v4l2(self, cap: Any) -> None:
         cfg = self.config
-        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*self._pixel_format))
+        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter.fourcc(*self._pixel_format))
         cap.set(cv2.CAP_PROP_FRAME_WIDTH, cfg.width)
         cap.set(cv2.CAP_PROP_FRAME_HEIGHT, cfg.height)
         cap.set(cv2.CAP_PROP_FPS, cfg.fps)

@@ -77,6 +77,13 @@ class CalibrationDriftError(MotionRefusedError):
     code = "calibration_drift"
 
 
+class NotAvailableError(OmnisortError):
+    """A command needs a section of the cell file, or a component, that this cell does not
+    have (the message names it)."""
+
+    code = "not_available"
+
+
 class MissingExtraError(OmnisortError):
     """An optional feature was asked for without its extra installed (the message names the
     pip extra to install)."""

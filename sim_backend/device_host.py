@@ -349,7 +349,7 @@ class SimHost:
                 f"{self._proc.exitcode})",
                 device="sim",
             )
-        return value  # type: ignore[no-any-return]
+        return value
 
     @property
     def alive(self) -> bool:

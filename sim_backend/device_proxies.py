@@ -27,6 +27,7 @@ from __future__ import annotations
 import abc
 import contextlib
 import inspect
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -212,7 +213,7 @@ class HostedCamera(_HostedDevice, Camera):
 
     @property
     def resolution(self) -> tuple[int, int]:
-        return tuple(self._static("resolution"))  # type: ignore[return-value]
+        return tuple(self._static("resolution"))
 
     @property
     def serial(self) -> str:
@@ -230,7 +231,7 @@ class HostedCamera(_HostedDevice, Camera):
         frame = self._call("grab", timeout_s, timeout_s=wait, **kwargs)
         if not isinstance(frame, Frame):  # pragma: no cover - the child always sends one
             frame = Frame.now(np.asarray(frame), 0)
-        return frame  # type: ignore[no-any-return]
+        return frame
 
 
 class HostedLaserSwitch(_HostedDevice, LaserSwitch):
@@ -249,11 +250,12 @@ class HostedArm(_HostedDevice, Arm):
 
     def __init__(self, host: SimHost, kind: str = "arm") -> None:
         super().__init__(host, kind)
-        object.__setattr__(self, "_gripper", HostedGripper(host, host.names[kind]))
+        gripper = HostedGripper(host, host.names[kind])  # type: ignore[abstract]  # _forward_interface fills its abstract methods after the class statement
+        object.__setattr__(self, "_gripper", gripper)
 
     @property
     def limits(self) -> MotionLimits:
-        return self._static("limits")  # type: ignore[no-any-return]
+        return self._static("limits")
 
     @property
     def gripper(self) -> HostedGripper:
@@ -268,7 +270,7 @@ class HostedArm(_HostedDevice, Arm):
         """From the first call on, the child records the arm time (simulated seconds) of the
         last motion sample and of every `stop()`'s arrival: `{"samples", "last_sample",
         "stops", "now"}` (a stop's latency in the arm's own time, for tests and diagnosis)."""
-        return self._host.call(self._device, "arm", "trace")  # type: ignore[no-any-return]
+        return self._host.call(self._device, "arm", "trace")
 
 
 for _cls, _base in (
@@ -337,7 +339,11 @@ def open_devices(
     checked = {kind: _check_settings(kind, dict(s)) for kind, s in sections.items()}
     sim = SimHost(checked, base_dir, **host)
     made: dict[str, Camera | LaserSwitch | Arm] = {}
-    kinds = {"camera": HostedCamera, "laser": HostedLaserSwitch, "arm": HostedArm}
+    kinds: dict[str, Callable[[SimHost, str], Camera | LaserSwitch | Arm]] = {
+        "camera": HostedCamera,
+        "laser": HostedLaserSwitch,
+        "arm": HostedArm,
+    }
     for kind in sim.kinds:
         made[kind] = kinds[kind](sim, kind)
     return made

@@ -273,7 +273,7 @@ def open_devices(
         path = base_dir / path
     seeds = {s["seed"] for s in checked.values() if "seed" in s}
     cam = checked.get("camera", {})
-    overrides = {k: cam[k] for k in ("width", "height") if k in cam}
+    overrides: dict[str, Any] = {k: cam[k] for k in ("width", "height") if k in cam}
     if "model_file" in cam:
         mf = Path(cam["model_file"])
         overrides["model_file"] = str(base_dir / mf if base_dir and not mf.is_absolute() else mf)

@@ -125,7 +125,7 @@ def _mirror_laser(
     pts = points.reshape(-1, 3)[lit].astype(np.float64)
     keep = np.isfinite(pts).all(axis=1) & (pts[:, 2] > floor_z + 1.0)
     lit, pts = lit[keep], pts[keep]
-    out = np.zeros((h, w), np.float32)
+    out: np.ndarray = np.zeros((h, w), np.float32)
     if lit.size == 0:
         return out
     pts[:, 2] = 2.0 * floor_z - pts[:, 2]

@@ -9,6 +9,7 @@ analytically and keep the parts the camera sees and the laser reaches.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -134,7 +135,7 @@ FACE_LIFT_MM = 1.0  # off a face, for its visibility test (more than the engine'
 def laser_polylines(
     world: SimWorld,
     plane: LaserPlane,
-    in_view: callable,  # type: ignore[valid-type]
+    in_view: Callable[[np.ndarray], np.ndarray],
     step_mm: float = 0.5,
 ) -> list[Polyline]:
     """Exact plane/face intersections, kept where seen by the camera and lit by the laser.

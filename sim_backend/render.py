@@ -65,7 +65,7 @@ def static_hits_for(world: SimWorld, geo: FisheyeGeometry, shader: Shader) -> Hi
     """The static hits of the pixel centres, cached on the world per camera configuration."""
     cache = world.render_cache
     hits = cache.get(geo.key)
-    if hits is None:
+    if not isinstance(hits, Hits):
         parts = [
             shader.static_hits(geo.rays_S[start : start + _CHUNK])
             for start in range(0, geo.pixel_index.size, _CHUNK)

@@ -336,7 +336,11 @@ class Scene:
         updates: dict[str, Any] = {}
         for key, value in changes.items():
             current = getattr(self, key)
-            if isinstance(value, dict) and dataclasses.is_dataclass(current):
+            if (
+                isinstance(value, dict)
+                and dataclasses.is_dataclass(current)
+                and not isinstance(current, type)
+            ):
                 hints = typing.get_type_hints(type(current))
                 fields = {f.name for f in dataclasses.fields(current)}
                 parsed = {}

@@ -247,10 +247,10 @@ class Shader:
             dirs.append(d)
         n0, n1, n2 = near
         tmin = np.maximum(np.maximum(n0, n1), n2)
-        axis = np.where(tmin == n0, 0, np.where(tmin == n1, 1, 2))
-        d_axis = np.where(axis == 0, dirs[0], np.where(axis == 1, dirs[1], dirs[2]))
+        entry_axis = np.where(tmin == n0, 0, np.where(tmin == n1, 1, 2))
+        d_axis = np.where(entry_axis == 0, dirs[0], np.where(entry_axis == 1, dirs[1], dirs[2]))
         hit = (tmin <= far) & (tmin > 0)
-        face = 2 * axis + (d_axis > 0)
+        face = 2 * entry_axis + (d_axis > 0)
         return hit, tmin, face
 
     def _shade_box(

@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pybullet as p
@@ -164,7 +165,7 @@ class SimArm(_Connectable, Arm):
         linear_accel_mm_s2: float = 1000.0,
         limits: MotionLimits | None = None,
         realtime: bool = False,
-        max_rates: dict[str, float] | None = None,
+        max_rates: dict[str, Any] | None = None,
     ) -> None:
         super().__init__(cell)
         robot = cell.scene.robot

@@ -109,11 +109,11 @@ class SimVerifier:
             if self._steps % self.check_every == 0:
                 self._check()
 
-        self.world.step = step  # type: ignore[method-assign]
+        self.world.step = step
 
     def stop(self) -> None:
         if self._orig_step is not None:
-            self.world.step = self._orig_step  # type: ignore[method-assign]
+            self.world.step = self._orig_step
             self._orig_step = None
 
     def _check(self) -> None:
@@ -174,7 +174,7 @@ class SimVerifier:
         for out in report.outcomes:
             c = np.asarray(out.center_S_mm)
             d = [
-                np.linalg.norm(t.center_S[:2] - c[:2]) if t.index not in used else np.inf
+                float(np.linalg.norm(t.center_S[:2] - c[:2])) if t.index not in used else np.inf
                 for t in truth
             ]
             if not d or min(d) > 60.0:
@@ -205,7 +205,7 @@ def scene_T_SB(scene: Any) -> np.ndarray:
     T_SB[:3, :3] = [
         [math.cos(yaw), -math.sin(yaw), 0],
         [math.sin(yaw), math.cos(yaw), 0],
-        [0, 0, 1],
+        [0.0, 0.0, 1.0],
     ]
     T_SB[:3, 3] = (robot.base_mm[0], robot.base_mm[1], scene.floor_z + robot.pedestal_mm)
     return T_SB
@@ -226,7 +226,7 @@ def sim_sort_config(scene: Any, base: SortConfig | None = None) -> SortConfig:
             BinSpec(
                 b.color.name,
                 (float(c[0]), float(c[1])),
-                tuple(b.size_mm),  # type: ignore[arg-type]
+                tuple(b.size_mm),
                 b.yaw_deg - robot.base_yaw_deg,
             )
         )
@@ -303,7 +303,7 @@ def sim_registration_config(scene: Any) -> RegistrationConfig:
         fb.yaw_base_deg,
     )
     board = BoardSpec(fb.inner_corners[0], fb.inner_corners[1], fb.square_mm)
-    return RegistrationConfig(board, offset, "auto", scene.camera.height_mm)  # type: ignore[arg-type]
+    return RegistrationConfig(board, offset, "auto", scene.camera.height_mm)
 
 
 class SimScene:

@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.frames import invert_pose, rpy_deg
@@ -62,7 +63,7 @@ def _visible(world: SimWorld, proj: Projector, pts: np.ndarray, normal: np.ndarr
     return ok
 
 
-def _r(values: np.ndarray, nd: int = 4) -> list[Any]:
+def _r(values: ArrayLike, nd: int = 4) -> list[Any]:
     return np.round(np.asarray(values, float), nd).tolist()
 
 

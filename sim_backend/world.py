@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, field
+from typing import TypedDict
 
 import numpy as np
 import pybullet as p
@@ -88,6 +89,17 @@ class BoardTruth:
     on_floor: bool = False
 
 
+class WallTruth(TypedDict):
+    """One wall of the target in S (mm; unit vectors along the wall and along its normal)."""
+
+    name: str
+    inner_face_origin_mm: np.ndarray
+    along_wall: np.ndarray
+    normal: np.ndarray
+    length_mm: float
+    border_segment_S_mm: list[np.ndarray]
+
+
 @dataclass
 class WorldInfo:
     """What the renderer and the truth need besides pybullet's bodies."""
@@ -97,7 +109,7 @@ class WorldInfo:
     static_rects: list[tuple[str, int, Rect]] = field(default_factory=list)
     markers: list[MarkerTruth] = field(default_factory=list)
     boards: list[BoardTruth] = field(default_factory=list)
-    walls: list[dict[str, object]] = field(default_factory=list)
+    walls: list[WallTruth] = field(default_factory=list)
     cubes: list[tuple[CubeSpec, int]] = field(default_factory=list)
     boxes: list[AnalyticBox] = field(default_factory=list)
     cylinders: list[AnalyticCylinder] = field(default_factory=list)

@@ -29,14 +29,14 @@ from typing import TYPE_CHECKING, Any
 from omnisort_hw import fileio
 from omnisort_hw.cell.compute_worker import ComputeWorker
 from omnisort_hw.cell.devices import Devices, open_devices
-from omnisort_hw.cell.jobs import CellJobs, NotAvailableError
+from omnisort_hw.cell.jobs import CellJobs
 from omnisort_hw.cell.journal import JobJournal
 from omnisort_hw.cell.status import Cached, Caches, arm_summary, camera_summary, error_text
 from omnisort_hw.cell.watchdog import DriftWatchdog, WatchdogPorts
 from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.errors import OmnisortError
+from omnisort_hw.errors import NotAvailableError, OmnisortError
 from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.gripper_load import assess
@@ -113,7 +113,7 @@ class Cell(CellJobs):
         self.drift = DriftWatchdog(
             WatchdogPorts(
                 store,
-                lambda: self._image(None, laser=False),
+                lambda: self.frame(None, laser=False),
                 lambda: self.registration_config,
                 lambda: self.runlog,
             ),

@@ -10,20 +10,29 @@ cell it uses. A command whose section is missing raises `NotAvailableError` nami
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.errors import InputError, MotionRefusedError, OmnisortError
+from omnisort_hw.errors import MotionRefusedError
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
+from omnisort_hw.pipeline.requests import (
+    ExtrinsicsRequest,
+    IntrinsicsRequest,
+    LocateRequest,
+    MapRequest,
+    RegisterRequest,
+    SortRequest,
+)
 
 if TYPE_CHECKING:
     from contextlib import AbstractContextManager
-    from pathlib import Path
 
     from omnisort_hw.cell.compute_worker import ComputeWorker
     from omnisort_hw.cell.devices import Devices
@@ -31,14 +40,14 @@ if TYPE_CHECKING:
     from omnisort_hw.cell.watchdog import DriftWatchdog
     from omnisort_hw.config.capture import CaptureSettings
     from omnisort_hw.config.sorting import RegistrationConfig
+    from omnisort_hw.core.camera_model import OcamModel
     from omnisort_hw.core.radiometry import ToneCurve
+    from omnisort_hw.pipeline.calibration_source import CalibrationSource
+    from omnisort_hw.pipeline.sort_run import SortSession
     from omnisort_hw.runlog import RunLog
 
 
-class NotAvailableError(OmnisortError):
-    """A command needs a component that is not in this build (the message names it)."""
-
-    code = "not_available"
+T = TypeVar("T")
 
 
 class CellJobs:
@@ -75,108 +84,71 @@ class CellJobs:
     # -- pipeline (use cases) --------------------------------------------------------------
 
     def calibrate_intrinsics(
-        self,
-        folder: str,
-        board: str = "9x6",
-        square_mm: float = 0.0,
-        degree: int | None = None,
-        cancel: threading.Event | None = None,
+        self, request: IntrinsicsRequest, cancel: threading.Event | None = None
     ) -> dict[str, Any]:
-        """Intrinsic calibration from the checkerboard images of `folder`, saved as camera.json.
+        """Intrinsic calibration from the request's checkerboard images, saved as camera.json.
 
         The images are taken to come from the camera attached now (its serial is stored).
         """
-        from omnisort_hw.core.camera_io import camera_record
-        from omnisort_hw.core.checkerboard import BoardSpec
-        from omnisort_hw.pipeline.intrinsics import calibrate_folder, image_files
+        from omnisort_hw.pipeline import intrinsics
 
-        try:
-            spec = BoardSpec.parse(board, square_mm)
-        except ValueError as exc:
-            raise InputError(f"calibrate: board/square_mm: {exc}") from None
-        files = image_files(folder)
-        rl = self.runlog
-        rl.event("calibration/intrinsics", f"{len(files)} images from {folder}, board {board}")
-        cal = self.compute.call_logged(
-            calibrate_folder, rl, files, spec, degree, cancel=cancel, what="calibration"
-        )
-        _raise_if_cancelled(cancel, "calibration")
-        result, record = cal.result, {**cal.record, "images_folder": str(folder)}
-        saved = self.store.save_camera(camera_record(result.model, **record))
-        report = cal.write_report(saved)
-        return {
-            "path": str(saved),
-            "rms_px": result.rms_px,
-            "images_used": len(result.images_used),
-            "images_rejected": record["images_rejected"],
-            "corners_rejected": len(result.corners_rejected),
-            "outer_band_covered": cal.figures.outer_coverage,
-            "report": str(report),
-            "center_uv": list(result.model.center_uv),
-            "poly_degree": result.degree,
-            "camera_serial": self.store.expected_serial,
-        }
+        result = intrinsics.run(self, request, cancel)
+        return {**result.reply(), "camera_serial": self.store.expected_serial}
 
     def calibrate_extrinsics(
-        self,
-        image: str | None = None,
-        target: str | None = None,
-        method: str | None = None,
-        separation_mm: float | None = None,
-        board: str | None = None,
-        square_mm: float | None = None,
-        cancel: threading.Event | None = None,
+        self, request: ExtrinsicsRequest, cancel: threading.Event | None = None
     ) -> dict[str, Any]:
         """Camera rotation and laser plane from one image of the calibration target (a fresh
-        capture with the laser on, or `image`), saved as system.json. The previous robot base
-        pose is not carried over: it was registered with the previous camera rotation."""
-        from omnisort_hw.core.checkerboard import BoardSpec
-        from omnisort_hw.core.overlays import overlay_path, write_picture
-        from omnisort_hw.pipeline.extrinsics import (
-            calibration_result,
-            resolve_target,
-            run_extrinsics,
-            system_payload,
-        )
+        capture with the laser on, or the request's image), saved as system.json. The previous
+        robot base pose is not carried over: it was registered with the previous camera
+        rotation."""
+        from omnisort_hw.pipeline import extrinsics
 
-        defaults = self.config.target
-        field = "separation_mm (or [target] separation_mm in the cell file)"
-        target, separation = resolve_target(
-            target, separation_mm, defaults.kind, defaults.separation_mm, field
-        )
-        try:
-            board_size = BoardSpec.parse(board or "9x6", square_mm or 97.0).size
-        except ValueError as exc:
-            raise InputError(f"calibrate: board/square_mm: {exc}") from None
-        model = self.store.camera_model()
-        tone = self.camera_tone_curve()
-        acq = self.measure(image)
-        img, record, source, tone = acq.board, acq.record, acq.source, acq.tone or tone
-        _raise_if_cancelled(cancel, "calibration")
-        run = self.compute.call_logged(
-            run_extrinsics,
-            self.runlog,
-            img,
-            model,
-            target,
-            method,
-            separation_mm=separation,
-            board=board_size,
-            square_mm=square_mm or 97.0,
-            source=source,
-            tone=tone,
-            cancel=cancel,
-            what="calibration",
-            stripe_px=acq.stripe_px,
-        )
-        _raise_if_cancelled(cancel, "calibration")
-        calib = run.calib
-        saved = self.store.save_system(system_payload(calib, record))
-        # and the picture of what was detected and fitted (about 11 ms)
-        picture = write_picture(overlay_path(saved), lambda: run.overlay(img, source))
-        return calibration_result(calib, target, saved, picture, record, tone)
+        return extrinsics.run(self, request, cancel)
 
-    def camera_tone_curve(self) -> ToneCurve:
+    def map_scene(
+        self, request: MapRequest, cancel: threading.Event | None = None
+    ) -> dict[str, Any]:
+        """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments;
+        `request.with_points` adds the points (S, 0.1 mm) and their pixels, `request.picture`
+        writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
+        from omnisort_hw.pipeline import laser_map
+
+        return laser_map.run(self, request, cancel).reply(request.with_points)
+
+    def register_robot(
+        self, request: RegisterRequest, cancel: threading.Event | None = None
+    ) -> dict[str, Any]:
+        """Robot base pose T_SB from the floor checkerboard in the request's image (or a
+        laser-off capture), saved as `robot_base` in the store's system.json."""
+        from omnisort_hw.pipeline import registration
+
+        result = registration.run(self, request, cancel)
+        return {"robot_base": result.record, "path": str(result.path)}
+
+    def locate(
+        self, request: LocateRequest, cancel: threading.Event | None = None
+    ) -> dict[str, Any]:
+        """The cubes in the request's image (or laser-off and laser-on captures), in S and B."""
+        from omnisort_hw.pipeline import locate
+
+        return locate.run(self, request, cancel).reply(request.colors)
+
+    # -- what makes the cell a `pipeline.rig.Rig` ------------------------------------------
+
+    @property
+    def system_path(self) -> Path:
+        return self.store.path("system")
+
+    def system_calibration(self) -> SystemCalibration:
+        """The verified system.json as the core's SystemCalibration."""
+        rec = self.store.read("system")
+        return SystemCalibration.from_json(rec.payload, source=str(rec.path))
+
+    def camera_model(self) -> OcamModel:
+        return self.store.camera_model()
+
+    def tone_curve(self) -> ToneCurve:
         """The camera's transfer curve, undone wherever edges are located in its images (the
         extrinsic target's borders and markers); sRGB when the cell has no camera, what 8-bit
         image files hold."""
@@ -185,46 +157,15 @@ class CellJobs:
         camera = self.devices.camera
         return ToneCurve.parse(camera.tone_curve if camera is not None else None)
 
-    def system_calibration(self) -> SystemCalibration:
-        """The verified system.json as the core's SystemCalibration."""
-        rec = self.store.read("system")
-        return SystemCalibration.from_json(rec.payload, source=str(rec.path))
+    def target_defaults(self) -> tuple[str | None, float | None, str]:
+        t = self.config.target
+        field = "separation_mm (or [target] separation_mm in the cell file)"
+        return t.kind, t.separation_mm, field
 
-    def map_scene(
-        self,
-        image: str | None = None,
-        cancel: threading.Event | None = None,
-        with_points: bool = False,
-        picture: bool = False,
-    ) -> dict[str, Any]:
-        """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments.
+    def has_laser(self) -> bool:
+        return self.devices.laser is not None
 
-        `with_points` adds the points themselves (S, mm, 0.1 mm) and their pixels; `picture`
-        writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
-        from omnisort_hw.core.overlays import write_picture
-        from omnisort_hw.pipeline.laser_map import floor_plane_S, map_laser, map_overlay
-
-        calib = self.system_calibration()
-        acq = self.measure(image, board=False)
-        _raise_if_cancelled(cancel, "mapping")
-        floor = floor_plane_S(calib, self.sort_config)  # the floor's mirror images go
-        light = acq.stripe_px is not None  # a capture's laser light: red-channel centres
-        laser_map = map_laser(acq.stripe, calib, acq.source, self.runlog, floor, light_only=light)
-        out = {"image": acq.record, **laser_map.summary(with_points)}
-        if picture:
-            path = self.store.path("system").with_name("map_overlay.png")
-            out |= write_picture(
-                path, lambda: map_overlay(acq.stripe, laser_map, calib, acq.source)
-            )
-        return out
-
-    def measure(self, image: str | None, board: bool = True) -> Any:
-        """The file `image`, or a measurement capture (`pipeline.cell_acquisition`)."""
-        from omnisort_hw.pipeline.cell_acquisition import acquire
-
-        return acquire(self, image, board)
-
-    def _image(self, image: str | None, laser: bool) -> np.ndarray:
+    def frame(self, image: str | None, laser: bool) -> np.ndarray:
         """The file `image`, or a capture with the laser switched to `laser` (off after)."""
         from omnisort_hw.pipeline.image_files import read_image
 
@@ -238,98 +179,81 @@ class CellJobs:
             if laser and self.devices.laser is not None:
                 self.set_laser(False)
 
-    def _sorting(self, what: str) -> SortConfig:
-        if self.sort_config is None:
-            raise NotAvailableError(
-                f"{what} needs a [sorting] section in the cell configuration (bins, obstacles, "
-                "cube size, home pose; or from_scene = true)"
-            )
-        return self.sort_config
+    def run_logged(
+        self,
+        fn: Callable[..., T],
+        *args: Any,
+        cancel: threading.Event | None = None,
+        what: str = "job",
+        **kwargs: Any,
+    ) -> T:
+        """In the compute worker, its run-log calls replayed on the cell's run log."""
+        return self.compute.call_logged(fn, self.runlog, *args, cancel=cancel, what=what, **kwargs)
 
-    def register_robot(
-        self, image: str | None, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
-        """Robot base pose T_SB from the floor checkerboard in `image` (or a laser-off
-        capture), saved as `robot_base` in the store's system.json."""
-        from omnisort_hw.pipeline.registration import register_from_image, robot_base_record
+    def save_camera(self, model: OcamModel, record: Mapping[str, Any]) -> Path:
+        from omnisort_hw.core.camera_io import camera_record
 
-        rc = self.registration_config
-        if rc is None:
-            raise NotAvailableError(
-                "the robot registration needs a [registration] section in the cell "
-                "configuration (board, square_mm, offset = [X, Y, Z, RX, RY, RZ] of the board in B)"
-            )
+        return self.store.save_camera(camera_record(model, **record))
+
+    def save_system(self, payload: Mapping[str, Any]) -> Path:
+        return self.store.save_system(dict(payload))
+
+    def save_robot_base(self, record: Mapping[str, Any], image: np.ndarray) -> Path:
+        """Into the store's system.json; `image` becomes the drift watchdog's reference."""
         payload = dict(self.store.load_system())
-        calib = SystemCalibration.from_json(payload, source=str(self.store.path("system")))
-        img = self._image(image, laser=False)
-        self.runlog.image("registration/image", img)
-        reg = self.compute.call_logged(
-            register_from_image, self.runlog, img, calib, rc, cancel=cancel
-        )
-        payload["robot_base"] = robot_base_record(reg, rc, image or "capture")
+        payload["robot_base"] = dict(record)
         path = self.store.save_system(payload)
-        self.drift.save_reference(img)
-        return {"robot_base": payload["robot_base"], "path": str(path)}
+        self.drift.save_reference(image)
+        return path
 
-    def locate(
-        self, image: str | None, colors: list[str] | None, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
-        """The cubes in `image` (or laser-off and laser-on captures), in S and B."""
-        from omnisort_hw.pipeline.calibration_source import robot_base_T
-        from omnisort_hw.pipeline.locate import locate_in_images
-
-        cfg = self._sorting("the colour-blob location")
-        calib = self.system_calibration()
-        T_SB = robot_base_T(calib, str(self.store.path("system")), for_motion=False)
-        with_laser = image is None and cfg.use_laser and self.devices.laser is not None
-        acq = self.measure(image) if with_laser else None
-        colour = acq.board if acq is not None else self._image(image, laser=False)
-        laser_img = acq.stripe if acq is not None else None
-        args = (colour, laser_img, calib, cfg, T_SB, calib.robot_base)  # located in the worker
-        cubes, _ = self.compute.call_logged(locate_in_images, self.runlog, *args, cancel=cancel)
-        found = [c.summary() for c in cubes if colors is None or c.color in colors]
-        return {"cubes": found, "count": len(found)}
+    def map_picture_path(self, image: str | None) -> Path:
+        return self.store.path("system").with_name("map_overlay.png")
 
     def sort(
         self,
-        max_objects: int | None,
-        colors: list[str] | None,
+        request: SortRequest,
         cancel: threading.Event,
         progress: Callable[[dict[str, Any]], None] | None = None,
     ) -> dict[str, Any]:
         """Locate, pick and place every object by colour until done, `max_objects` or cancel;
-        gated by the calibration store."""
-        from omnisort_hw.pipeline.calibration_source import StoreCalibration, robot_base_T
-        from omnisort_hw.pipeline.gripper_load import resolve_before_sort
-        from omnisort_hw.pipeline.sort import Sorter
-        from omnisort_hw.pipeline.sort_capture import sort_capture_for
+        gated by the calibration store and the drift watchdog (`pipeline.sort_run`)."""
+        from omnisort_hw.pipeline import sort_run
 
-        cfg = self._sorting("the sorting pipeline")
-        if self.devices.camera is None or self.devices.arm is None:
+        return sort_run.run(self, request, cancel, progress).to_dict()
+
+    # -- and a `pipeline.sort_run.SortRig` -------------------------------------------------
+
+    def laser_off(self) -> None:
+        """Switch the laser off (how a sort's capture ends)."""
+        self.set_laser(False)
+
+    def calibration_source(self) -> CalibrationSource:
+        from omnisort_hw.pipeline.calibration_source import StoreCalibration
+
+        return StoreCalibration(self.store)
+
+    def check_drift(self) -> None:
+        self.drift.before_sort()
+
+    @contextmanager
+    def sorting(self, request: SortRequest) -> Iterator[SortSession]:
+        """The cell's devices, connected since start, through its locks; its compute worker
+        and its measurement capture (the service's job runner journals the job itself)."""
+        from omnisort_hw.pipeline.sort_capture import sort_capture_for
+        from omnisort_hw.pipeline.sort_run import SortSession
+
+        arm = self.devices.arm
+        if self.devices.camera is None or arm is None:
             raise MotionRefusedError("sort: the cell needs a camera and an arm")
         laser = _CellLaser(self) if self.devices.laser is not None else None
-        sorter = Sorter(
+        yield SortSession(
             _CellCamera(self),  # type: ignore[arg-type]
-            self.devices.arm,
             laser,  # type: ignore[arg-type]
-            StoreCalibration(self.store),
-            cfg,
-            self.registration_config,
-            log=self.runlog,
-            cancel=cancel,
-            progress=progress,
-            on_pick=lambda phase, o: self.journal.pick_phase(phase, o.index, o.color, o.bin),
+            arm,
+            self.journal,
             compute=self.compute,
-            acquire=sort_capture_for(self),
+            acquire=sort_capture_for(self, self.laser_off if laser is not None else None),
         )
-        sorter.calibration.check_motion_allowed()
-        self.drift.before_sort()
-        T_SB = robot_base_T(sorter.calibration.system())
-        held = resolve_before_sort(sorter, self.journal, T_SB)
-        report = sorter.run(max_objects, colors)
-        if held is not None:
-            report.outcomes.insert(0, held)
-        return report.to_dict()
 
 
 class _CellCamera:
@@ -353,8 +277,3 @@ class _CellLaser:
 
     def off(self) -> None:
         self.cell.set_laser(False)
-
-
-def _raise_if_cancelled(cancel: threading.Event | None, what: str = "move") -> None:
-    if cancel is not None and cancel.is_set():
-        raise MotionRefusedError(f"{what} cancelled")

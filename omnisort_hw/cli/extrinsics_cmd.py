@@ -9,7 +9,7 @@ from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result
-from omnisort_hw.errors import InputError
+from omnisort_hw.pipeline.requests import DEFAULT_BOARD, DEFAULT_SQUARE_MM
 
 
 def register(sub: Any) -> None:
@@ -35,8 +35,15 @@ def register(sub: Any) -> None:
         help="measured inner distance between the walls, mm (required for the wall targets, "
         "or [target] separation_mm of --config)",
     )
-    cal.add_argument("--board", default="9x6", help="inner corners COLSxROWS (checkerboards)")
-    cal.add_argument("--square", type=float, default=97.0, help="square size mm (checkerboards)")
+    cal.add_argument(
+        "--board", default=None, help=f"inner corners COLSxROWS (checkerboards; {DEFAULT_BOARD})"
+    )
+    cal.add_argument(
+        "--square",
+        type=float,
+        default=None,
+        help=f"square size mm (checkerboards; {DEFAULT_SQUARE_MM:g})",
+    )
     cal.add_argument(
         "--method",
         choices=("joint", "paper", "method1", "method2"),
@@ -85,122 +92,43 @@ def register(sub: Any) -> None:
     mp.set_defaults(func=cmd_map)
 
 
-def _floor(calib: Any, config: Path | None) -> Any:
-    """The floor the map's mirror images are judged against, as the service has it: from the
-    registered robot base and the cell file's `[sorting]`, or None without a registration."""
-    from omnisort_hw.cli.cell_file import sorting_config
-    from omnisort_hw.pipeline.laser_map import floor_plane_S
-
-    return floor_plane_S(calib, sorting_config(config) if config is not None else None)
-
-
-def measure(config: Path | None, log: Any, board: bool) -> Any:
-    """A measurement capture with the cell file's camera and laser (`MeasurementCapture`)."""
-    from omnisort_hw.cell.devices import open_devices
-    from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.pipeline.measurement_capture import capture_measurement
-
-    if config is None:
-        raise InputError("give an image, or --config CELL.toml to measure with the cell")
-    cell = load_cell_config(config)
-    devices = open_devices(cell.devices)
-    if devices.camera is None or devices.laser is None:
-        raise InputError(f"{config}: a capture needs the [camera] and [laser] sections")
-    with devices.camera as cam, devices.laser as laser:
-        return capture_measurement(cam, laser, cell.capture, log, board=board)
-
-
-def laser_off_frame(config: Path | None) -> Any:
-    """One frame of the cell file's camera with its laser switched off (registration, colours)."""
-    from omnisort_hw.cell.devices import open_devices
-    from omnisort_hw.config.cell import load_cell_config
-
-    if config is None:
-        raise InputError("give an image, or --config CELL.toml to capture with the cell")
-    devices = open_devices(load_cell_config(config).devices)
-    if devices.camera is None:
-        raise InputError(f"{config}: a capture needs the [camera] section")
-    with devices.camera as cam:
-        if devices.laser is None:
-            return cam.grab().image
-        with devices.laser as laser:
-            laser.set(False)
-            return cam.grab().image
-
-
-def load_system(path: Path) -> Any:
-    """system.json from the CLI or from the service's store (then its checksum is verified)."""
-    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-    from omnisort_hw.pipeline.calibration_source import read_system_payload
-
-    payload, _ = read_system_payload(path)
-    return SystemCalibration.from_json(payload, source=str(path))
-
-
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from omnisort_hw.core.camera_io import load_camera_json
-    from omnisort_hw.core.overlays import overlay_path, write_picture
+    from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.core.radiometry import ToneCurve
-    from omnisort_hw.fileio import atomic_write_json
-    from omnisort_hw.pipeline.extrinsics import (
-        calibration_result,
-        image_record,
-        resolve_target,
-        run_extrinsics,
-        system_payload,
-    )
-    from omnisort_hw.pipeline.image_files import read_image
+    from omnisort_hw.pipeline import extrinsics
+    from omnisort_hw.pipeline.requests import ExtrinsicsRequest
     from omnisort_hw.runlog import RunLog
 
-    default, field = None, "--separation"
-    if args.separation is None and args.config is not None and args.target != "checkerboards":
-        from omnisort_hw.config.cell import load_cell_config
-
-        default = load_cell_config(args.config).target.separation_mm
-        field = f"--separation (or [target] separation_mm in {args.config})"
-    _, separation = resolve_target(args.target, args.separation, None, default, field)
-    try:
-        cols, rows = (int(v) for v in args.board.lower().split("x"))
-    except ValueError as exc:
-        raise InputError(f"--board must look like 9x6, got {args.board!r}") from exc
-    tone = ToneCurve.parse(args.tone_curve)
-    model, _ = load_camera_json(args.camera)
+    request = ExtrinsicsRequest(
+        image=str(args.image) if args.image is not None else None,
+        target=args.target,
+        method=args.method,
+        separation_mm=args.separation,
+        board=args.board,
+        square_mm=args.square,
+    )
     with RunLog(args.log) as log:
-        stripe_px = None
-        if args.image is not None:
-            image, source, record = read_image(args.image), str(args.image), None
-        else:
-            cap = measure(args.config, log, board=True)
-            image, source, record = cap.board_image, "capture", {"capture": cap.record}
-            stripe_px, tone = cap.stripe_px, cap.tone or tone
-        run = run_extrinsics(
-            image,
-            model,
-            args.target,
-            args.method,
-            separation_mm=separation,
-            board=(cols, rows),
-            square_mm=args.square,
-            source=source,
+        rig = FileRig(
+            config=args.config,
+            camera=args.camera,
+            out=args.out,
+            tone=ToneCurve.parse(args.tone_curve),
             log=log,
-            tone=tone,
-            stripe_px=stripe_px,
+            sort_config=None,
+            registration_config=None,
         )
-    calib = run.calib
-    image_rec = image_record(args.image) if args.image is not None else record
-    atomic_write_json(args.out, system_payload(calib, image_rec))
-    picture = write_picture(overlay_path(args.out), lambda: run.overlay(image, source))
-    _warn(picture)
+        result = extrinsics.run(rig, request)
+    _warn(result)
     if args.json:
-        print_result(calibration_result(calib, args.target, args.out, picture, image_rec, tone))
+        print_result(result)
     else:
-        print(f"system calibration ({calib.method}) written to {args.out}")
-        for key, value in calib.parameters().items():
-            std = calib.std.get(key)
+        print(f"system calibration ({result['method']}) written to {args.out}")
+        for key, value in result["parameters"].items():
+            std = result["std"].get(key)
             extra = f"  +- {std:.4f}" if std is not None else ""
             print(f"  {key:<20} {value:10.4f}{extra}")
-        if picture["overlay_png"]:
-            print(f"picture of what was detected and fitted: {picture['overlay_png']}")
+        if result["overlay_png"]:
+            print(f"picture of what was detected and fitted: {result['overlay_png']}")
     return 0
 
 
@@ -210,48 +138,31 @@ def _warn(picture: dict[str, str | None]) -> None:
         print(f"omnisort: warning: {picture['overlay_problem']}", file=sys.stderr)
 
 
-def map_png_path(args: argparse.Namespace) -> Path:
-    """The map picture's path: --png, else named after the image, beside system.json."""
-    if args.png is not None:
-        return Path(args.png)
-    stem = args.image.stem if args.image is not None else "capture"
-    return args.system.with_name(f"{stem}_map_overlay.png")
-
-
 def cmd_map(args: argparse.Namespace) -> int:
-    from omnisort_hw.core.overlays import write_picture
-    from omnisort_hw.pipeline.image_files import read_image
-    from omnisort_hw.pipeline.laser_map import map_laser, map_overlay
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import laser_map
+    from omnisort_hw.pipeline.requests import MapRequest
     from omnisort_hw.runlog import RunLog
 
-    calib = load_system(args.system)
-    record, light = None, False
-    with RunLog(args.log) as log:
-        if args.image is not None:
-            image, source = read_image(args.image), str(args.image)
-        else:  # the laser light of a measurement capture with the cell file's camera and laser
-            cap = measure(args.config, log, board=False)
-            image, record, source = cap.stripe_image, cap.record, "capture"
-            light = cap.stripe_px is not None
-        # The service's map: the floor's mirror images dropped, a capture's laser light fitted
-        # on its own (the same capture gives the same points through either door).
-        floor = _floor(calib, args.config)
-        laser_map = map_laser(image, calib, source, log, floor, light_only=light)
-    picture = write_picture(
-        map_png_path(args), lambda: map_overlay(image, laser_map, calib, source)
+    request = MapRequest(
+        image=str(args.image) if args.image is not None else None,
+        with_points=args.points,
+        picture=True,
     )
-    _warn(picture)
+    with RunLog(args.log) as log:
+        rig = FileRig(config=args.config, system=args.system, map_png=args.png, log=log)
+        result = laser_map.run(rig, request)
+    _warn(result.picture)
     if args.json:
-        out = {**laser_map.summary(with_points=args.points), **picture}
-        print_result({**out, "capture": record} if record else out)
+        print_result(result.reply(with_points=args.points))
     else:
-        segs = laser_map.segments
-        print(f"{len(laser_map.pixels)} laser points, {len(segs)} segments")
+        segs = result.laser_map.segments
+        print(f"{len(result.laser_map.pixels)} laser points, {len(segs)} segments")
         for i, s in enumerate(segs):
             print(
                 f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"
                 f"  bearing {s.bearing_deg:7.1f} deg  length {s.length_mm:7.1f} mm"
             )
-        if picture["overlay_png"]:
-            print(f"picture of the points and their top view: {picture['overlay_png']}")
+        if result.picture["overlay_png"]:
+            print(f"picture of the points and their top view: {result.picture['overlay_png']}")
     return 0

@@ -10,7 +10,7 @@ from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result
-from omnisort_hw.errors import InputError
+from omnisort_hw.pipeline.requests import DEFAULT_BOARD
 
 
 def register(sub: Any) -> None:
@@ -19,7 +19,9 @@ def register(sub: Any) -> None:
 
     cal = isub.add_parser("calibrate", help="calibrate from checkerboard images")
     cal.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
-    cal.add_argument("--board", default="9x6", help="inner corners, COLSxROWS (default 9x6)")
+    cal.add_argument(
+        "--board", default=None, help=f"inner corners, COLSxROWS (default {DEFAULT_BOARD})"
+    )
     cal.add_argument("--square", type=float, required=True, help="square size in mm")
     cal.add_argument("--out", type=output_file, required=True, help="camera.json to write")
     cal.add_argument("--degree", type=int, default=None, help="polynomial degree (default: auto)")
@@ -48,40 +50,34 @@ def register(sub: Any) -> None:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from omnisort_hw.core.camera_io import save_camera_json
-    from omnisort_hw.core.checkerboard import BoardSpec
+    from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.core.intrinsics_report import OUTER_BAND
-    from omnisort_hw.pipeline.intrinsics import calibrate_intrinsics, read_images
+    from omnisort_hw.pipeline import intrinsics
+    from omnisort_hw.pipeline.requests import IntrinsicsRequest
     from omnisort_hw.runlog import RunLog
 
-    try:
-        board = BoardSpec.parse(args.board, args.square)
-    except ValueError as exc:
-        raise InputError(f"--board/--square: {exc}") from exc
-    images = read_images(args.images)
+    request = IntrinsicsRequest(
+        tuple(args.images),
+        args.square,
+        board=args.board,
+        degree=args.degree,
+        refinement=args.refinement,
+    )
+    request.board_spec()  # a bad board is refused before the images are read
     with (
         tqdm(
-            total=len(images), desc="detecting boards", unit="img", file=sys.stderr, disable=None
+            total=len(request.images),
+            desc="detecting boards",
+            unit="img",
+            file=sys.stderr,
+            disable=None,
         ) as bar,
         RunLog(args.log) as log,
     ):
-        cal = calibrate_intrinsics(
-            images,
-            board,
-            degree=args.degree,
-            on_detected=lambda _n: bar.update(1),
-            log=log,
-            refinement=args.refinement,
-        )
-    result, record, figures = cal.result, cal.record, cal.figures
-    save_camera_json(args.out, result.model, **record)
-    report_path = cal.write_report(args.out)
-    summary = {"out": str(args.out), "report": str(report_path), **record}
-    summary["model"] = result.model.to_dict()
-    summary["field_of_view_deg"] = {
-        "image_circle": figures.circle_field_deg,
-        "corners_seen": figures.corners_field_deg,
-    }
+        rig = FileRig(out=args.out, log=log, sort_config=None, registration_config=None)
+        done = intrinsics.run(rig, request, on_detected=lambda _n: bar.update(1))
+    result, figures, report_path = done.calibration.result, done.calibration.figures, done.report
+    summary = {"out": str(args.out), **done.reply()}
     if args.json:
         print_result(summary)
     else:

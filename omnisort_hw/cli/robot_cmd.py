@@ -26,7 +26,7 @@ from omnisort_hw.cli.cell_file import load_cell, sorting_config
 from omnisort_hw.cli.output import print_result
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 from omnisort_hw.errors import ConfigError, InputError
-from omnisort_hw.pipeline.sort import resolve_sorting
+from omnisort_hw.pipeline.requests import DEFAULT_BOARD
 
 
 def register(sub: Any) -> None:
@@ -152,43 +152,50 @@ def _registration(args: argparse.Namespace) -> Any:
     if args.config is not None:
         cell, _ = load_cell(args.config, devices=False)
         base = cell.registration
-    if args.square is None and base is None:
-        raise InputError("--square is needed (or a [registration] section in --config)")
-    if args.offset is None and base is None:
-        raise InputError("--offset is needed (or a [registration] section in --config)")
-    square = args.square if args.square is not None else base.board.square_mm
-    board_text = args.board or (f"{base.board.cols}x{base.board.rows}" if base else "9x6")
+    if base is None:
+        for flag, value in (("--square", args.square), ("--offset", args.offset)):
+            if value is None:
+                raise InputError(f"{flag} is needed (or a [registration] section in --config)")
+        board_text, square = args.board or DEFAULT_BOARD, args.square
+        fit, height = args.fit, args.camera_height  # None: RegistrationConfig's defaults
+    else:
+        board_text = args.board or f"{base.board.cols}x{base.board.rows}"
+        square = args.square if args.square is not None else base.board.square_mm
+        fit = args.fit or base.fit
+        height = args.camera_height if args.camera_height is not None else base.camera_height_mm
     try:
         board = BoardSpec.parse(board_text, square)
     except ValueError as exc:
         raise InputError(f"--board/--square: {exc}") from None
-    offset = _numbers(args.offset, 6, "--offset") if args.offset is not None else base.offset
-    fit = args.fit or (base.fit if base is not None else "auto")
-    height = args.camera_height
-    if height is None:
-        height = base.camera_height_mm if base is not None else 1200.0
-    return RegistrationConfig(board, offset, fit, height)  # type: ignore[arg-type]
+    offset = base.offset if args.offset is None and base is not None else _offset(args.offset)
+    given = {"fit": fit, "camera_height_mm": height}
+    return RegistrationConfig(board, offset, **{k: v for k, v in given.items() if v is not None})
+
+
+def _offset(text: str) -> tuple[float, float, float, float, float, float]:
+    x, y, z, rx, ry, rz = _numbers(text, 6, "--offset")
+    return (x, y, z, rx, ry, rz)
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    from omnisort_hw.cli.extrinsics_cmd import laser_off_frame, load_system
-    from omnisort_hw.pipeline.image_files import read_image
-    from omnisort_hw.pipeline.registration import (
-        register_from_image,
-        robot_base_record,
-        write_robot_base,
-    )
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import registration
+    from omnisort_hw.pipeline.requests import RegisterRequest
     from omnisort_hw.runlog import RunLog
 
-    rc = _registration(args)
-    calib = load_system(args.system)
-    image = read_image(args.image) if args.image else laser_off_frame(args.config)
-    source = str(args.image) if args.image else "capture"
+    request = RegisterRequest(
+        image=str(args.image) if args.image else None, save=not args.dry_run, model=args.model
+    )
     with RunLog(args.log) as log:
-        log.image("registration/image", image)
-        reg = register_from_image(image, calib, rc, log)
-    record = robot_base_record(reg, rc, source, args.model)
-    written = None if args.dry_run else write_robot_base(args.system, record)
+        rig = FileRig(
+            config=args.config,
+            system=args.system,
+            log=log,
+            sort_config=None,
+            registration_config=_registration(args),
+        )
+        result = registration.run(rig, request)
+    record, reg, written = result.record, result.registration, result.path
     if args.json:
         print_result({**record, "written": str(written) if written else None})
     else:
@@ -234,36 +241,28 @@ def _locate_config(args: argparse.Namespace) -> Any:
 
 
 def cmd_locate(args: argparse.Namespace) -> int:
-    from omnisort_hw.cli.extrinsics_cmd import laser_off_frame, load_system, measure
-    from omnisort_hw.pipeline.calibration_source import robot_base_T
-    from omnisort_hw.pipeline.image_files import read_image
-    from omnisort_hw.pipeline.locate import locate_in_images
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import locate
+    from omnisort_hw.pipeline.requests import LocateRequest
     from omnisort_hw.runlog import RunLog
 
-    calib = load_system(args.system)
-    T_SB = robot_base_T(calib, str(args.system), for_motion=False)
-    cfg = _locate_config(args)
-    laser_image = read_image(args.laser_image) if args.laser_image is not None else None
+    request = LocateRequest(
+        image=str(args.image) if args.image is not None else None,
+        laser_image=str(args.laser_image) if args.laser_image is not None else None,
+    )
     with RunLog(args.log) as log:
-        if args.image is not None:
-            image = read_image(args.image)
-        elif cfg.use_laser and laser_image is None:
-            # As the service: the capture's averaged laser-off image and its laser light.
-            cap = measure(args.config, log, board=True)
-            image, laser_image = cap.board_image, cap.stripe_image
-        else:
-            image = laser_off_frame(args.config)
-        log.image("locate/image", image)
-        cubes, diag = locate_in_images(
-            image, laser_image, calib, cfg, T_SB, calib.robot_base, log, prefix="locate"
+        rig = FileRig(
+            config=args.config,
+            system=args.system,
+            log=log,
+            sort_config=_locate_config(args),
+            registration_config=None,
         )
-    result = {
-        "cubes": [c.summary() for c in cubes],
-        "rejected": [r for r in diag["rejected"] if r["reason"] != "outside the search region"],
-    }
+        result = locate.run(rig, request)
     if args.json:
-        print_result(result)
+        print_result(result.reply())
         return 0
+    cubes = result.cubes
     print(f"{len(cubes)} cubes")
     for i, c in enumerate(cubes):
         s, b = c.center_S, c.center_B
@@ -276,118 +275,19 @@ def cmd_locate(args: argparse.Namespace) -> int:
 
 
 def cmd_sort(args: argparse.Namespace) -> int:
-    from omnisort_hw.cell.journal import JobJournal
-    from omnisort_hw.cell.lock import InstanceLock
-    from omnisort_hw.fileio import check_writable
-    from omnisort_hw.pipeline.calibration_source import FileCalibration, StoreCalibration
-
-    cell, devices = load_cell(args.config)
-    cfg, reg_cfg = resolve_sorting(cell.sorting, cell.registration, devices.scene)
-    if devices.camera is None or devices.arm is None:
-        raise ConfigError("[camera] and [arm] sections are needed to sort")
-    if args.system is not None:
-        calibration: Any = FileCalibration(args.system, cell.storage.max_age_days or None)
-    else:
-        from omnisort_hw.pipeline.calibration_store import CalibrationStore
-
-        store = CalibrationStore.from_config(cell.storage)
-        calibration = StoreCalibration(store)
-    colors = [c.strip() for c in args.colors.split(",")] if args.colors else None
-    if args.max is not None and args.max < 1:
-        raise InputError(f"--max must be at least 1, got {args.max}")
-    # The service's gates before anything opens: a usable calibration (checksum, age) and no
-    # drift of it on record in the cell's state folder (the watchdog's drift.json).
-    calibration.check_motion_allowed()
-    _refuse_on_recorded_drift(cell.storage.state_dir, args.system)
-    # As the service: the cell is held (not while its service runs), and the job journal
-    # records the sort and the cube in flight, so a cube held after a crash is placed first.
-    check_writable(cell.storage.state_dir, "[storage] state_dir")
-    with InstanceLock(cell.storage.state_dir):
-        journal = JobJournal(cell.storage.state_dir)
-        journal.recover()
-        journal.start("sort", "cli", {"max_objects": args.max, "colors": colors})
-        try:
-            report = _sort_with_devices(args, devices, calibration, cfg, reg_cfg, colors, journal)
-        except BaseException as exc:
-            journal.finish("failed", f"{getattr(exc, 'code', type(exc).__name__)}: {exc}")
-            raise
-        journal.finish("done", "sort done")
-    _print_report(report, args.json)
-    return 0
-
-
-def _sort_with_devices(
-    args: argparse.Namespace,
-    devices: Any,
-    calibration: Any,
-    cfg: Any,
-    reg_cfg: Any,
-    colors: list[str] | None,
-    journal: Any,
-) -> dict[str, Any]:
-    """Connect the devices, place a held cube, sort, close the devices; the report."""
-    from omnisort_hw.pipeline.calibration_source import robot_base_T
-    from omnisort_hw.pipeline.gripper_load import resolve_before_sort
-    from omnisort_hw.pipeline.sort import Sorter
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import sort_run
+    from omnisort_hw.pipeline.requests import SortRequest
     from omnisort_hw.runlog import RunLog
 
-    verifier = devices.scene.verifier() if devices.scene is not None else None
-    connected = []
-    try:
-        for dev in (devices.camera, devices.laser, devices.arm):
-            if dev is not None:
-                dev.connect()
-                connected.append(dev)
-        store = getattr(calibration, "store", None)
-        if store is not None and store.expected_serial is None:
-            store.expected_serial = devices.camera.serial
-        if verifier is not None:
-            verifier.start()
-        with RunLog(args.log) as log:
-            sorter = Sorter(
-                devices.camera,
-                devices.arm,
-                devices.laser,
-                calibration,
-                cfg,
-                reg_cfg,
-                log,
-                progress=None if args.json else _print_progress,
-                on_pick=lambda phase, o: journal.pick_phase(phase, o.index, o.color, o.bin),
-            )
-            held, system = None, calibration.system()
-            if system.robot_base is not None:
-                held = resolve_before_sort(sorter, journal, robot_base_T(system))
-            report = sorter.run(
-                args.max,
-                colors,
-                register=args.register,
-                on_located=verifier.on_located if verifier is not None else None,
-                on_done=verifier.on_done if verifier is not None else None,
-            )
-            if held is not None:
-                report.outcomes.insert(0, held)
-        if verifier is not None:
-            verifier.stop()
-    finally:
-        for dev in reversed(connected):
-            dev.close()
-    return report.to_dict()
-
-
-def _refuse_on_recorded_drift(state_dir: Path, system: Path | None) -> None:
-    """CalibrationDriftError when the cell's drift state holds an unacknowledged drift of the
-    calibration this sort would use (`system`, else the store's system.json)."""
-    from omnisort_hw.errors import CalibrationDriftError
-    from omnisort_hw.pipeline.calibration_source import read_system_payload
-    from omnisort_hw.pipeline.calibration_store import FILE_NAMES
-    from omnisort_hw.pipeline.drift_check import calibration_key, drift_refusal, load_drift_state
-
-    path = system if system is not None else Path(state_dir) / FILE_NAMES["system"]
-    payload, _ = read_system_payload(path)
-    why = drift_refusal(load_drift_state(state_dir), calibration_key(payload))
-    if why is not None:
-        raise CalibrationDriftError(why)
+    colors = tuple(c.strip() for c in args.colors.split(",")) if args.colors else None
+    request = SortRequest(args.max, colors, register=args.register)
+    with RunLog(args.log) as log:
+        rig = FileRig(config=args.config, system=args.system, log=log)
+        progress = None if args.json else _print_progress
+        report = sort_run.run(rig, request, progress=progress)
+    _print_report(report.to_dict(), args.json)
+    return 0
 
 
 def _print_progress(event: dict[str, Any]) -> None:

@@ -46,4 +46,7 @@ class LiveViewConfig:
             raise ConfigError(
                 f"[logging] live_memory_limit must look like 256MiB, 1GiB or 25%, got {limit!r}"
             )
-        return cls(live, host, int(ports["live_port"]), ports["live_web_port"], limit)
+        port = ports["live_port"]
+        if port is None:
+            raise ConfigError("[logging] live_port must be an integer in [0, 65535], got None")
+        return cls(live, host, port, ports["live_web_port"], limit)

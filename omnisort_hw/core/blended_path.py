@@ -200,8 +200,8 @@ def plan_blended_path(
     n = int(starts[-1] + lengths[-1])
     i = np.arange(n)
     qs = np.repeat(moves[0].q[:1], n, axis=0)
-    for s, m in zip(starts, moves, strict=True):
-        qs += m.q[np.clip(i - s, 0, len(m) - 1)] - m.q[0]
+    for s, mv in zip(starts, moves, strict=True):
+        qs += mv.q[np.clip(i - s, 0, len(mv) - 1)] - mv.q[0]
     qs[-1] = moves[-1].q[-1]
     traj = Trajectory(t=i * dt, q=qs, kind="blended")
     return BlendedPath(traj, tuple(moves), starts, overlaps)

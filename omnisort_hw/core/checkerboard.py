@@ -305,11 +305,11 @@ def _candidates(
     for s in scales:
         interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
         resized[s] = gray if s == 1.0 else cv2.resize(gray, None, fx=s, fy=s, interpolation=interp)
-        ok, pts = cv2.findChessboardCorners(resized[s], (cols, rows), _CLASSIC_FLAGS)
+        ok, pts = cv2.findChessboardCorners(resized[s], (cols, rows), flags=_CLASSIC_FLAGS)
         if ok:
             yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
     for s in scales[:2]:
-        ok, pts = cv2.findChessboardCornersSB(resized[s], (cols, rows), _SB_FLAGS)
+        ok, pts = cv2.findChessboardCornersSB(resized[s], (cols, rows), flags=_SB_FLAGS)
         if ok:
             yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
 

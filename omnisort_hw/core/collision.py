@@ -203,10 +203,12 @@ def _hits(
         return any_hit, who, what
     boxes = [i for i, o in enumerate(obstacles) if isinstance(o, Box)]
     planes = [i for i, o in enumerate(obstacles) if isinstance(o, FloorPlane)]
-    lo = np.array([obstacles[i].lo_mm for i in boxes], dtype=float).reshape(-1, 3)
-    hi = np.array([obstacles[i].hi_mm for i in boxes], dtype=float).reshape(-1, 3)
-    normals = np.array([obstacles[i].T_BF[:3, 2] for i in planes], dtype=float).reshape(-1, 3)
-    offsets = np.array([obstacles[i].T_BF[:3, 2] @ obstacles[i].T_BF[:3, 3] for i in planes])
+    box_obs = [o for o in obstacles if isinstance(o, Box)]
+    plane_obs = [o for o in obstacles if isinstance(o, FloorPlane)]
+    lo = np.array([o.lo_mm for o in box_obs], dtype=float).reshape(-1, 3)
+    hi = np.array([o.hi_mm for o in box_obs], dtype=float).reshape(-1, 3)
+    normals = np.array([o.T_BF[:3, 2] for o in plane_obs], dtype=float).reshape(-1, 3)
+    offsets = np.array([o.T_BF[:3, 2] @ o.T_BF[:3, 3] for o in plane_obs])
     order = np.array(boxes + planes, dtype=int)
     r = sp.radius + margin_mm
     b_frame, b_mid, b_radius, members = _bounds(capsules)

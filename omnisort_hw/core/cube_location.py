@@ -129,13 +129,15 @@ class ColorTable:
         out: dict[str, np.ndarray] = {}
         matched = np.zeros(bgr.shape[:2], np.uint8)
         for name, rows in self.ranges.items():
-            m = np.zeros(bgr.shape[:2], np.uint8)
+            m: np.ndarray = np.zeros(bgr.shape[:2], np.uint8)
             for h0, h1, s0, s1, v0, v1 in rows:
                 m |= cv2.inRange(hsv, (h0, s0, v0), (h1, s1, v1))
             m &= ~matched  # the first colour that matches a pixel keeps it
             out[name] = m
             matched |= m
-        fg = cv2.inRange(hsv, (0, FOREGROUND_MIN_SATURATION, FOREGROUND_MIN_VALUE), (179, 255, 255))
+        fg: np.ndarray = cv2.inRange(
+            hsv, (0, FOREGROUND_MIN_SATURATION, FOREGROUND_MIN_VALUE), (179, 255, 255)
+        )
         fg |= cv2.inRange(hsv, (0, 0, 0), (179, 255, DARK_MAX_VALUE))
         return out, fg & ~matched
 
@@ -417,7 +419,7 @@ def locate_cubes(
     masks = {**masks, UNKNOWN: unknown}
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
     clean = {k: cv2.morphologyEx(m, cv2.MORPH_OPEN, kernel) for k, m in masks.items()}
-    all_fg = np.zeros(img.shape[:2], np.uint8)
+    all_fg: np.ndarray = np.zeros(img.shape[:2], np.uint8)
     for m in clean.values():
         all_fg |= m
     laser_xy = np.empty((0, 2))

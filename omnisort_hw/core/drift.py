@@ -141,7 +141,7 @@ def _warp(model: OcamModel, rays_C: np.ndarray, omega_C: np.ndarray, scale: floa
 def _sample(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Bilinear values of `img` at (N, 2) pixels, NaN outside (remap wants maps < 32767 wide)."""
     n = len(uv)
-    m = np.full((-(-n // 1024) * 1024, 2), -10.0, np.float32)
+    m: np.ndarray = np.full((-(-n // 1024) * 1024, 2), -10.0, np.float32)
     m[:n] = uv
     m = m.reshape(-1, 1024, 2)
     out = cv2.remap(img, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderValue=np.nan)
@@ -280,10 +280,10 @@ def predict_board_corners(
 def _saddle_ok(gray: np.ndarray, uv: np.ndarray, radius: float, min_contrast: float) -> np.ndarray:
     """Corners whose four quadrants alternate dark/light with contrast (a visible corner)."""
     off = 0.5 * radius
-    q = []
+    quadrants = []
     for du, dv in ((-off, -off), (off, -off), (off, off), (-off, off)):
-        q.append(_sample(gray, uv + np.array([du, dv])))
-    q = np.stack(q, 1).astype(float)
+        quadrants.append(_sample(gray, uv + np.array([du, dv])))
+    q = np.stack(quadrants, 1).astype(float)
     diag1, diag2 = q[:, 0] + q[:, 2], q[:, 1] + q[:, 3]
     contrast = np.abs(diag1 - diag2) / 2.0
     spread_in = np.maximum(np.abs(q[:, 0] - q[:, 2]), np.abs(q[:, 1] - q[:, 3]))

@@ -185,7 +185,7 @@ def _linear_solve(
             rhs = np.concatenate([dv * zr, du * zr])
             # Three unknowns: the normal equations are exact enough and far cheaper.
             sol = np.linalg.solve(M.T @ M, M.T @ rhs)
-            err = np.linalg.norm(M @ sol - rhs)
+            err = float(np.linalg.norm(M @ sol - rhs))
             if sol[0] > 0 and err < best_err:
                 best, best_err = ci, err
         choices.append(best)

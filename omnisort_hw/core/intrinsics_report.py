@@ -139,7 +139,8 @@ def _circle_panel(
     gain = 0.04 * size / max(p95, 1e-6)  # the 95th percentile residual draws 4 % of the panel
     for k, name in enumerate(result.images_used):
         hue = int(180 * k / max(len(result.images_used), 1))
-        col = cv2.cvtColor(np.uint8([[[hue, 200, 255]]]), cv2.COLOR_HSV2BGR)[0, 0].tolist()
+        hsv = np.array([[[hue, 200, 255]]], np.uint8)
+        col = cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0].tolist()
         for p, r in zip(result.corners_px[name], result.residuals_px[name], strict=True):
             a = (round(p[0] * s), round(p[1] * s))
             b = (round(p[0] * s + r[0] * gain), round(p[1] * s + r[1] * gain))

@@ -272,7 +272,7 @@ class IKSolutions:
         return self.wrist_singular | self.elbow_singular | self.shoulder_singular
 
     @property
-    def reachable(self) -> np.ndarray:
+    def reachable(self) -> np.ndarray | np.bool_:
         """(...) at least one branch exists."""
         return self.valid.any(axis=-1)
 

@@ -123,7 +123,7 @@ def _ridge_candidates(
     `red`, (K,) ridge heights).
     """
     w = _HALF
-    flat = np.flatnonzero(cv2.compare(red, threshold, cv2.CMP_GT).view(bool))
+    flat = np.flatnonzero(cv2.compare(red, threshold, cv2.CMP_GT).view(bool))  # type: ignore[call-overload]  # cv2 stubs: src2 may be a scalar
     r, c = np.divmod(flat, red.shape[1])
     pos = c if axis == 1 else r
     inside = (pos >= w) & (pos < red.shape[axis] - w)

@@ -218,7 +218,7 @@ def _aabb_B(T_BX: np.ndarray, center: np.ndarray, size: np.ndarray, yaw_deg: flo
     R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * size / 2.0
     pts = (corners @ R.T + center) @ T_BX[:3, :3].T + T_BX[:3, 3]
-    return Box(tuple(pts.min(axis=0)), tuple(pts.max(axis=0)))  # type: ignore[arg-type]
+    return Box(tuple(pts.min(axis=0)), tuple(pts.max(axis=0)))
 
 
 class Planner:
@@ -229,7 +229,7 @@ class Planner:
         cfg: SortConfig,
         T_SB: np.ndarray,
         joint_limits_deg: np.ndarray | None = None,
-        workspace_check: Callable[[np.ndarray], None] | None = None,
+        workspace_check: Callable[[np.ndarray], object] | None = None,
         linear_joint_caps: tuple[float, float] | None = None,
     ) -> None:
         """`linear_joint_caps`: the joints' speed (deg/s) and acceleration (deg/s^2) a linear

@@ -57,7 +57,7 @@ def nearest_on_polylines(
     the index of that polyline."""
     segs = [np.stack([p[:-1], p[1:]], axis=1) for p in polylines if len(p) >= 2]
     owner_of = np.concatenate(
-        [np.full(len(p) - 1, i) for i, p in enumerate(polylines) if len(p) >= 2] or [[]]
+        [np.full(len(p) - 1, i) for i, p in enumerate(polylines) if len(p) >= 2] or [np.empty(0)]
     ).astype(int)
     pts = np.asarray(points, float).reshape(-1, 2)
     best = np.full(len(pts), np.inf)

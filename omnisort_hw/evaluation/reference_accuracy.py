@@ -17,6 +17,7 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
+from omnisort_hw.pipeline.image_files import read_image
 
 AUTHORS_SETTINGS: dict[str, float] = {
     "cam_roll_deg": 3.5,
@@ -59,7 +60,7 @@ def intrinsics_model(ref_dir: Path) -> OcamModel:
 
     views = sorted((ref_dir / "intrinsics").glob("a*.jpg"))
     return calibrate_images(
-        [(p.name, cv2.imread(str(p))) for p in views], BoardSpec(*BOARD, SQUARE_MM)
+        [(p.name, read_image(p)) for p in views], BoardSpec(*BOARD, SQUARE_MM)
     ).model
 
 
@@ -145,7 +146,7 @@ def scene_check(ref_dir: Path, model: OcamModel, tone: ToneCurve = SRGB) -> dict
         ("two_sided_target.png", "two-sided"),
         ("three_sided_target.png", "three-sided"),
     ):
-        f = extract_target_features(cv2.imread(str(ref_dir / name)), model, kind, tone)
+        f = extract_target_features(read_image(ref_dir / name), model, kind, tone)
         walls: dict[str, float] = {}
         heights: dict[str, float] = {}
         slopes: dict[str, float] = {}
@@ -194,7 +195,7 @@ def intrinsics_spread(ref_dir: Path, tone: ToneCurve = SRGB) -> dict[str, dict[s
     from omnisort_hw.core.checkerboard import BoardSpec
     from omnisort_hw.core.intrinsics import calibrate_images
 
-    views = [(p.name, cv2.imread(str(p))) for p in sorted((ref_dir / "intrinsics").glob("a*.jpg"))]
+    views = [(p.name, read_image(p)) for p in sorted((ref_dir / "intrinsics").glob("a*.jpg"))]
     results: dict[str, list[dict[str, float]]] = {row: [] for row in RUNS}
     for k in range(len(views)):
         subset = views[:k] + views[k + 1 :]

@@ -79,7 +79,9 @@ def draw_layout(
     }
 
 
-def apply_layout(base: Any, layout: dict[str, Any], home_deg: Sequence[float] | None) -> Any:
+def apply_layout(
+    base: Any, layout: dict[str, Any], home_deg: Sequence[float] | np.ndarray | None
+) -> Any:
     """The base scene with a layout's camera angles, cubes and bins (`draw_layout`)."""
     size = base.cubes[0].size_mm if base.cubes else 100.0
     cubes = tuple(
@@ -201,7 +203,8 @@ def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, A
     try:
         for d in (cam, laser, arm):
             d.connect()
-        truth = cam.grab(with_truth=True) and cam.last_truth
+        cam.grab(with_truth=True)
+        truth = cam.last_truth
         assert truth is not None
         calib = SystemCalibration.from_json(truth, source="truth")
         if "calibration_errors" in config:
@@ -216,7 +219,7 @@ def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, A
             cfg,
             reg_cfg,
             log,
-            clock=lambda cell=cell: cell.world.sim_time,  # the arm's time, not the PC's
+            clock=lambda: cell.world.sim_time,  # the arm's time, not the PC's
         )
         t0 = time.perf_counter()
         report = sorter.run(register=True, on_located=verifier.on_located, on_done=verifier.on_done)
@@ -331,7 +334,8 @@ def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
             planner.commit(plan)
             planned += 1
             motion += plan.duration_s
-            q = plan.end_q
+            if plan.end_q is not None:  # a plan without moves leaves the arm where it is
+                q = plan.end_q
     ms = 1e3 * np.asarray(times)
     return {
         "plans": len(times),

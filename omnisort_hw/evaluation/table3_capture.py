@@ -32,6 +32,7 @@ from omnisort_hw.evaluation.table3 import (
     mapping_errors,
 )
 from omnisort_hw.pipeline.extrinsics import calibrate_system
+from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.measurement_capture import MeasurementCapture, capture_measurement
 from sim_backend.dataset import TABLE3_SCENES, table3_configs
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
@@ -290,10 +291,7 @@ def evaluate_kept(
                 bar.update(1)
                 continue
             kept = json.loads(Path(f"{base}.capture.json").read_text())
-            images = {
-                k: cv2.imread(f"{base}.{k}.png", cv2.IMREAD_COLOR)
-                for k in ("board", "stripe", "clean")
-            }
+            images = {k: read_image(f"{base}.{k}.png") for k in ("board", "stripe", "clean")}
             truth, record = kept["truth"], kept["record"]
             board_tone = ToneCurve("measured", np.asarray(kept["tone"])) if kept["tone"] else tone
             stripe_px = laser_stripe_points(images["stripe"], light_only=True)

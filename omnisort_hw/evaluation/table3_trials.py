@@ -61,5 +61,5 @@ def table3_trial(config: Mapping[str, Any], seed: int) -> TrialOutput:
 def summarize_rows(rows: Sequence[Mapping[str, Any]], dataset: str) -> dict[str, Any]:
     """`evaluate_dataset`'s summary from a sweep's table3 rows (manifest order)."""
     pairs = [(r["result"], r["timing"].get("calibration_s")) for r in rows]
-    first = rows[0] if rows else {"seed": None, "config": {"degraded": False}}
+    first: Mapping[str, Any] = rows[0] if rows else {"seed": None, "config": {"degraded": False}}
     return summarize_table3(pairs, dataset, first["seed"], bool(first["config"]["degraded"]))

@@ -18,15 +18,10 @@ import numpy as np
 from drivers.base import Arm, pose_matrix
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import plan_joint_move
-from omnisort_hw.errors import MotionRefusedError
+from omnisort_hw.pipeline.rig import raise_if_cancelled
 from omnisort_hw.runlog import RunLog
 
 _log = logging.getLogger(__name__)
-
-
-def _raise_if_cancelled(cancel: threading.Event | None) -> None:
-    if cancel is not None and cancel.is_set():
-        raise MotionRefusedError("move cancelled")
 
 
 class ArmMover:
@@ -49,7 +44,7 @@ class ArmMover:
         """Move to `joints_deg` (joint space), or to `matrix` / `pose` ([x, y, z mm, rotation
         vector deg]) along a straight TCP line; returns the joints and TCP pose reached."""
         arm.safety_status().raise_if_stopped(arm.name)
-        _raise_if_cancelled(cancel)
+        raise_if_cancelled(cancel)
         start = np.asarray(arm.joint_positions(), float)
         sampler = _JointSampler(arm)
         if joints_deg is not None:
@@ -59,7 +54,7 @@ class ArmMover:
                 self._log_planned_joint_move(rl, start, target, speed_deg_s)
             except Exception as exc:
                 _log.warning("could not log the planned trajectory: %s", exc)
-            _raise_if_cancelled(cancel)
+            raise_if_cancelled(cancel)
             with sampler:
                 arm.move_joints(target, speed_deg_s=speed_deg_s)
         else:
@@ -69,7 +64,7 @@ class ArmMover:
                 T = pose_matrix(p[:3], p[3:])
             rl.event("arm/command", f"move_linear to xyz {np.round(T[:3, 3], 2).tolist()} mm")
             rl.pose("arm/planned/tcp", T)
-            _raise_if_cancelled(cancel)
+            raise_if_cancelled(cancel)
             with sampler:
                 arm.move_linear(T, speed_mm_s=speed_mm_s)
         end = np.asarray(arm.joint_positions(), float)

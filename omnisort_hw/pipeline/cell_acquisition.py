@@ -23,8 +23,7 @@ from omnisort_hw import fileio
 from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import OmnisortError
-from omnisort_hw.pipeline.extrinsics import image_record
-from omnisort_hw.pipeline.image_files import read_image
+from omnisort_hw.pipeline.image_files import image_record, read_image
 from omnisort_hw.pipeline.measurement_capture import capture_measurement
 from omnisort_hw.runlog import RunLog
 
@@ -33,7 +32,10 @@ class CaptureRig(Protocol):
     """What a measurement capture needs of a cell (`cell.Cell` is one): its camera and laser
     held for the capture, where the images go, the `[capture]` settings and the run log."""
 
-    capture_dir: Path
+    @property
+    def capture_dir(self) -> Path:
+        """Where the capture's images are kept."""
+        ...
 
     @property
     def runlog(self) -> RunLog: ...

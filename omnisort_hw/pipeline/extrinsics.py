@@ -1,6 +1,7 @@
 """Extrinsic calibration: one target image -> features -> camera rotation and laser plane.
 
-One use case for the CLI (`omnisort extrinsics calibrate`), the service and the evaluation.
+One use case for the CLI (`omnisort extrinsics calibrate`) and the service (`calibrate`),
+`run(rig, ExtrinsicsRequest)`; the evaluation calls `run_extrinsics` on its renders.
 
 Picks the extractor for the target and the method (the best one for the target by default),
 checks the image against the camera model, and logs what it saw and produced.
@@ -8,7 +9,7 @@ checks the image against the camera model, and logs what it saw and produced.
 
 from __future__ import annotations
 
-import hashlib
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,9 +20,13 @@ from omnisort_hw.config.target import METHODS_FOR, TARGETS, separation_problem
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
-from omnisort_hw.core.overlays import draw_extrinsics
+from omnisort_hw.core.overlays import draw_extrinsics, overlay_path, write_picture
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.errors import InputError
+from omnisort_hw.pipeline.cell_acquisition import acquire
+from omnisort_hw.pipeline.image_files import check_image_size
+from omnisort_hw.pipeline.requests import ExtrinsicsRequest
+from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -57,20 +62,6 @@ def resolve_target(
         return kind, None
     value = separation_mm if separation_mm is not None else default_separation_mm
     return kind, check_separation_mm(value, field)
-
-
-def image_record(path: str | Path) -> dict[str, Any]:
-    p = Path(path)
-    return {"path": str(p), "sha256": hashlib.sha256(p.read_bytes()).hexdigest()}
-
-
-def check_image_size(image: np.ndarray, model: OcamModel, source: str) -> None:
-    size = (image.shape[1], image.shape[0])
-    if size != tuple(model.image_size):
-        raise InputError(
-            f"{source}: image is {size[0]}x{size[1]} but the camera model is for "
-            f"{model.image_size[0]}x{model.image_size[1]}"
-        )
 
 
 @dataclass
@@ -158,6 +149,44 @@ def run_extrinsics(
     if log.enabled:
         log.image("extrinsics/overlay", run.overlay(image, source))
     return run
+
+
+def run(
+    rig: Rig, request: ExtrinsicsRequest, cancel: threading.Event | None = None
+) -> dict[str, Any]:
+    """Calibrate from the request's image, or from a measurement capture (its averaged board
+    frames for the edges and markers, its on/off pairs for the stripe), with the rig's camera
+    model and tone curve; the target and wall distance default to the rig's `[target]`. The
+    result is saved as the rig's system.json with the picture of what was detected and fitted
+    beside it; the answer is `calibration_result`'s."""
+    kind, separation_default, field = rig.target_defaults()
+    target, separation = resolve_target(
+        request.target, request.separation_mm, kind, separation_default, field
+    )
+    board = request.board_spec()
+    model = rig.camera_model()
+    acq = acquire(rig, request.image, board=True)
+    tone = acq.tone or rig.tone_curve()
+    raise_if_cancelled(cancel, "calibration")
+    fitted = rig.run_logged(
+        run_extrinsics,
+        acq.board,
+        model,
+        target,
+        request.method,
+        separation_mm=separation,
+        board=board.size,
+        square_mm=board.square_mm,
+        source=acq.source,
+        tone=tone,
+        stripe_px=acq.stripe_px,
+        cancel=cancel,
+        what="calibration",
+    )
+    raise_if_cancelled(cancel, "calibration")
+    saved = rig.save_system(system_payload(fitted.calib, acq.record))
+    picture = write_picture(overlay_path(saved), lambda: fitted.overlay(acq.board, acq.source))
+    return calibration_result(fitted.calib, target, saved, picture, acq.record, tone)
 
 
 def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> dict[str, Any]:

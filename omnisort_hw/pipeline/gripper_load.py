@@ -19,7 +19,7 @@ import numpy as np
 
 from omnisort_hw.core.pick_planning import tool_pose
 from omnisort_hw.errors import OmnisortError
-from omnisort_hw.pipeline.sort import CubeOutcome
+from omnisort_hw.pipeline.sort_report import CubeOutcome
 
 if TYPE_CHECKING:
     from omnisort_hw.pipeline.sort import Sorter

@@ -5,11 +5,14 @@ fills the missing rows with grey and warns on stderr), and was then reported as 
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
+from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import InputError
 
 JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe"})
@@ -43,3 +46,19 @@ def read_image(path: str | Path) -> np.ndarray:
     if image is None:
         raise InputError(f"{p}: not a readable image (unknown format or corrupt)")
     return image
+
+
+def image_record(path: str | Path) -> dict[str, Any]:
+    """The image file's record in system.json and replies: its path and SHA-256."""
+    p = Path(path)
+    return {"path": str(p), "sha256": hashlib.sha256(p.read_bytes()).hexdigest()}
+
+
+def check_image_size(image: np.ndarray, model: OcamModel, source: str) -> None:
+    """InputError naming `source` when the image is not the size the camera model is for."""
+    size = (image.shape[1], image.shape[0])
+    if size != tuple(model.image_size):
+        raise InputError(
+            f"{source}: image is {size[0]}x{size[1]} but the camera model is for "
+            f"{model.image_size[0]}x{model.image_size[1]}"
+        )

@@ -1,9 +1,9 @@
 """Intrinsic calibration: checkerboard images -> the camera's OCamCalib model and its record.
 
 One use case for the CLI (`omnisort intrinsics calibrate`) and the service
-(`calibrate what=intrinsics`): read the images (every one must be readable, or nothing is
-done), calibrate with the core, build the camera.json record and the technician's report
-(PNG beside camera.json, and in the run log) once.
+(`calibrate what=intrinsics`), `run(rig, IntrinsicsRequest)`: read the images (every one
+must be readable, or nothing is done), calibrate with the core, build the camera.json record
+and the technician's report (PNG beside camera.json, and in the run log) once.
 """
 
 from __future__ import annotations
@@ -37,6 +37,8 @@ from omnisort_hw.core.intrinsics_uncertainty import (
 from omnisort_hw.core.overlays import write_png
 from omnisort_hw.errors import InputError, MotionRefusedError
 from omnisort_hw.pipeline.image_files import read_image
+from omnisort_hw.pipeline.requests import IntrinsicsRequest
+from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.runlog import NullLog, RunLog
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -97,11 +99,84 @@ def read_images(
     return images
 
 
-def calibrate_folder(
-    paths: Sequence[Path], board: BoardSpec, degree: int | None = None, log: RunLog = NullLog
+@dataclass
+class IntrinsicsResult:
+    """A calibration, the camera.json it was saved as and its report picture."""
+
+    calibration: IntrinsicCalibration
+    path: Path
+    report: Path
+
+    def reply(self) -> dict[str, Any]:
+        """The answer at every door (the service's reply, the CLI's `--json`)."""
+        cal = self.calibration
+        result, record, figures = cal.result, cal.record, cal.figures
+        return {
+            "path": str(self.path),
+            "report": str(self.report),
+            **record,
+            "rms_px": result.rms_px,
+            "images_used": len(result.images_used),
+            "corners_rejected": len(result.corners_rejected),
+            "outer_band_covered": figures.outer_coverage,
+            "center_uv": list(result.model.center_uv),
+            "poly_degree": result.degree,
+            "model": result.model.to_dict(),
+            "field_of_view_deg": {
+                "image_circle": figures.circle_field_deg,
+                "corners_seen": figures.corners_field_deg,
+            },
+        }
+
+
+def run(
+    rig: Rig,
+    request: IntrinsicsRequest,
+    cancel: threading.Event | None = None,
+    on_detected: Callable[[str], None] | None = None,
+) -> IntrinsicsResult:
+    """Calibrate from the request's images (every one readable, or nothing is done), save the
+    model as the rig's camera.json and the report beside it. `on_detected` (a progress bar)
+    is called per image where the rig calibrates in its own process."""
+    board = request.board_spec()
+    rig.runlog.event(
+        "calibration/intrinsics", f"{len(request.images)} images, board {board.cols}x{board.rows}"
+    )
+    extra = {} if on_detected is None else {"on_detected": on_detected}
+    cal = rig.run_logged(
+        calibrate_files,
+        list(request.images),
+        board,
+        request.degree,
+        request.refinement,
+        cancel=cancel,
+        what="calibration",
+        **extra,
+    )
+    raise_if_cancelled(cancel, "calibration")
+    if request.folder is not None:
+        cal.record["images_folder"] = request.folder
+    saved = rig.save_camera(cal.result.model, cal.record)
+    return IntrinsicsResult(cal, saved, cal.write_report(saved))
+
+
+def calibrate_files(
+    paths: Sequence[Path],
+    board: BoardSpec,
+    degree: int | None = None,
+    refinement: str = "auto",
+    log: RunLog = NullLog,
+    on_detected: Callable[[str], None] | None = None,
 ) -> IntrinsicCalibration:
     """Read the images and calibrate (what the service's compute worker runs)."""
-    return calibrate_intrinsics(read_images(paths), board, degree=degree, log=log)
+    return calibrate_intrinsics(
+        read_images(paths),
+        board,
+        degree=degree,
+        on_detected=on_detected,
+        log=log,
+        refinement=refinement,
+    )
 
 
 def calibrate_intrinsics(

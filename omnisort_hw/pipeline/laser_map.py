@@ -1,11 +1,13 @@
 """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> straight segments.
 
-One use case for the CLI (`omnisort map`) and the service (`map`), logged the same way.
+One use case for the CLI (`omnisort map`) and the service (`map`): `run(rig, MapRequest)`,
+logged the same way.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -20,8 +22,11 @@ from omnisort_hw.core.map_uncertainty import (
     stripe_pixel_sigma,
 )
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
-from omnisort_hw.core.overlays import draw_map
-from omnisort_hw.pipeline.extrinsics import check_image_size
+from omnisort_hw.core.overlays import draw_map, write_picture
+from omnisort_hw.pipeline.cell_acquisition import acquire
+from omnisort_hw.pipeline.image_files import check_image_size
+from omnisort_hw.pipeline.requests import MapRequest
+from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -145,3 +150,36 @@ def floor_plane_S(
     n = T[:3, 2] / np.linalg.norm(T[:3, 2])
     floor_z_B = float(getattr(sort_config, "floor_z_B_mm", 0.0) or 0.0)
     return n, float(n @ T[:3, 3] + floor_z_B)
+
+
+@dataclass
+class MapResult:
+    """A map and what it was made from: the image's (or capture's) record and its picture."""
+
+    laser_map: LaserMap
+    image: dict[str, Any]
+    picture: dict[str, Any] = field(default_factory=dict)
+
+    def reply(self, with_points: bool = False) -> dict[str, Any]:
+        """The answer at every door (the service's reply, the CLI's `--json`)."""
+        return {"image": self.image, **self.laser_map.summary(with_points), **self.picture}
+
+
+def run(rig: Rig, request: MapRequest, cancel: threading.Event | None = None) -> MapResult:
+    """The map of the request's image, or of a measurement capture's laser light, with the
+    rig's calibration; the floor's mirror images (from the registered robot base and
+    `[sorting]`) dropped; its picture written where the rig keeps it when asked."""
+    calib = rig.system_calibration()
+    acq = acquire(rig, request.image, board=False)
+    raise_if_cancelled(cancel, "mapping")
+    stripe = acq.stripe if acq.stripe is not None else acq.board
+    floor = floor_plane_S(calib, rig.sort_config)
+    light = acq.stripe_px is not None  # a capture's laser light: red-channel centres
+    laser_map = map_laser(stripe, calib, acq.source, rig.runlog, floor, light_only=light)
+    result = MapResult(laser_map, acq.record)
+    if request.picture:
+        result.picture = write_picture(
+            rig.map_picture_path(request.image),
+            lambda: map_overlay(stripe, laser_map, calib, acq.source),
+        )
+    return result

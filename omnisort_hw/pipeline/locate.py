@@ -1,6 +1,7 @@
 """Cube location: the cubes in a colour image (and a laser-on image), in S and in B.
 
-One use case for the CLI (`omnisort locate`), the service (`locate`) and the sorting run: the
+One use case for the CLI (`omnisort locate`) and the service (`locate`), `run(rig,
+LocateRequest)`, and a step of the sorting run: the
 `[sorting]` record gives the cube size, the colours, the search region and the floor height,
 the calibration gives the camera, the laser plane and the robot base; the floor board's area
 is left out (its squares are not cubes).
@@ -9,6 +10,7 @@ is left out (its squares are not cubes).
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -22,6 +24,12 @@ from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.core.registration import Registration
+from omnisort_hw.errors import NotAvailableError
+from omnisort_hw.pipeline.calibration_source import robot_base_T
+from omnisort_hw.pipeline.cell_acquisition import acquire
+from omnisort_hw.pipeline.image_files import read_image
+from omnisort_hw.pipeline.requests import LocateRequest
+from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -35,6 +43,64 @@ class Located:
     registration: Registration | None
     diagnostics: dict[str, Any]
     image: np.ndarray = field(repr=False)
+
+
+@dataclass
+class LocateResult:
+    """The cubes found and what was left out (the location's `rejected` blobs)."""
+
+    cubes: list[Cube]
+    diagnostics: dict[str, Any] = field(repr=False)
+
+    def reply(self, colors: Sequence[str] | None = None) -> dict[str, Any]:
+        """The answer at every door: the cubes (of `colors` when given), their count, and the
+        blobs rejected inside the search region with the reason."""
+        found = [c.summary() for c in self.cubes if colors is None or c.color in colors]
+        rejected = [
+            r
+            for r in self.diagnostics.get("rejected", [])
+            if r["reason"] != "outside the search region"
+        ]
+        return {"cubes": found, "count": len(found), "rejected": rejected}
+
+
+def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None) -> LocateResult:
+    """The cubes of the request's image (its laser-on image as height check when given), or of
+    a measurement capture (its averaged laser-off image and its laser light) when `[sorting]`
+    uses the laser and the rig has one, else of one laser-off frame."""
+    cfg = rig.sort_config
+    if cfg is None:
+        raise NotAvailableError(
+            "the colour-blob location needs a [sorting] section in the cell configuration "
+            "(bins, obstacles, cube size, home pose; or from_scene = true)"
+        )
+    calib = rig.system_calibration()
+    T_SB = robot_base_T(calib, str(rig.system_path), for_motion=False)
+    laser_image: np.ndarray | None = None
+    if request.image is not None:
+        colour = read_image(request.image)
+        if request.laser_image is not None:
+            laser_image = read_image(request.laser_image)
+    elif cfg.use_laser and rig.has_laser():
+        acq = acquire(rig, None, board=True)
+        colour, laser_image = acq.board, acq.stripe
+    else:
+        colour = rig.frame(None, laser=False)
+    raise_if_cancelled(cancel, "location")
+    rig.runlog.image("locate/image", colour)
+    cubes, diag = rig.run_logged(
+        locate_in_images,
+        colour,
+        laser_image,
+        calib,
+        cfg,
+        T_SB,
+        calib.robot_base,
+        prefix="locate",
+        cancel=cancel,
+        what="location",
+    )
+    return LocateResult(cubes, diag)
 
 
 def locate_in_images(

@@ -1,7 +1,8 @@
 """Robot registration: the robot base pose T_SB from the floor checkerboard in one image.
 
-One use case for the CLI (`omnisort register-robot`), the service (`register_robot`) and the
-sorting run (`Sorter.locate(register=True)`): the core's `register_robot` with the
+One use case for the CLI (`omnisort register-robot`) and the service (`register_robot`),
+`run(rig, RegisterRequest)`, and a step of the sorting run (`Sorter.locate(register=True)`):
+the core's `register_robot` with the
 `[registration]` record, the run-log entries, the `robot_base` record stored in system.json,
 and writing it into a system.json file.
 """
@@ -9,7 +10,9 @@ and writing it into a system.json file.
 from __future__ import annotations
 
 import json
+import threading
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,9 +21,40 @@ import numpy as np
 from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.registration import Registration, register_robot
-from omnisort_hw.errors import CalibrationFileError
+from omnisort_hw.errors import CalibrationFileError, NotAvailableError
 from omnisort_hw.pipeline.intrinsics import board_record
+from omnisort_hw.pipeline.requests import RegisterRequest
+from omnisort_hw.pipeline.rig import Rig
 from omnisort_hw.runlog import NullLog, RunLog
+
+
+@dataclass
+class RegisterResult:
+    """A registration, its `robot_base` record and where it was saved (None: not saved)."""
+
+    registration: Registration
+    record: dict[str, Any]
+    path: Path | None
+
+
+def run(
+    rig: Rig, request: RegisterRequest, cancel: threading.Event | None = None
+) -> RegisterResult:
+    """T_SB from the floor board in the request's image (or a laser-off frame) with the rig's
+    `[registration]`, saved into its system.json unless the request says not to."""
+    rc = rig.registration_config
+    if rc is None:
+        raise NotAvailableError(
+            "the robot registration needs a [registration] section in the cell configuration "
+            "(board, square_mm, offset = [X, Y, Z, RX, RY, RZ] of the board in B)"
+        )
+    calib = rig.system_calibration()
+    image = rig.frame(request.image, laser=False)
+    rig.runlog.image("registration/image", image)
+    reg = rig.run_logged(register_from_image, image, calib, rc, cancel=cancel, what="registration")
+    record = robot_base_record(reg, rc, request.image or "capture", request.model)
+    path = rig.save_robot_base(record, image) if request.save else None
+    return RegisterResult(reg, record, path)
 
 
 def register_from_image(

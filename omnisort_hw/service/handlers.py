@@ -13,6 +13,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from omnisort_hw.cell.cell import Cell
+from omnisort_hw.pipeline.requests import (
+    ExtrinsicsRequest,
+    IntrinsicsRequest,
+    LocateRequest,
+    MapRequest,
+    RegisterRequest,
+    SortRequest,
+)
 
 
 @dataclass
@@ -47,36 +55,42 @@ def laser(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
 
 def calibrate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
     if args["what"] == "intrinsics":
-        return ctx.cell.calibrate_intrinsics(
-            args["folder"],
-            board=args["board"] or "9x6",
-            square_mm=args["square_mm"],
+        from omnisort_hw.pipeline.intrinsics import image_files
+
+        folder = args["folder"]
+        request = IntrinsicsRequest(
+            tuple(image_files(folder)),
+            args["square_mm"],
+            board=args["board"],
             degree=args["degree"],
-            cancel=ctx.cancel,
+            folder=str(folder),
         )
+        return ctx.cell.calibrate_intrinsics(request, ctx.cancel)
     return ctx.cell.calibrate_extrinsics(
-        image=args["image"],
-        target=args["target"],
-        method=args["method"],
-        separation_mm=args["separation_mm"],
-        board=args["board"],
-        square_mm=args["square_mm"],
-        cancel=ctx.cancel,
+        ExtrinsicsRequest(
+            image=args["image"],
+            target=args["target"],
+            method=args["method"],
+            separation_mm=args["separation_mm"],
+            board=args["board"],
+            square_mm=args["square_mm"],
+        ),
+        ctx.cancel,
     )
 
 
 def map_scene(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.map_scene(
-        args["image"], ctx.cancel, with_points=args["points"], picture=args["picture"]
-    )
+    request = MapRequest(args["image"], with_points=args["points"], picture=args["picture"])
+    return ctx.cell.map_scene(request, ctx.cancel)
 
 
 def register_robot(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.register_robot(args["image"], ctx.cancel)
+    return ctx.cell.register_robot(RegisterRequest(args["image"]), ctx.cancel)
 
 
 def locate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.locate(args["image"], args["colors"], ctx.cancel)
+    colors = tuple(args["colors"]) if args["colors"] is not None else None
+    return ctx.cell.locate(LocateRequest(args["image"], colors=colors), ctx.cancel)
 
 
 def move(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
@@ -91,7 +105,9 @@ def move(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
 
 
 def sort(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.sort(args["max_objects"], args["colors"], ctx.cancel, ctx.progress)
+    colors = tuple(args["colors"]) if args["colors"] is not None else None
+    request = SortRequest(args["max_objects"], colors)
+    return ctx.cell.sort(request, ctx.cancel, ctx.progress)
 
 
 def check(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:

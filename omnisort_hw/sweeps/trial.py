@@ -78,7 +78,7 @@ def trial_function(experiment: str) -> Callable[[Mapping[str, Any], int], TrialO
         known = ", ".join(sorted(EXPERIMENTS))
         raise InputError(f"unknown experiment {experiment!r} (known: {known})") from None
     module, name = target.split(":")
-    return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
+    return getattr(importlib.import_module(module), name)
 
 
 def run_trial(trial: Mapping[str, Any]) -> dict[str, Any]:

@@ -294,9 +294,10 @@ class CameraStreamServer:
         frames = self.frames
         frames.clients += 1
         try:
-            if self._wait_current(self.listener.stop) is None:
+            image = frames.image if self._wait_current(self.listener.stop) is not None else None
+            if image is None:
                 return
-            _, buf = cv2.imencode(".png", frames.image)
+            _, buf = cv2.imencode(".png", image)
         finally:
             frames.clients -= 1
         data = buf.tobytes()

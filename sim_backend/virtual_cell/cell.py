@@ -65,7 +65,9 @@ class VirtualCell:
         degraded: bool = False,
     ) -> None:
         self.host = host
-        size = {k: v for k, v in (("width", width), ("height", height or width)) if v}
+        size: dict[str, Any] = {
+            k: v for k, v in (("width", width), ("height", height or width)) if v
+        }
         self.cell = SimCell.from_scene(scene, seed=seed, **size)
         self.arm = SimArm(self.cell)
         self.arm.connect()

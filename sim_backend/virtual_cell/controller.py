@@ -263,8 +263,8 @@ class URController:
         }
         for i, v in enumerate(self.out_int):
             snap[f"output_int_register_{i}"] = v
-        for i, v in enumerate(self.out_double):
-            snap[f"output_double_register_{i}"] = v
+        for i, x in enumerate(self.out_double):
+            snap[f"output_double_register_{i}"] = x
         self.snapshot = snap
 
     def value(self, name: str, kind: str, snap: dict[str, Any]) -> Any:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -92,8 +93,11 @@ def test_map_without_an_image_measures_with_the_configured_cell(tmp_path) -> Non
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout)["result"]
-    assert out["capture"]["frames"] == 2
-    assert out["capture"]["pixel_format"] == "BGR3"
+    # The service's record of a capture: its settings and the images kept in the capture folder.
+    capture = out["image"]["capture"]
+    assert capture["frames"] == 2 and capture["pixel_format"] == "BGR3"
+    kept = Path(out["image"]["laser_image"]["path"])
+    assert kept.is_file() and kept.parent == system.parent / "captures"
     assert out["points"] > 20 and out["segments"]
 
 

@@ -19,6 +19,7 @@ from omnisort_hw.pipeline.drift_check import DRIFT_STATE_NAME, calibration_key
 
 pytest.importorskip("pybullet", reason="the cell file's devices are the simulated ones")
 ROOT = Path(__file__).resolve().parents[2]
+SIM_SERIAL = "SIM-sorting-960x960-equidistant185"
 
 
 def _cell(tmp_path: Path) -> tuple[Path, CalibrationStore]:
@@ -29,7 +30,8 @@ def _cell(tmp_path: Path) -> tuple[Path, CalibrationStore]:
     text = re.sub(r'log_dir = ".*"', f'log_dir = "{tmp_path / "logs"}"', text)
     cfg = tmp_path / "cell.toml"
     cfg.write_text(text)
-    store = CalibrationStore(state_dir=tmp_path / "state")
+    # made with the shipped cell's (simulated) camera, as its service would have stored it
+    store = CalibrationStore(state_dir=tmp_path / "state", expected_serial=SIM_SERIAL)
     model = OcamModel.equidistant(960, 960, 185.0)
     store.save_camera(camera_record(model))
     zero = dict.fromkeys(
@@ -45,6 +47,26 @@ def _cell(tmp_path: Path) -> tuple[Path, CalibrationStore]:
     return cfg, store
 
 
+def service_refusal(cfg: Path) -> dict[str, str]:
+    """The error the service's cell raises for a sort on the same cell file and state."""
+    import threading
+
+    from omnisort_hw.cell.cell import Cell
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.errors import OmnisortError
+    from omnisort_hw.pipeline.requests import SortRequest
+
+    cell = Cell.from_settings(load_cell_config(cfg))
+    cell.connect()
+    try:
+        cell.sort(SortRequest(), threading.Event())
+    except OmnisortError as exc:
+        return {"code": exc.code, "message": str(exc)}
+    finally:
+        cell.close()
+    raise AssertionError("the service's cell sorted on a refused calibration")
+
+
 def test_a_drift_on_record_refuses_the_cli_sort(tmp_path: Path, capsys) -> None:
     cfg, store = _cell(tmp_path)
     key = calibration_key(store.read("system").payload)
@@ -54,13 +76,14 @@ def test_a_drift_on_record_refuses_the_cli_sort(tmp_path: Path, capsys) -> None:
     err = json.loads(capsys.readouterr().out)["error"]
     assert code == 2 and err["code"] == "calibration_drift", err
     assert "0.400 deg" in err["message"] and "acknowledge_drift" in err["message"]
+    assert service_refusal(cfg) == err
     # Acknowledged by an operator (as the service's acknowledge_drift records it): not refused
     # by the drift gate any more (what follows is the sort itself).
     ack = {"drift_detected": drift, "acknowledged": {"at": "now", "angle_deg": 0.4}}
     (store.state_dir / DRIFT_STATE_NAME).write_text(json.dumps(ack))
-    from omnisort_hw.cli.robot_cmd import _refuse_on_recorded_drift
+    from omnisort_hw.cli.file_rig import FileRig
 
-    _refuse_on_recorded_drift(store.state_dir, None)
+    FileRig(config=cfg).check_drift()
 
 
 def test_a_tampered_calibration_refuses_the_cli_sort(tmp_path: Path, capsys) -> None:
@@ -73,6 +96,7 @@ def test_a_tampered_calibration_refuses_the_cli_sort(tmp_path: Path, capsys) -> 
     err = json.loads(capsys.readouterr().out)["error"]
     assert code == 2 and err["code"] == "motion_refused", err
     assert "checksum mismatch" in err["message"], err
+    assert service_refusal(cfg) == err
 
 
 def test_the_cli_sort_does_not_run_beside_the_service_of_the_same_cell(

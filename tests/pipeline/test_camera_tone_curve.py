@@ -12,6 +12,7 @@ import numpy as np
 from omnisort_hw.core.radiometry import SRGB
 from omnisort_hw.evaluation.table3 import truth_parameters
 from omnisort_hw.pipeline.extrinsics import calibrate_system
+from omnisort_hw.pipeline.requests import ExtrinsicsRequest
 from tests.service.sim_cell import calibrated_sim_cell
 
 
@@ -27,15 +28,17 @@ def test_the_simulated_cell_calibrates_with_its_cameras_own_curve(tmp_path: Path
         # The simulated camera reports what its frames are written with (the shipped scenes
         # render linear), and the cell takes the curve from its camera.
         assert camera.tone_curve == truth["render"]["tone_curve"] == "linear"
-        assert cell.camera_tone_curve().name == "linear"
+        assert cell.tone_curve().name == "linear"
         image = tmp_path / "target.png"
         assert cv2.imwrite(str(image), frame.image)
         want = truth_parameters(truth)
 
         result = cell.calibrate_extrinsics(
-            image=str(image),
-            target="two-sided",
-            separation_mm=truth["target"]["separation_mm"],
+            ExtrinsicsRequest(
+                image=str(image),
+                target="two-sided",
+                separation_mm=truth["target"]["separation_mm"],
+            )
         )
         assert result["tone_curve"] == "linear"
         roll_err = result["parameters"]["cam_roll_deg"] - want["cam_roll_deg"]

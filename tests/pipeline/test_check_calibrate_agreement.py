@@ -22,6 +22,7 @@ from omnisort_hw.core.camera_io import camera_record
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import calibration_key, save_reference
+from omnisort_hw.pipeline.requests import ExtrinsicsRequest
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -99,7 +100,7 @@ def test_cli_calibrate_is_the_services_calibrate(tmp_path: Path) -> None:
         f'[target]\nkind = "two-sided"\nseparation_mm = {separation}\n'
     )
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = as_json(cell.calibrate_extrinsics(str(image_path)))
+    service = as_json(cell.calibrate_extrinsics(ExtrinsicsRequest(str(image_path))))
     out = tmp_path / "cli" / "system.json"
     command = cli(
         "extrinsics",

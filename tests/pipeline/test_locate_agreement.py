@@ -16,10 +16,11 @@ pytest.importorskip("pybullet", reason="the image is rendered by the simulated c
 from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.pipeline.requests import LocateRequest
 from tests.pipeline.registered_scene import registered_scene
 
 
-def locate_cli(*args: str) -> list[dict]:
+def locate_cli(*args: str) -> dict:
     proc = subprocess.run(
         [sys.executable, "-m", "omnisort_hw.cli", "locate", *args, "--json"],
         capture_output=True,
@@ -27,7 +28,7 @@ def locate_cli(*args: str) -> list[dict]:
         timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout)["result"]["cubes"]
+    return json.loads(proc.stdout)["result"]
 
 
 def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:
@@ -57,16 +58,18 @@ def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = cell.locate(str(image_path), None)
-    cli = locate_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
-    assert service["cubes"] == json.loads(json.dumps(cli))
+    service = cell.locate(LocateRequest(str(image_path)))
+    reply = locate_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
+    # The whole answer: the cubes, their count and the blobs rejected with their reasons.
+    assert json.loads(json.dumps(service)) == reply
+    cli = reply["cubes"]
     # Not a vacuous agreement: every cube of the scene, where the truth has it.
     assert len(cli) == len(truth["cubes"]) >= 3
     for cube in truth["cubes"]:
         d = [np.linalg.norm(np.subtract(c["center_B_mm"], cube["center_B_mm"])) for c in cli]
         assert min(d) < 3.0, (cube, d)
     # The floor height matters: without the cell file the CLI puts the cubes elsewhere.
-    plain = locate_cli(str(image_path), "--system", str(system))
+    plain = locate_cli(str(image_path), "--system", str(system))["cubes"]
     moved = [
         np.linalg.norm(np.subtract(a["center_B_mm"], b["center_B_mm"]))
         for a, b in zip(

@@ -17,6 +17,7 @@ pytest.importorskip("pybullet", reason="the image is rendered by the simulated c
 
 from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
+from omnisort_hw.pipeline.requests import MapRequest
 from tests.pipeline.registered_scene import registered_scene
 
 
@@ -40,7 +41,7 @@ def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = json.loads(json.dumps(cell.map_scene(str(image_path), with_points=True)))
+    service = json.loads(json.dumps(cell.map_scene(MapRequest(str(image_path), with_points=True))))
     cli = map_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
     assert cli["points_S"] == service["points_S"] and cli["pixels"] == service["pixels"]
     assert cli["segments"] == service["segments"]

@@ -21,6 +21,7 @@ from omnisort_hw.pipeline.calibration_source import (
     MemoryCalibration,
     StoreCalibration,
 )
+from omnisort_hw.pipeline.requests import LocateRequest, RegisterRequest, SortRequest
 from omnisort_hw.pipeline.sort import Sorter
 from omnisort_hw.runlog import RunLog, entity_paths
 from sim_backend.sort_harness import SimScene, SimVerifier, sim_registration_config, sim_sort_config
@@ -214,16 +215,16 @@ def test_service_commands_through_the_cell(tmp_path: Path) -> None:
     cell.connect()
     try:
         cancel = threading.Event()
-        reg = cell.register_robot(None, cancel)
+        reg = cell.register_robot(RegisterRequest(), cancel)
         rb = store.load_system()["robot_base"]
         assert rb == json.loads(json.dumps(reg["robot_base"]))
         np.testing.assert_allclose(rb["xyz_mm"], truth["robot_base"]["xyz_mm"], atol=3.0)
-        located = cell.locate(None, None, cancel)
+        located = cell.locate(LocateRequest(), cancel)
         assert located["count"] == 1 and located["cubes"][0]["color"] == "blue"
         np.testing.assert_allclose(
             located["cubes"][0]["center_B_mm"], truth["cubes"][0]["center_B_mm"], atol=3.0
         )
-        result = cell.sort(None, None, cancel)
+        result = cell.sort(SortRequest(), cancel)
         assert result["totals"]["sorted"] == 1, result
         verifier = SimVerifier(devices.arm)
         final = verifier.true_cubes()[0]

@@ -69,7 +69,8 @@ def _look_along(axis: np.ndarray) -> np.ndarray:
 
 def calibrate_method2(features: BoardsFeatures, model: OcamModel) -> SystemCalibration:
     t0 = time.perf_counter()
-    poses, fit = {}, {}
+    poses: dict[str, np.ndarray] = {}
+    fit: dict[str, float] = {}
     for name in ("left", "far"):
         if name not in features.boards:
             raise CalibrationError(f"checkerboards: the {name} board was not found")

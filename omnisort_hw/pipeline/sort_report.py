@@ -1,0 +1,114 @@
+"""A sorting run's record: what happened to each located cube, and the run's totals, as the
+service replies, the CLI prints and the evaluation counts them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+def _finite(value: float, digits: int) -> float | None:
+    """A rounded number for JSON, None when it is not finite (strict JSON has no NaN)."""
+    return round(float(value), digits) if math.isfinite(value) else None
+
+
+@dataclass
+class CubeOutcome:
+    """What happened to one located cube."""
+
+    index: int
+    color: str
+    center_S_mm: list[float]
+    center_B_mm: list[float]
+    yaw_B_deg: float
+    sigma_mm: float
+    status: str  # "sorted" (placed), "skipped" (refused before motion), "failed"
+    reason: str = ""
+    bin: str | None = None
+    motion_s: float = 0.0
+    error_mm: float | None = None  # filled by a verifier
+    in_right_bin: bool | None = None  # filled by a verifier
+    relocated: bool = False  # moved after the first capture; located again by a check
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {
+            "index": self.index,
+            "color": self.color,
+            "center_S_mm": [_finite(v, 2) for v in self.center_S_mm],
+            "center_B_mm": [_finite(v, 2) for v in self.center_B_mm],
+            "yaw_B_deg": _finite(self.yaw_B_deg, 2),
+            "sigma_mm": _finite(self.sigma_mm, 3),
+            "status": self.status,
+            "reason": self.reason,
+            "bin": self.bin,
+            "motion_s": round(self.motion_s, 3),
+        }
+        if self.error_mm is not None:
+            out["error_mm"] = round(self.error_mm, 3)
+        if self.in_right_bin is not None:
+            out["in_right_bin"] = self.in_right_bin
+        if self.relocated:
+            out["relocated"] = True
+        return out
+
+
+@dataclass
+class SortReport:
+    """Per-cube outcomes and totals of one sorting run."""
+
+    outcomes: list[CubeOutcome]
+    registration: dict[str, Any] | None = None
+    rejected_blobs: int = 0
+    wall_s: float = 0.0
+    verified: bool = False
+    collisions: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def add_missed(self, color: str, center_S_mm: list[float], in_right_bin: bool) -> None:
+        """A cube a verifier knows of that the run never located (status "missed")."""
+        self.outcomes.append(
+            CubeOutcome(
+                len(self.outcomes),
+                color,
+                list(center_S_mm),
+                [float("nan")] * 3,
+                0.0,
+                float("nan"),
+                "missed",
+                "not located",
+                None,
+                in_right_bin=in_right_bin,
+            )
+        )
+
+    def totals(self) -> dict[str, Any]:
+        picked = [o for o in self.outcomes if o.status == "sorted"]
+        out: dict[str, Any] = {
+            "cubes": len(self.outcomes),
+            "sorted": len(picked),
+            "skipped": sum(o.status == "skipped" for o in self.outcomes),
+            "failed": sum(o.status == "failed" for o in self.outcomes),
+            "motion_s": round(sum(o.motion_s for o in self.outcomes), 3),
+            "motion_s_per_pick": round(sum(o.motion_s for o in picked) / len(picked), 3)
+            if picked
+            else None,
+            "wall_s": round(self.wall_s, 3),
+        }
+        if self.verified:
+            out["sorted_ok"] = sum(bool(o.in_right_bin) for o in self.outcomes)
+            errs = [o.error_mm for o in self.outcomes if o.error_mm is not None]
+            out["mean_position_error_mm"] = round(float(np.mean(errs)), 3) if errs else None
+            out["collisions"] = self.collisions
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "cubes": [o.to_dict() for o in self.outcomes],
+            "totals": self.totals(),
+            "registration": self.registration,
+            "rejected_blobs": self.rejected_blobs,
+            **self.extra,
+        }
