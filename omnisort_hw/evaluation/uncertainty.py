@@ -87,12 +87,14 @@ def map_trial(seed: int, width: int = 960) -> Normalised:
     from sim_backend.scene_images import render_scene
 
     scene = _mounting(seed, width)
-    calib_image, truth = render_scene(scene, seed=2 * seed + 1)
-    model = OcamModel.from_dict(truth["camera"])
+    calib_image, first = render_scene(scene, seed=2 * seed + 1)
+    assert first is not None
+    model = OcamModel.from_dict(first["camera"])
     calib = calibrate_system(
-        calib_image, model, "two-sided", "joint", separation_mm=truth["target"]["separation_mm"]
+        calib_image, model, "two-sided", "joint", separation_mm=first["target"]["separation_mm"]
     )
     image, truth = render_scene(scene, seed=2 * seed + 2)
+    assert truth is not None
     laser_map = map_laser(image, calib)
     assert laser_map.sigmas is not None
     errors, sigmas, surfaces = map_errors(
@@ -145,6 +147,7 @@ def cube_trial(seed: int, width: int = 960, n_cubes: int = 5) -> Normalised:
     rng = np.random.default_rng(seed)
     scene = random_scene(sized(load_scene("sorting"), width), rng, n_cubes)
     colour, truth = render_scene(scene, seed=2 * seed + 1, laser_on=False)
+    assert truth is not None
     laser_image, _ = render_scene(scene, seed=2 * seed + 2, laser_on=True)
     model = OcamModel.from_dict(truth["camera"])
     calib = calibrate_system(
@@ -153,7 +156,7 @@ def cube_trial(seed: int, width: int = 960, n_cubes: int = 5) -> Normalised:
     cfg = sim_sort_config(scene, SortConfig())
     T_SB = scene_T_SB(scene)
     cubes, _ = locate_in_images(colour, None, calib, cfg, T_SB, None)
-    true_S = np.array([c["center_S_mm"] for c in truth["cubes"]], float)
+    true_S = np.asarray([c["center_S_mm"] for c in truth["cubes"]], dtype=np.float64)
     errors, sigmas = [], []
     for cube, k in zip(cubes, match_to_truth(cubes, true_S), strict=True):
         if k is None:
@@ -197,6 +200,7 @@ def gated_sort(width: int = 960, seed: int = 3) -> dict[str, Any]:
         d.connect()
     try:
         cam.grab(with_truth=True)
+        assert cam.last_truth is not None
         calib = SystemCalibration.from_json(cam.last_truth, source="truth")
         noise = np.diag(np.square([1e-6, 1e-6, np.radians(GATED_YAW_SIGMA_DEG), 1e-6, 1e-6, 1e-3]))
         calib.covariance = ExtrinsicCovariance(noise).to_json()
