@@ -113,14 +113,21 @@ def map_errors(
     near = (dist <= SPURIOUS_PX) & np.all(np.isfinite(points_S), axis=1)
     true_calib = SystemCalibration.from_json(truth)
     want = pixels_to_plane(foot[near], true_calib)
-    # The true line's direction at the foot: the true points of the two ends of its piece.
-    tangents = np.zeros_like(want)
-    for i, k in enumerate(np.flatnonzero(near)):
-        poly = polys[owner[k]]
-        j = int(np.argmin(np.linalg.norm(poly - foot[k], axis=1)))
-        a, b = poly[max(j - 1, 0)], poly[min(j + 1, len(poly) - 1)]
-        ends = pixels_to_plane(np.array([a, b]), true_calib)
-        tangents[i] = ends[1] - ends[0]
+    # The true line's direction at the foot: through the true points of the vertices on
+    # either side of the foot's nearest vertex on its own polyline.
+    verts = np.concatenate(polys)
+    start = np.cumsum([0, *(len(p) for p in polys)])[:-1]
+    k_near = owner[near]
+    lo, hi = start[k_near], start[k_near] + np.array([len(polys[k]) for k in k_near]) - 1
+    # Nearest vertex of the owning polyline (polylines are short: a dense (points, vertices)
+    # distance with the other polylines masked out).
+    d = np.linalg.norm(foot[near][:, None, :] - verts[None, :, :], axis=2)
+    idx = np.arange(len(verts))[None, :]
+    d[(idx < lo[:, None]) | (idx > hi[:, None])] = np.inf
+    j = np.argmin(d, axis=1)
+    a = pixels_to_plane(verts[np.maximum(j - 1, lo)], true_calib)
+    b = pixels_to_plane(verts[np.minimum(j + 1, hi)], true_calib)
+    tangents = b - a
     normal = np.cross(true_calib.laser_normal, tangents)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     err = np.einsum("ni,ni->n", points_S[near] - want, normal)
