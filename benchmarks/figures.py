@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import prose
+from benchmarks.figures_uncertainty import uncertainty, uncertainty_rows
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -514,6 +515,8 @@ def summary(r: dict[str, Any]) -> str:
                 "[drift](docs/drift.md)",
             ]
         )
+    if "uncertainty" in r:
+        rows += uncertainty_rows(r["uncertainty"])
     if "sweep" in r:
         sw = r["sweep"]
         rows.append(
@@ -714,6 +717,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "lighting": lighting,
     "table3_capture": table3_capture,
     "sweeps": sweeps,
+    "uncertainty": uncertainty,
 }
 
 

@@ -91,6 +91,7 @@ _SORT_NUMBERS = (
     "linear_accel_mm_s2",
     "collision_margin_mm",
     "max_sigma_mm",
+    "capture_tolerance_mm",
 )
 _SORT_KEYS = {
     *_SORT_NUMBERS,

@@ -18,7 +18,15 @@ from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import CalibrationFileError, InputError
 from omnisort_hw.fileio import atomic_write_bytes, atomic_write_json
 
-MODEL_KEYS = ("model", "image_size", "center_uv", "stretch", "poly", "inv_poly", "theta_max_deg")
+MODEL_KEYS = (
+    "model",
+    "image_size",
+    "center_uv",
+    "stretch",
+    "poly",
+    "inv_poly",
+    "theta_max_deg",
+)
 
 
 def camera_record(model: OcamModel, **meta: Any) -> dict[str, Any]:
@@ -44,7 +52,8 @@ def load_camera_json(path: str | Path) -> tuple[OcamModel, dict[str, Any]]:
         model = OcamModel.from_dict(data, source=str(p))
     except InputError as exc:
         raise CalibrationFileError(str(exc)) from exc
-    meta = {k: v for k, v in data.items() if k not in MODEL_KEYS and k != "inv_error_px"}
+    model_only = {*MODEL_KEYS, "inv_error_px", "uncertainty"}
+    meta = {k: v for k, v in data.items() if k not in model_only}
     return model, meta
 
 

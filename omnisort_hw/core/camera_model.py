@@ -17,7 +17,7 @@ and z into the scene negative; swapping x/y and negating z is a proper rotation)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -98,6 +98,10 @@ class OcamModel:
     inv_poly: np.ndarray = field(repr=False)
     theta_max: float
     inv_error_px: float
+    # The intrinsic calibration's covariance, when known (core.intrinsics_uncertainty:
+    # `parameters`, `covariance`, `rho_scale`, `poly_degree`): carried with the model into
+    # system.json so that every map point's sigma can include it.
+    uncertainty: dict[str, Any] | None = field(default=None, repr=False)
 
     @classmethod
     def create(
@@ -337,6 +341,7 @@ class OcamModel:
             "inv_poly": [float(a) for a in self.inv_poly],
             "theta_max_deg": float(np.rad2deg(self.theta_max)),
             "inv_error_px": float(self.inv_error_px),
+            **({"uncertainty": self.uncertainty} if self.uncertainty else {}),
         }
 
     @classmethod
@@ -361,10 +366,14 @@ class OcamModel:
             raise InputError(f"{source}: missing key {exc.args[0]!r} in the camera model") from exc
         except (TypeError, ValueError, IndexError, OverflowError) as exc:
             raise InputError(f"{source}: malformed camera model ({exc})") from exc
+        unc = data.get("uncertainty")
+        if unc is not None and not isinstance(unc, dict):
+            raise InputError(f"{source}: 'uncertainty' must be a JSON object")
         try:
-            return cls.create(poly, centre, stretch, size)
+            model = cls.create(poly, centre, stretch, size)
         except InputError as exc:
             raise InputError(f"{source}: {str(exc).removeprefix('camera model: ')}") from exc
+        return replace(model, uncertainty=unc) if unc else model
 
     def ocam_inverse_for_export(self, tol_px: float = INVERSE_TOLERANCE_PX) -> np.ndarray:
         """OCamCalib's `invpol`: rho as a polynomial of t = atan(z_o / |xy|) = theta - pi/2."""

@@ -255,11 +255,25 @@ class Cube:
     bbox: tuple[int, int, int, int]  # x, y, w, h in pixels
     notes: list[str] = field(default_factory=list)
     outline_px: np.ndarray | None = field(default=None, repr=False)
+    # Covariance (mm^2) of the centre along B's x and y: the outline fit's own, and with the
+    # calibration's part added (core.cube_uncertainty), when known.
+    fit_cov_xy: np.ndarray | None = field(default=None, repr=False)
+    position_cov_xy: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def sigma_mm(self) -> float:
-        """Radial 1-sigma of the centre (mm)."""
+        """Radial 1-sigma of the centre (mm), every known source."""
+        if self.position_cov_xy is not None:
+            return float(np.sqrt(max(np.trace(self.position_cov_xy), 0.0)))
         return float(np.hypot(*self.sigma_xy_mm))
+
+    @property
+    def position_sigma_xy_mm(self) -> tuple[float, float]:
+        """1-sigma along B's x and y, every known source."""
+        if self.position_cov_xy is None:
+            return self.sigma_xy_mm
+        d = np.sqrt(np.clip(np.diag(self.position_cov_xy), 0.0, None))
+        return float(d[0]), float(d[1])
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -269,7 +283,8 @@ class Cube:
             "yaw_S_deg": round(self.yaw_S_deg, 3),
             "yaw_B_deg": round(self.yaw_B_deg, 3),
             "sigma_mm": round(self.sigma_mm, 3),
-            "sigma_xy_B_mm": [round(v, 3) for v in self.sigma_xy_mm],
+            "sigma_xy_B_mm": [round(v, 3) for v in self.position_sigma_xy_mm],
+            "sigma_fit_xy_B_mm": [round(v, 3) for v in self.sigma_xy_mm],
             "sigma_yaw_deg": round(self.sigma_yaw_deg, 3),
             "rms_px": round(self.rms_px, 3),
             "area_px": self.area_px,
@@ -547,6 +562,7 @@ def _locate_one(
         bbox=(0, 0, 0, 0),
         notes=notes,
         outline_px=pts,
+        fit_cov_xy=cov[:2, :2],
     )
 
 

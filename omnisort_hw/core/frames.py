@@ -198,3 +198,12 @@ def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> np.ndarray:
     )
     trace = d[..., 0, 0] + d[..., 1, 1] + d[..., 2, 2]
     return np.degrees(np.arctan2(0.5 * np.linalg.norm(skew, axis=-1), 0.5 * (trace - 1.0)))
+
+
+def tangent_basis(rays: np.ndarray) -> np.ndarray:
+    """Two unit vectors perpendicular to each ray, (N, 2, 3)."""
+    helper = np.where(np.abs(rays[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(rays, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(rays, t1)
+    return np.stack([t1, t2], axis=1)

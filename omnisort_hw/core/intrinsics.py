@@ -81,6 +81,13 @@ class IntrinsicResult:
     corner_ids: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     refinement: dict[str, str] = field(default_factory=dict)
     corner_limit_px: float = 0.0
+    # The refined parameter vector (intrinsics first, then 6 per pose: rotation vector, mm),
+    # its covariance (sigma_px^2 (J^T J)^-1, poses included) and the radius scale of the
+    # polynomial's coefficients: what core.intrinsics_uncertainty propagates.
+    params: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
+    rho_scale: float = 0.0
+    n_intrinsic: int = 0
 
     def record(self) -> dict[str, Any]:
         """The calibration's record for camera.json (besides the model itself)."""
@@ -581,6 +588,10 @@ def _result(
         corners_px={v.name: v.pixels for v in views},
         corner_ids={v.name: v.ids for v in views},
         corner_limit_px=limit,
+        params=x.copy(),
+        covariance=cov,
+        rho_scale=prob.rho_scale,
+        n_intrinsic=prob.n_intr,
     )
 
 

@@ -411,6 +411,7 @@ def draw_top_view(
     labels: np.ndarray,
     segs: Sequence[Segment],
     calib: SystemCalibration,
+    point_colours: np.ndarray | None = None,
 ) -> np.ndarray:
     """Square panel: the points on the laser plane (L: x_l right, y_l up, as the image shows
     X and Y), grid and ticks in mm, the camera axis' foot at the origin, and each segment's
@@ -444,7 +445,8 @@ def draw_top_view(
             org = (round(pa[0]) - 18, size - margin // 3) if axis == 0 else (4, round(pa[1]) + 4)
             put_text(panel, f"{val:.0f}", org, _GREY, text)
     radius = max(1, size // 700)
-    draw_dots(panel, to_px(pts[ok]), _colours(labels[ok]), radius)
+    cols = _colours(labels[ok]) if point_colours is None else np.asarray(point_colours)[ok]
+    draw_dots(panel, to_px(pts[ok]), cols, radius)
     origin = np.round(to_px(np.zeros(2))[0]).astype(int)
     cv2.drawMarker(panel, (int(origin[0]), int(origin[1])), _WHITE, cv2.MARKER_CROSS, 14, 1)
     put_text(panel, "camera axis", (int(origin[0]) + 8, int(origin[1]) - 8), _WHITE, text)
@@ -474,10 +476,13 @@ def draw_map(
     segs: Sequence[Segment],
     calib: SystemCalibration,
     title: str = "",
+    sigma_mm: np.ndarray | None = None,
 ) -> np.ndarray:
     """The map's picture, the image's height: the image (its pixel coordinates kept) with the
     laser points, a square top view of the points on the laser plane, and a legend column;
-    points in a segment share its colour in both, grey ones are in none."""
+    points in a segment share its colour in both, grey ones are in none. With `sigma_mm`
+    (each point's sigma along the surface normal) a second top view colours the points by it
+    (blue 0 to red at its 95th percentile)."""
     left = image.copy() if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     labels = segment_labels(points_S, segs)
     thick = line_scale(left)
@@ -508,5 +513,14 @@ def draw_map(
     if finite.any():
         points_L[finite] = to_plane_frame(np.asarray(points_S, float)[finite], calib)
     top = draw_top_view(left.shape[0], points_L, labels, segs, calib)
+    panels = [left, top]
+    if sigma_mm is not None and np.isfinite(sigma_mm).any():
+        sig = np.asarray(sigma_mm, float)
+        hi = float(np.nanpercentile(sig, 95)) or 1.0
+        level = np.clip(np.nan_to_num(sig / hi) * 255, 0, 255).astype(np.uint8)
+        cols = cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_JET).reshape(-1, 3)
+        panels.append(draw_top_view(left.shape[0], points_L, labels, [], calib, cols))
+        lines.append((f"sigma along the surface normal: blue 0 .. red {hi:.2f} mm", None))
+        lines.append((f"median {float(np.nanmedian(sig)):.2f} mm", _GREY))
     legend = legend_panel(left.shape[0], lines, (), 0.45 * thick)
-    return np.concatenate([left, top, legend], axis=1)
+    return np.concatenate([*panels, legend], axis=1)

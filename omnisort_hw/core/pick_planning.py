@@ -27,6 +27,7 @@ import numpy as np
 
 from omnisort_hw.core.collision import Box, Capsule, CollisionError, FloorPlane, find_collision
 from omnisort_hw.core.cube_location import UNKNOWN, ColorTable, Cube, LocateSettings
+from omnisort_hw.core.cube_uncertainty import capture_refusal
 from omnisort_hw.core.frames import invert_pose
 from omnisort_hw.core.kinematics import URModel, forward, get_model, nearest_solution
 from omnisort_hw.core.motion import MotionLimits, Trajectory, plan_joint_move, plan_linear_move
@@ -111,6 +112,9 @@ class SortConfig:
     linear_accel_mm_s2: float = 1200.0
     collision_margin_mm: float = 10.0
     max_sigma_mm: float = 5.0
+    # How far off centre the open jaws still close on the cube (mm); None: half the stroke's
+    # excess over the cube, (gripper_stroke_mm - cube_size_mm) / 2.
+    capture_tolerance_mm: float | None = None
     floor_z_B_mm: float = 0.0
     region_S_mm: tuple[float, float, float, float] | None = None
     workspace_B_mm: tuple[float, float, float, float] | None = None
@@ -118,6 +122,11 @@ class SortConfig:
     bins: tuple[BinSpec, ...] = ()
     obstacles: tuple[ObstacleSpec, ...] = ()
     colors: ColorTable = field(default_factory=ColorTable.default)
+
+    def capture_tolerance(self) -> float:
+        if self.capture_tolerance_mm is not None:
+            return float(self.capture_tolerance_mm)
+        return max(0.5 * (self.gripper_stroke_mm - self.cube_size_mm), 0.0)
 
     def bin_for(self, color: str) -> BinSpec | None:
         return next((b for b in self.bins if b.color == color), None)
@@ -466,10 +475,13 @@ class Planner:
         if bin_ is None:
             plan.refused = f"no bin configured for colour {cube.color!r}"
             return plan
-        if not cube.sigma_mm <= cfg.max_sigma_mm:
-            plan.refused = (
-                f"location too uncertain ({cube.sigma_mm:.1f} mm > {cfg.max_sigma_mm:g} mm)"
-            )
+        fit_sigma = float(np.hypot(*cube.sigma_xy_mm))  # the outline fit's own: its quality
+        if not fit_sigma <= cfg.max_sigma_mm:
+            plan.refused = f"location too uncertain ({fit_sigma:.1f} mm > {cfg.max_sigma_mm:g} mm)"
+            return plan
+        uncertain = capture_refusal(cube, cfg.capture_tolerance())
+        if uncertain is not None:
+            plan.refused = uncertain
             return plan
         c = cube.center_B
         if cfg.workspace_B_mm is not None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -25,6 +25,14 @@ from omnisort_hw.core.intrinsics_report import (
     ReportFigures,
     build_report,
     log_report,
+)
+from omnisort_hw.core.intrinsics_uncertainty import (
+    cross_validate,
+    model_uncertainty,
+    projection_uncertainty,
+    same_board_views,
+    uncertainty_png,
+    unique_images,
 )
 from omnisort_hw.core.overlays import write_png
 from omnisort_hw.errors import InputError, MotionRefusedError
@@ -44,10 +52,17 @@ class IntrinsicCalibration:
     record: dict[str, Any]
     figures: ReportFigures
     picture: np.ndarray
+    uncertainty_picture: np.ndarray | None = None
 
     def write_report(self, camera_json: str | Path) -> Path:
-        """Write the report picture beside `camera_json` (atomically); its path."""
+        """Write the report picture (and the projection uncertainty's map, `*_uncertainty.png`)
+        beside `camera_json` (atomically); the report's path."""
         path = report_png_path(Path(camera_json))
+        if self.uncertainty_picture is not None:
+            write_png(
+                path.with_name(Path(camera_json).stem + "_uncertainty.png"),
+                self.uncertainty_picture,
+            )
         return write_png(path, self.picture)
 
 
@@ -173,10 +188,24 @@ def calibrate_intrinsics(
     refinement: str = "auto",
 ) -> IntrinsicCalibration:
     """Calibrate from (name, image) pairs; the record holds the board, the outer-band coverage
-    and the creation time; the report goes to the run log."""
+    and the creation time; the report goes to the run log. A view given twice (the same
+    pixels, or a board that did not move) is counted once, with a warning in the record; the
+    record holds the cross-validated error beside the in-sample RMS and the projection
+    uncertainty, and the model carries the intrinsics' covariance."""
+    images, repeats = unique_images(images)
     result = calibrate_images(
         images, board, degree=degree, on_detected=on_detected, log=log, refinement=refinement
     )
+    still = same_board_views(result)
+    if still:
+        again = {r["file"] for r in still}
+        images = [im for im in images if im[0] not in again]
+        result = calibrate_images(
+            images, board, degree=degree, on_detected=on_detected, log=log, refinement=refinement
+        )
+        repeats += still
+    unc = projection_uncertainty(result)
+    result.model = replace(result.model, uncertainty=model_uncertainty(result))
     figures, picture = build_report(result, images)
     log_report(log, figures, picture)
     record = {
@@ -188,11 +217,19 @@ def calibrate_intrinsics(
             "image_circle_radius_px": figures.circle_radius_px,
             "warning": figures.warning,
         },
+        "cross_validation": cross_validate(result, board.object_points()),
+        "projection_uncertainty": unc.record(),
+        "repeated_views": repeats,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }
+    if repeats:
+        record["repeated_views_warning"] = (
+            f"{len(repeats)} view(s) repeat another one and were counted once: "
+            + ", ".join(f"{Path(r['file']).name} = {Path(r['same_as']).name}" for r in repeats)
+        )
     log.scalar("calibration/intrinsics/rms_px", result.rms_px)
     log.text(
         "calibration/intrinsics/parameters",
         json.dumps({"model": result.model.to_dict(), "std": result.std}, indent=1, default=str),
     )
-    return IntrinsicCalibration(result, record, figures, picture)
+    return IntrinsicCalibration(result, record, figures, picture, uncertainty_png(unc))

@@ -15,6 +15,12 @@ import numpy as np
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_echoes import direct_hits, floor_echoes
 from omnisort_hw.core.laser_stripe import laser_stripe_points_stats, stripe_interior
+from omnisort_hw.core.map_uncertainty import (
+    PointSigmas,
+    point_sigmas,
+    sigma_colours,
+    stripe_pixel_sigma,
+)
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
 from omnisort_hw.core.overlays import draw_map, write_picture
 from omnisort_hw.pipeline.cell_acquisition import acquire
@@ -34,6 +40,7 @@ class LaserMap:
     segments: list[Segment]
     echoes: int = 0  # stripe points dropped as reflections (core.laser_echoes)
     ends: int = 0  # stripe points dropped at ends and kinks (core.laser_stripe.stripe_interior)
+    sigmas: PointSigmas | None = None  # each point's uncertainty (core.map_uncertainty)
 
     @property
     def finite_points_S(self) -> np.ndarray:
@@ -41,7 +48,8 @@ class LaserMap:
 
     def summary(self, with_points: bool = False) -> dict[str, Any]:
         """Counts and segments; `with_points` adds every point on the plane (S, 0.1 mm) and,
-        in the same order, its pixel (0.01 px)."""
+        in the same order, its pixel (0.01 px) and its standard deviations (0.01 mm) along
+        the surface normal, along the line and off the laser plane."""
         finite = np.all(np.isfinite(self.points_S), axis=1)
         out: dict[str, Any] = {
             "points": len(self.pixels),
@@ -50,9 +58,16 @@ class LaserMap:
             "stripe_ends_dropped": self.ends,
             "segments": [seg.summary() for seg in self.segments],
         }
+        if self.sigmas is not None:
+            out["sigma"] = self.sigmas.summary()
         if with_points:
             out["points_S"] = np.round(self.points_S[finite], 1).tolist()
             out["pixels"] = np.round(self.pixels[finite], 2).tolist()
+            if self.sigmas is not None:
+                sg = self.sigmas
+                out["sigma_normal_mm"] = np.round(sg.normal_mm[finite], 2).tolist()
+                out["sigma_along_mm"] = np.round(sg.along_mm[finite], 2).tolist()
+                out["sigma_off_plane_mm"] = np.round(sg.off_plane_mm[finite], 2).tolist()
         return out
 
 
@@ -63,6 +78,7 @@ def map_laser(
     log: RunLog = NullLog,
     floor_S: tuple[np.ndarray, float] | None = None,
     light_only: bool = False,
+    with_sigmas: bool = True,
 ) -> LaserMap:
     """The laser map of one laser-on image (or a capture's laser-light image; its size must
     match the camera model). Points at the stripe's ends and kinks, where the straight-stripe
@@ -70,7 +86,8 @@ def map_laser(
     direct hits of the laser (a reflection at the same bearing, weaker, at another range; with
     the floor known, `floor_S` = (unit normal up, k) of n . x = k in S, the floor's mirror image
     of a stripe point seen) are dropped. `light_only`: the image is a capture's laser light
-    alone (on minus off), whose centres are fitted on the red channel (`laser_stripe_points`)."""
+    alone (on minus off), whose centres are fitted on the red channel (`laser_stripe_points`).
+    `with_sigmas`: every point's uncertainty too (core.map_uncertainty)."""
     check_image_size(image, calib.model, source)
     pixels, stats = laser_stripe_points_stats(image, light_only=light_only)
     interior = stripe_interior(stats)
@@ -82,16 +99,26 @@ def map_laser(
         n, k = floor_S
         keep &= ~floor_echoes(points, calib.laser_normal, calib.laser_distance_mm, n, k, every)
     pixels, points = pixels[keep], points[keep]
+    sigmas = None
+    if with_sigmas:
+        chains = None if stats.chains is None else stats.chains[interior][keep]
+        sigmas = point_sigmas(pixels, calib, stripe_pixel_sigma(pixels, chains), points)
     result = LaserMap(
         pixels,
         points,
         segments(points, calib, pixels=pixels),
         int((~keep).sum()),
         int((~interior).sum()),
+        sigmas,
     )
     log.image("map/image", image)
     log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
-    log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))
+    if sigmas is None:
+        log.points3d("map/points_S", result.finite_points_S, color=(255, 0, 0))
+    else:
+        finite = np.all(np.isfinite(points), axis=1)
+        log.points3d("map/points_S", points[finite], color=sigma_colours(sigmas.normal_mm[finite]))
+        log.scalar("map/sigma_normal_mm_median", float(np.nanmedian(sigmas.normal_mm)))
     for i, seg in enumerate(result.segments):
         log.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
     return result
@@ -102,7 +129,10 @@ def map_overlay(
 ) -> np.ndarray:
     """The map's picture: the image with its laser points beside their top view on the laser
     plane (mm), segments in matching colours. Drawn only when asked: `map_laser` stays fast."""
-    return draw_map(image, laser_map.pixels, laser_map.points_S, laser_map.segments, calib, title)
+    sigma = None if laser_map.sigmas is None else laser_map.sigmas.normal_mm
+    return draw_map(
+        image, laser_map.pixels, laser_map.points_S, laser_map.segments, calib, title, sigma
+    )
 
 
 def floor_plane_S(

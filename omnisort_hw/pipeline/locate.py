@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.cube_location import Cube, LocateSettings, locate_cubes
+from omnisort_hw.core.cube_uncertainty import add_calibration_part, rotation_covariance
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
@@ -121,6 +122,11 @@ def locate_in_images(
         log.points2d(f"{prefix}/laser_image/stripe", px, color=(255, 0, 0), radius=1)
     settings = locate_settings_for(cfg, calib, robot_base)
     cubes, diag = locate_cubes(colour, calib.model, calib.R_SC, T_SB, cfg.colors, settings, lp)
+    p = calib.parameters()
+    angles = np.radians([p["cam_roll_deg"], p["cam_pitch_deg"], p["cam_yaw_deg"]])
+    size, floor_z = settings.cube_size_mm, settings.floor_z_B_mm
+    rot_cov = rotation_covariance(calib.covariance)
+    add_calibration_part(cubes, calib.R_SC, angles, T_SB, size, floor_z, rot_cov)
     log_cubes(log, prefix, cubes, diag)
     return cubes, diag
 

@@ -179,7 +179,7 @@ def test_reference_set_all_images_used_and_rms_below_030(
     )
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)["result"]
-    assert len(summary["images_used"]) == 9 and summary["images_rejected"] == []
+    assert summary["images_used"] == 9 and summary["images_rejected"] == []
     assert summary["rms_px"] <= 0.30
     model, meta = load_camera_json(out)
     assert meta["rms_px"] == summary["rms_px"]

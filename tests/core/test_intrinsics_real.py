@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from omnisort_hw.core.camera_io import load_camera_json
 from omnisort_hw.core.checkerboard import (
     BoardSpec,
     detect_board,
@@ -123,11 +124,26 @@ def test_the_saddle_check_tells_corners_from_square_middles(photos: list[Path]) 
 @pytest.mark.reference
 def test_fisheye2_all_images_used_and_rms_below_the_peer(cli_run: dict) -> None:
     s = cli_run["summary"]
-    assert len(s["images_used"]) == 16 and s["images_rejected"] == []
-    n = 48 * 16 - len(s["corners_rejected"])
-    # Few corners dropped (gross errors only), each with its reason.
-    assert len(s["corners_rejected"]) <= 0.03 * 48 * 16
-    assert all(c["reason"] and "file" in c and "corner" in c for c in s["corners_rejected"])
+    # Fisheye2_1 and Fisheye2_16 are the same file: counted once, and said so.
+    assert s["images_used"] == 15 and s["images_rejected"] == []
+    assert [(Path(r["file"]).name, Path(r["same_as"]).name) for r in s["repeated_views"]] == [
+        ("Fisheye2_16.jpg", "Fisheye2_1.jpg")
+    ]
+    assert "Fisheye2_16" in s["repeated_views_warning"]
+    # Held out, a view is fitted worse than in sample, and not by much (15 views).
+    cv = s["cross_validation"]
+    assert cv["in_sample_rms_px"] <= cv["rms_px"] < 1.5 * cv["in_sample_rms_px"]
+    unc = s["projection_uncertainty"]["median_px_at_angle_deg"]
+    assert 0 < unc["45"] < unc["80"]
+    picture = cv2.imread(str(cli_run["out"].with_name("camera_uncertainty.png")))
+    assert picture is not None and abs(picture.shape[0] - 480) <= 16
+    # Few corners dropped (gross errors only), each with its reason (in camera.json; the
+    # reply counts them).
+    _, meta = load_camera_json(cli_run["out"])
+    dropped = meta["corners_rejected"]
+    assert s["corners_rejected"] == len(dropped) <= 0.03 * 48 * 15
+    assert all(c["reason"] and "file" in c and "corner" in c for c in dropped)
+    n = 48 * 15 - len(dropped)
     # The RMS beats py-OCamCalib's by more than its own sampling noise (relative standard
     # deviation of an RMS over n corners in 2D: 1 / sqrt(2 n)).
     assert s["rms_px"] * (1 + 3 / np.sqrt(2 * n)) < PEER_RMS_PX

@@ -45,5 +45,9 @@ def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:
     cli = map_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
     assert cli["points_S"] == service["points_S"] and cli["pixels"] == service["pixels"]
     assert cli["segments"] == service["segments"]
+    # Every point with its sigmas, the same in both.
+    for key in ("sigma_normal_mm", "sigma_along_mm", "sigma_off_plane_mm"):
+        assert cli[key] == service[key] and len(cli[key]) == len(cli["points_S"])
+    assert min(cli["sigma_normal_mm"]) >= 0 and max(cli["sigma_normal_mm"]) > 0
     # Not a vacuous agreement: a real map of this scene.
     assert cli["points_on_plane"] > 50 and len(cli["segments"]) >= 3

@@ -38,12 +38,12 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.extrinsics.covariance import fit_covariance
 from omnisort_hw.core.extrinsics.joint_three_sided import calibrate_three_sided
 from omnisort_hw.core.extrinsics.joint_weighted import (
     LineStore,
     _outcome,
     _refine,
-    _tangent_basis,
     _WeightedProblem,
 )
 from omnisort_hw.core.extrinsics.system_calibration import (
@@ -61,6 +61,7 @@ from omnisort_hw.core.frames import (
     laser_normal,
     nearest_rotation,
     rays_to_plane,
+    tangent_basis,
 )
 from omnisort_hw.core.target_layout import TargetLayout, image_centroid_shift, side_marker_centres
 from omnisort_hw.errors import CalibrationError
@@ -206,7 +207,7 @@ class JointProblem(_WeightedProblem):
         self.marker_right = np.array([side == "right" for side, _ in self.marker_keys])
         self.marker_far = np.array([name.endswith("far") for _, name in self.marker_keys])
         self.marker_top = np.array([name.startswith("border") for _, name in self.marker_keys])
-        self.marker_basis = _tangent_basis(self.marker_rays)
+        self.marker_basis = tangent_basis(self.marker_rays)
         self.marker_scale = np.array([obs.scale_markers[k] for k in self.marker_keys])
         # With a measured layout: each marker's (along, height above the left border) and the
         # right border's height above the left one; the unknowns are then the left wall's X,
@@ -402,6 +403,7 @@ def calibrate_joint(
         },
         residuals={**residuals, "floor_lines": floor_note},
         std=calib_std,
+        covariance=fit_covariance(prob, sol, model).to_json(),
     )
     calib.elapsed_s = time.perf_counter() - t0
     return calib

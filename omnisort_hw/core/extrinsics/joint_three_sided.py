@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.extrinsics.covariance import fit_covariance
 from omnisort_hw.core.extrinsics.joint_weighted import (
     LineStore,
     _outcome,
@@ -146,6 +147,7 @@ def calibrate_three_sided(
         },
         residuals=residuals,
         std={**calib_std, "far_wall_y_mm": float(std[8])},
+        covariance=fit_covariance(prob, sol, model).to_json(),
     )
     calib.elapsed_s = time.perf_counter() - t0
     return calib

@@ -53,15 +53,6 @@ def line_inflation(blocks: dict[str, np.ndarray], rays: dict[str, np.ndarray]) -
     return {k: sum(f * n for f, n in v) / sum(n for _, n in v) for k, v in acc.items()}
 
 
-def _tangent_basis(rays: np.ndarray) -> np.ndarray:
-    """Two unit vectors perpendicular to each ray, (N, 2, 3)."""
-    helper = np.where(np.abs(rays[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(rays, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(rays, t1)
-    return np.stack([t1, t2], axis=1)
-
-
 # Block name -> (the dict holding its rays, the dict holding their pixel scales, its key).
 LineStore = dict[str, tuple[dict[str, np.ndarray], dict[str, np.ndarray], str]]
 

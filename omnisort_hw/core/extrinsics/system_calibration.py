@@ -39,6 +39,9 @@ class SystemCalibration:
     robot_base: dict[str, Any] | None = None
     image: dict[str, Any] | None = None
     elapsed_s: float = 0.0
+    # The six parameters' covariance as system.json stores it (core.extrinsics.covariance);
+    # None for methods that do not give one.
+    covariance: dict[str, Any] | None = None
 
     @classmethod
     def from_angles(
@@ -93,6 +96,8 @@ class SystemCalibration:
             out["robot_base"] = self.robot_base
         if self.image is not None:
             out["image"] = self.image
+        if self.covariance is not None:
+            out["covariance"] = self.covariance
         return out
 
     @classmethod
@@ -132,6 +137,7 @@ class SystemCalibration:
             std=dict(data.get("std", {})),
             robot_base=data.get("robot_base"),
             image=data.get("image"),
+            covariance=data.get("covariance"),
         )
 
 
