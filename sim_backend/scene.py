@@ -16,7 +16,6 @@ the checks that name a bad field by its dotted path.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 import types
 import typing
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from typing import Any, get_args, get_origin
 
 import numpy as np
 
+from omnisort_hw.config.toml_file import read_toml
 from omnisort_hw.errors import ConfigError
 
 SCENES_DIR = Path(__file__).resolve().parent / "scenes"
@@ -683,13 +683,7 @@ def load_scene(path: str | Path) -> Scene:
     p = Path(path)
     if not p.exists() and not p.suffix and (SCENES_DIR / f"{p.name}.toml").exists():
         p = SCENES_DIR / f"{p.name}.toml"
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"scene file {p} not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"scene {p}: not valid TOML ({exc})") from None
-    return scene_from_dict(data, p.parent, str(p))
+    return scene_from_dict(read_toml(p, "scene file"), p.parent, str(p))
 
 
 def sized(scene: Scene, width: int | None, height: int | None = None) -> Scene:

@@ -15,7 +15,6 @@ starts the service from /).
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +31,7 @@ from omnisort_hw.config.sorting import (
 )
 from omnisort_hw.config.storage import StorageConfig
 from omnisort_hw.config.target import TARGETS, separation_problem
+from omnisort_hw.config.toml_file import read_toml
 from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
 from omnisort_hw.errors import ConfigError
 
@@ -128,14 +128,7 @@ class CellConfig:
 def load_cell_config(path: str | Path) -> CellConfig:
     """Read and validate the cell file; ConfigError names the file and the key."""
     p = Path(path)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: cell configuration file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: cannot be read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    doc = read_toml(p, "cell configuration file")
     try:
         return CellConfig.from_mapping(doc, p.resolve())
     except ConfigError as exc:

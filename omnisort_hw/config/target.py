@@ -11,10 +11,10 @@ implausible field is a ConfigError naming the file and the field.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.config.toml_file import read_toml
 from omnisort_hw.core.features import MARKER_NAMES
 from omnisort_hw.core.target_layout import MarkerSpec, TargetLayout, WallSpec
 from omnisort_hw.errors import ConfigError
@@ -132,16 +132,7 @@ def _parse(doc: dict[str, Any], source: str) -> TargetLayout:
 
 def load_target_description(path: str | Path) -> TargetLayout:
     """Read and check a target description file (TOML, `deploy/target.example.toml`)."""
-    p = Path(path)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: target description not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: cannot read the target description ({exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
-    return parse_target_description(doc, str(p))
+    return parse_target_description(read_toml(path, "target description"), str(path))
 
 
 def target_description_toml(layout: TargetLayout, header: str = "") -> str:
