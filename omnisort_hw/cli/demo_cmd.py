@@ -24,12 +24,6 @@ from omnisort_hw.cli.arg_types import output_folder
 
 def register(sub: Any) -> None:
     demo = sub.add_parser("demo", help="run the simulated cell end to end")
-    demo.add_argument(
-        "--shared",
-        type=Path,
-        default=Path("../shared"),
-        help="folder with reference/ (third-party images), if present",
-    )
     demo.add_argument("--out", type=output_folder, default=Path("build/demo"))
     demo.add_argument("--seed", type=int, default=7)
     demo.add_argument("--width", type=int, default=960, help="simulated cell camera size (step 4)")
