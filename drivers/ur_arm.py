@@ -470,12 +470,15 @@ class URArm(Arm):
             if self._stop_requested.is_set():
                 raise DeviceError(f"{self.name}: {what} interrupted by stop()", device=cfg.host)
             if not self._link.is_moving():
+                rest = self._at_rest()  # read before the position: once at rest, it stays
                 err = error_fn()
-                if err <= tolerance:
+                if rest and err <= tolerance:
                     return
                 now = time.monotonic()
                 idle_since = idle_since if idle_since is not None else now
-                if now - idle_since > 0.5:
+                # a pendant stop is judged after 0.5 s; the state stream is never older
+                # than state_timeout_s (refused as stale), so its lag cannot pass for a stop
+                if now - idle_since > 0.5 + cfg.state_timeout_s:
                     raise DeviceError(
                         f"{self.name}: {what} ended {err:.2f} {unit} from the target (stopped "
                         "from the pendant or by another client?)",
@@ -491,6 +494,15 @@ class URArm(Arm):
                     device=cfg.host,
                 )
             time.sleep(cfg.poll_period_s)
+
+    def _at_rest(self) -> bool:
+        """The state stream shows the joints at rest: slower than one arrival tolerance per
+        second. The motion's end is read from the control stream and the position from the
+        receive stream; under load the receive stream can lag a few packages behind, and a
+        position read from it mid-braking is not where the arm ends."""
+        with self._lock:
+            qd = np.rad2deg(np.asarray(self._ready_link().actual_qd(), dtype=float))
+        return float(np.max(np.abs(qd))) <= self.config.joint_tolerance_deg
 
     def _stop_now(self) -> None:
         decel = float(np.deg2rad(self.config.stop_decel_deg_s2))

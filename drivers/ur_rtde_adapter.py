@@ -46,6 +46,9 @@ class URLink(Protocol):
     def actual_q(self) -> list[float]:
         """Joint positions, rad."""
 
+    def actual_qd(self) -> list[float]:
+        """Joint speeds, rad/s (from the same state stream as `actual_q`)."""
+
     def actual_tcp_pose(self) -> list[float]:
         """TCP pose [x, y, z m, rx, ry, rz rad rotation vector] in the base frame."""
 
@@ -170,6 +173,9 @@ class RTDELink:
 
     def actual_q(self) -> list[float]:
         return list(self._call("actual_q"))
+
+    def actual_qd(self) -> list[float]:
+        return list(self._call("actual_qd"))
 
     def actual_tcp_pose(self) -> list[float]:
         return list(self._call("actual_tcp_pose"))

@@ -100,6 +100,8 @@ class _Session:
         self.fresh()
         if name == "actual_q":
             return list(rcv.getActualQ())
+        if name == "actual_qd":
+            return list(rcv.getActualQd())
         if name == "actual_tcp_pose":
             return list(rcv.getActualTCPPose())
         if name == "modes":

@@ -94,6 +94,10 @@ class RecordingURLink:
         self._need()
         return list(self.q)
 
+    def actual_qd(self) -> list[float]:
+        self._need()
+        return [0.1 if self._moving > 0 else 0.0] * 6
+
     def actual_tcp_pose(self) -> list[float]:
         self._need()
         return list(self.pose)
