@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Literal
 
 import cv2
 import numpy as np
@@ -296,33 +297,49 @@ def _checker_problem(gray: np.ndarray, corners: np.ndarray, cols: int, rows: int
     return None
 
 
+Detector = Literal["any", "quick", "sb"]
+
+
+def _resized(gray: np.ndarray, s: float) -> np.ndarray:
+    interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
+    return gray if s == 1.0 else cv2.resize(gray, None, fx=s, fy=s, interpolation=interp)
+
+
 def _candidates(
-    gray: np.ndarray, cols: int, rows: int, dense: bool = False
+    gray: np.ndarray, cols: int, rows: int, dense: bool = False, detector: Detector = "any"
 ) -> Iterator[tuple[np.ndarray, float]]:
-    """Candidate grids (full-resolution pixel coordinates, scale) in the order to try."""
+    """Candidate grids (full-resolution pixel coordinates, scale) in the order to try: the
+    classic detector over the scale ladder, then the sector-based one at the two finest
+    scales ("any"); only the classic one behind OpenCV's fast check ("quick": a search
+    over many views, most of them without a board); only the sector-based one ("sb")."""
     scales = detection_scales((gray.shape[1], gray.shape[0]), (cols, rows), dense)
-    resized = {}
-    for s in scales:
-        interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
-        resized[s] = gray if s == 1.0 else cv2.resize(gray, None, fx=s, fy=s, interpolation=interp)
-        ok, pts = cv2.findChessboardCorners(resized[s], (cols, rows), flags=_CLASSIC_FLAGS)
-        if ok:
-            yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
+    if detector != "sb":
+        flags = _CLASSIC_FLAGS | (cv2.CALIB_CB_FAST_CHECK if detector == "quick" else 0)
+        for s in scales:
+            ok, pts = cv2.findChessboardCorners(_resized(gray, s), (cols, rows), flags=flags)
+            if ok:
+                yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
+    if detector == "quick":
+        return
     for s in scales[:2]:
-        ok, pts = cv2.findChessboardCornersSB(resized[s], (cols, rows), flags=_SB_FLAGS)
+        ok, pts = cv2.findChessboardCornersSB(_resized(gray, s), (cols, rows), flags=_SB_FLAGS)
         if ok:
             yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
 
 
 def detect_board(
-    image: np.ndarray, board: tuple[int, int] | BoardSpec, dense: bool = False
+    image: np.ndarray,
+    board: tuple[int, int] | BoardSpec,
+    dense: bool = False,
+    detector: Detector = "any",
 ) -> BoardDetection:
     """The full board's corners with per-corner checks, or FeatureNotFoundError (the reason
-    names the last check that failed). `dense` searches the denser scale ladder (calibration)."""
+    names the last check that failed). `dense` searches the denser scale ladder (calibration);
+    `detector` picks the detectors tried (see `_candidates`)."""
     cols, rows = board.size if isinstance(board, BoardSpec) else board
     gray = to_gray(image)
     reason = "the detector found no grid at any scale"
-    for found, scale in _candidates(gray, cols, rows, dense):
+    for found, scale in _candidates(gray, cols, rows, dense, detector):
         problem = grid_problem(found, cols, rows) or _checker_problem(gray, found, cols, rows)
         if problem is not None:
             reason = problem
@@ -365,6 +382,8 @@ def _refined(
     return BoardDetection(corners, rejected, scale)
 
 
-def detect_corners(image: np.ndarray, board: tuple[int, int] | BoardSpec) -> np.ndarray:
+def detect_corners(
+    image: np.ndarray, board: tuple[int, int] | BoardSpec, detector: Detector = "any"
+) -> np.ndarray:
     """Inner corners of the full board, (cols*rows, 2) float pixels, or FeatureNotFoundError."""
-    return detect_board(image, board).corners
+    return detect_board(image, board, detector=detector).corners

@@ -167,18 +167,26 @@ def _detect(
     board_px = (max(board.cols, board.rows) + 3) * board.square_mm * f / camera_height_mm
     tile = int(min(2 * half, max(640, 2.2 * board_px)))
     overlap = int(min(tile - 1, 1.2 * board_px))
+    views = [TopView(f, (-x0, -y0), (tile, tile)) for x0, y0 in _tiles(half, tile, overlap)]
+    subs: dict[int, np.ndarray] = {}
     found: np.ndarray | None = None
-    for x0, y0 in _tiles(half, tile, overlap):
-        view = TopView(f, (-x0, -y0), (tile, tile))
-        sub = view.render(gray, model, R_SC)
-        if float(np.std(sub)) < 5.0:
-            continue
-        try:
-            corners_v = detect_corners(sub, board)
-        except FeatureNotFoundError:
-            continue
-        found = model.ray_to_pixel(view.rays_S(corners_v) @ R_SC)
-        break
+    # Most tiles hold no board: the quick classic pass over all of them first, and the
+    # sector-based detector (slower, surer on blurred squares) only if it found nothing.
+    for detector in ("quick", "sb"):
+        for i, view in enumerate(views):
+            if i not in subs:
+                subs[i] = view.render(gray, model, R_SC)
+            sub = subs[i]
+            if float(np.std(sub)) < 5.0:
+                continue
+            try:
+                corners_v = detect_corners(sub, board, detector=detector)
+            except FeatureNotFoundError:
+                continue
+            found = model.ray_to_pixel(view.rays_S(corners_v) @ R_SC)
+            break
+        if found is not None:
+            break
     if found is None:
         raise FeatureNotFoundError(
             f"floor board: no complete {board.cols}x{board.rows} checkerboard found on the floor "
