@@ -300,11 +300,6 @@ def _checker_problem(gray: np.ndarray, corners: np.ndarray, cols: int, rows: int
 Detector = Literal["any", "quick", "sb"]
 
 
-def _resized(gray: np.ndarray, s: float) -> np.ndarray:
-    interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
-    return gray if s == 1.0 else cv2.resize(gray, None, fx=s, fy=s, interpolation=interp)
-
-
 def _candidates(
     gray: np.ndarray, cols: int, rows: int, dense: bool = False, detector: Detector = "any"
 ) -> Iterator[tuple[np.ndarray, float]]:
@@ -313,16 +308,26 @@ def _candidates(
     scales ("any"); only the classic one behind OpenCV's fast check ("quick": a search
     over many views, most of them without a board); only the sector-based one ("sb")."""
     scales = detection_scales((gray.shape[1], gray.shape[0]), (cols, rows), dense)
+    resized: dict[float, np.ndarray] = {}
+
+    def at(s: float) -> np.ndarray:  # each scale resized once, for both detectors
+        if s not in resized:
+            interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
+            resized[s] = (
+                gray if s == 1.0 else cv2.resize(gray, None, fx=s, fy=s, interpolation=interp)
+            )
+        return resized[s]
+
     if detector != "sb":
         flags = _CLASSIC_FLAGS | (cv2.CALIB_CB_FAST_CHECK if detector == "quick" else 0)
         for s in scales:
-            ok, pts = cv2.findChessboardCorners(_resized(gray, s), (cols, rows), flags=flags)
+            ok, pts = cv2.findChessboardCorners(at(s), (cols, rows), flags=flags)
             if ok:
                 yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
     if detector == "quick":
         return
     for s in scales[:2]:
-        ok, pts = cv2.findChessboardCornersSB(_resized(gray, s), (cols, rows), flags=_SB_FLAGS)
+        ok, pts = cv2.findChessboardCornersSB(at(s), (cols, rows), flags=_SB_FLAGS)
         if ok:
             yield (pts.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, s
 

@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from scipy.special import erf
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.checkerboard import BoardSpec, detect_corners, to_gray
+from omnisort_hw.core.checkerboard import BoardSpec, Detector, detect_corners, to_gray
 from omnisort_hw.core.extrinsics.method2 import board_pose
 from omnisort_hw.core.frames import invert_pose, rot_z, rpy_deg, rpy_matrix
 from omnisort_hw.errors import CalibrationError, FeatureNotFoundError, InputError
@@ -168,25 +168,28 @@ def _detect(
     tile = int(min(2 * half, max(640, 2.2 * board_px)))
     overlap = int(min(tile - 1, 1.2 * board_px))
     views = [TopView(f, (-x0, -y0), (tile, tile)) for x0, y0 in _tiles(half, tile, overlap)]
-    subs: dict[int, np.ndarray] = {}
-    found: np.ndarray | None = None
-    # Most tiles hold no board: the quick classic pass over all of them first, and the
-    # sector-based detector (slower, surer on blurred squares) only if it found nothing.
-    for detector in ("quick", "sb"):
+    rendered: dict[int, np.ndarray | None] = {}  # None: a flat tile, nothing to detect
+
+    def search(detector: Detector) -> np.ndarray | None:
         for i, view in enumerate(views):
-            if i not in subs:
-                subs[i] = view.render(gray, model, R_SC)
-            sub = subs[i]
-            if float(np.std(sub)) < 5.0:
+            if i not in rendered:
+                sub = view.render(gray, model, R_SC)
+                rendered[i] = sub if float(np.std(sub)) >= 5.0 else None
+            sub_or_none = rendered[i]
+            if sub_or_none is None:
                 continue
             try:
-                corners_v = detect_corners(sub, board, detector=detector)
+                corners_v = detect_corners(sub_or_none, board, detector=detector)
             except FeatureNotFoundError:
                 continue
-            found = model.ray_to_pixel(view.rays_S(corners_v) @ R_SC)
-            break
-        if found is not None:
-            break
+            return model.ray_to_pixel(view.rays_S(corners_v) @ R_SC)
+        return None
+
+    # Most tiles hold no board: the quick classic pass over all of them first, and the
+    # sector-based detector (slower, surer on blurred squares) only if it found nothing.
+    found = search("quick")
+    if found is None:
+        found = search("sb")
     if found is None:
         raise FeatureNotFoundError(
             f"floor board: no complete {board.cols}x{board.rows} checkerboard found on the floor "

@@ -14,6 +14,7 @@ import pytest
 from drivers.errors import DeviceDisconnectedError, DeviceTimeoutError, SafetyStopError
 from drivers.ur_arm import URArm, URArmConfig
 from tests.drivers.contract import ArmContract
+from tests.sim.ur_rtde_client import wait_until
 from tests.sim.virtual_cell_fixture import virtual_cell
 
 pytest.importorskip("rtde_control", reason="needs ur-rtde")
@@ -63,16 +64,6 @@ def _move_in_thread(fn) -> tuple[threading.Thread, dict]:
     return thread, box
 
 
-def _wait_for(condition, timeout_s: float = 10.0) -> bool:
-    """Poll a condition on the state stream until it holds or the bound passes."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() >= deadline:
-            return False
-        time.sleep(0.02)
-    return True
-
-
 def test_protective_stop_during_a_move_is_safety_stop_and_nothing_is_resent(vc) -> None:
     with make_arm(vc.host) as arm:
         start = arm.joint_positions()
@@ -83,7 +74,9 @@ def test_protective_stop_during_a_move_is_safety_stop_and_nothing_is_resent(vc) 
         thread.join(10.0)
         assert isinstance(box.get("error"), SafetyStopError), box
         assert box["error"].kind == "protective" and box["error"].code == "safety_stop"
-        assert _wait_for(lambda: not vc.control("status")["moving"]), "still braking"
+        assert wait_until(lambda: not vc.control("status")["moving"], timeout_s=10.0), (
+            "still braking"
+        )
         stopped = vc.control("status")  # the controller braked to rest
         assert stopped["safety_mode"] == "PROTECTIVE_STOP" and not stopped["moving"]
         with pytest.raises(SafetyStopError):
@@ -153,7 +146,9 @@ def test_emergency_stop_then_power_on_and_brake_release(vc) -> None:
         assert box["error"].kind == "emergency"
         vc.control("release_emergency_stop")
         # the next RTDE package carries it; the bound is generous for a loaded machine
-        assert _wait_for(lambda: not arm.safety_status().emergency_stop), "e-stop still set"
+        assert wait_until(lambda: not arm.safety_status().emergency_stop, timeout_s=10.0), (
+            "e-stop still set"
+        )
         with pytest.raises(DeviceNotReadyError):
             arm.move_joints(start)
         assert vc.dashboard("power on", "brake release", "robotmode") == [
@@ -161,7 +156,9 @@ def test_emergency_stop_then_power_on_and_brake_release(vc) -> None:
             "Brake releasing",
             "Robotmode: RUNNING",
         ]
-        assert _wait_for(lambda: arm.safety_status().robot_mode == "RUNNING"), "not RUNNING"
+        assert wait_until(lambda: arm.safety_status().robot_mode == "RUNNING", timeout_s=10.0), (
+            "not RUNNING"
+        )
         arm.move_joints(start)
         np.testing.assert_allclose(arm.joint_positions(), start, atol=0.01)
 
