@@ -9,8 +9,10 @@ Fresh frames (V4L2): the driver asks for one kernel buffer (`CAP_PROP_BUFFERSIZE
 driver may keep a few more) and then grabs and discards frames until one carries a kernel
 timestamp (`CAP_PROP_POS_MSEC`, CLOCK_MONOTONIC for UVC) later than the moment `grab()` was
 called plus the exposure time, i.e. a frame whose exposure began after the call. When the
-timestamps are not on the monotonic clock it falls back to discarding frames that were already
-queued (a grab that returns in less than half a frame period). After an exposure or gain
+timestamps are not on the monotonic clock it counts instead of timing: it discards as many
+frames as the kernel can hold (`buffer_size`, or the larger count the driver reports), plus one
+per frame period of exposure, so the frame it keeps was taken into a buffer queued after the
+call; a dequeue's duration proves nothing on a loaded machine. After an exposure or gain
 change the next `settle_frames` frames are discarded too. File sources return the next frame.
 Streams carry no capture time: a reader thread keeps reading and stamps each frame on arrival,
 and `grab()` returns the first frame that arrived one frame period after the call.
@@ -28,6 +30,7 @@ controls, fresh frames, serial numbers); the fresh-frame rule needs all of them.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import threading
 import time
@@ -482,19 +485,16 @@ class V4L2Camera(Camera):
             self._sequence += 1
             return frame
 
-    def _grab_once(self, deadline: float) -> float:
-        """`cap.grab()` within the deadline; returns the seconds it blocked."""
+    def _grab_once(self, deadline: float) -> None:
+        """`cap.grab()` within the deadline."""
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             raise DeviceTimeoutError(
                 f"{self.name}: no fresh frame within the timeout", device=self.config.device
             )
-        cap = self._cap
-        t0 = time.monotonic()
-        ok = self._blocking(cap.grab, remaining, "frame")
+        ok = self._blocking(self._cap.grab, remaining, "frame")
         if not ok:
             raise self._mark_lost("grab failed")
-        return time.monotonic() - t0
 
     def _retrieve(self) -> np.ndarray:
         ok, image = self._cap.retrieve()
@@ -515,21 +515,32 @@ class V4L2Camera(Camera):
             self._resolution = (image.shape[1], image.shape[0])
         return image, stamp
 
+    def _queued_max(self) -> int:
+        """The most frames the kernel can hold for us: the buffers asked for or, when the driver
+        allocated more, the count OpenCV reports back (capped at V4L2's usual 32)."""
+        reported = int(self._cap.get(cv2.CAP_PROP_BUFFERSIZE) or 0)
+        return min(max(self.config.buffer_size, reported), 32)
+
     def _grab_fresh(self, t_call: float, deadline: float) -> tuple[np.ndarray, float]:
         cfg = self.config
         not_before = t_call + self._exposure_ms / 1000.0
-        half_period = 0.5 / cfg.fps
-        for _ in range(cfg.buffer_size + self._discard + 6):
-            blocked = self._grab_once(deadline)
+        # Without monotonic stamps, freshness is counted, never timed: at most `queued` buffers
+        # were filled before the call, so the dequeue after them returns a buffer queued after
+        # it, and each exposure period that may have begun before that adds one more.
+        queued = self._queued_max() + math.ceil(self._exposure_ms / 1000.0 * cfg.fps)
+        dequeued = 0
+        for _ in range(queued + self._discard + 6):
+            self._grab_once(deadline)
             kernel_ts = self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
             now = time.monotonic()
             on_monotonic = 0.0 < kernel_ts <= now + 0.01 and now - kernel_ts < 5.0
+            dequeued += 1
             if self._discard > 0:
                 self._discard -= 1
                 continue
             if on_monotonic and kernel_ts >= not_before:
                 return self._retrieve(), kernel_ts
-            if not on_monotonic and blocked >= half_period:
+            if not on_monotonic and dequeued > queued:
                 return self._retrieve(), now
         raise DeviceTimeoutError(
             f"{self.name}: only stale frames within the timeout", device=cfg.device
