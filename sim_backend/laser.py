@@ -2,15 +2,17 @@
 
 The emitter sits at E = (0, 0, -d). A point is lit when nothing lies between E and it:
 `LaserFan` casts a fan of rays in the plane (pybullet `rayTestBatch` on the collision shapes)
-and keeps the first hit distance per direction; a stripe sample is lit when its in-plane range
-does not exceed that distance. The polylines intersect the plane with every known planar face
-analytically and keep the parts the camera sees and the laser reaches.
+and keeps the first hit distance per direction, in a few sheets parallel to the plane across the
+light's thickness; a stripe sample is lit when its range within its own sheet does not exceed
+that sheet's distance (interpolated between the cast sheets). The polylines intersect the plane
+with every known planar face analytically and keep the parts the camera sees and the laser
+reaches.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -23,6 +25,7 @@ MM = 1e-3
 HALL_RADIUS_MM = 9000.0
 FAN_RAYS = 14400
 FAN_RANGE_MM = 15000.0
+FAN_SHEETS = 5  # sheets across the light's thickness (their ranges are interpolated)
 _BATCH = 1000  # rays per pybullet call: each holds the GIL ~3 ms (8000: 20-40 ms)
 
 
@@ -77,25 +80,35 @@ def ray_hits(
 
 @dataclass(frozen=True)
 class LaserFan:
-    """First-hit range (mm) of the laser light per direction in the plane (FAN_RAYS bins)."""
+    """First-hit range (mm) of the laser light per direction (FAN_RAYS bins) in the plane and in
+    the sheets parallel to it at `offsets` (mm): the light off the plane travels in its own
+    sheet, so a grazing surface (the floor) is reached at a range that changes with the offset,
+    and judging an off-plane point by the plane's own range would shadow half of its band."""
 
     plane: LaserPlane
-    ranges: np.ndarray
+    ranges: np.ndarray  # (len(offsets), FAN_RAYS)
+    offsets: np.ndarray = field(default_factory=lambda: np.zeros(1))
 
     @classmethod
-    def compute(cls, world: SimWorld, plane: LaserPlane) -> LaserFan:
-        """Cast the fan in `world` (collision shapes; the emitter housing has none)."""
+    def compute(cls, world: SimWorld, plane: LaserPlane, half_width_mm: float = 0.0) -> LaserFan:
+        """Cast the fan in `world` (collision shapes; the emitter housing has none), in
+        FAN_SHEETS sheets across +-`half_width_mm` (one sheet, the plane, when 0)."""
         phi = np.arange(FAN_RAYS) * (2.0 * np.pi / FAN_RAYS)
         e1, e2 = plane.basis
         dirs = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
-        start = plane.emitter + dirs * 1.0
-        end = plane.emitter + dirs * FAN_RANGE_MM
-        ids, frac = ray_hits(world.client, start, end)
-        ranges = np.where(ids >= 0, 1.0 + frac * (FAN_RANGE_MM - 1.0), np.inf)
-        return cls(plane, ranges)
+        offsets = np.linspace(-half_width_mm, half_width_mm, FAN_SHEETS if half_width_mm else 1)
+        ranges = np.empty((len(offsets), FAN_RAYS))
+        for j, off in enumerate(offsets):
+            emitter = plane.emitter + off * plane.normal
+            ids, frac = ray_hits(world.client, emitter + dirs * 1.0, emitter + dirs * FAN_RANGE_MM)
+            ranges[j] = np.where(ids >= 0, 1.0 + frac * (FAN_RANGE_MM - 1.0), np.inf)
+        return cls(plane, ranges, offsets)
 
     def lit(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(lit flags, range from the emitter in mm) of points near the plane."""
+        """(lit flags, range from the emitter in mm) of points near the plane: each point's
+        range within its own sheet against that sheet's reach, interpolated between the two
+        nearest cast sheets (exact on a planar surface, whose range is linear in the offset)."""
+        off = pts @ self.plane.normal + self.plane.offset
         rel = pts - self.plane.emitter
         rel = rel - np.outer(rel @ self.plane.normal, self.plane.normal)
         e1, e2 = self.plane.basis
@@ -103,9 +116,22 @@ class LaserFan:
         rng = np.linalg.norm(rel, axis=1)
         k = np.rint(phi / (2.0 * np.pi) * FAN_RAYS).astype(np.int64) % FAN_RAYS
         # Neighbouring bins guard against the quantisation of directions at grazing surfaces.
-        reach = np.maximum.reduce(
-            [self.ranges[k], self.ranges[(k + 1) % FAN_RAYS], self.ranges[(k - 1) % FAN_RAYS]]
-        )
+        r = self.ranges
+        reach_all = np.maximum.reduce([r[:, k], r[:, (k + 1) % FAN_RAYS], r[:, (k - 1) % FAN_RAYS]])
+        if len(self.offsets) == 1:
+            reach = reach_all[0]
+        else:
+            step = self.offsets[1] - self.offsets[0]
+            x = np.clip((off - self.offsets[0]) / step, 0.0, len(self.offsets) - 1.0)
+            i0 = np.minimum(x.astype(np.int64), len(self.offsets) - 2)
+            f = x - i0
+            cols = np.arange(len(pts))
+            r0, r1 = reach_all[i0, cols], reach_all[i0 + 1, cols]
+            with np.errstate(invalid="ignore"):
+                lerp = r0 + f * (r1 - r0)
+            # Where one sheet escapes (no hit), the light between them is not stopped earlier
+            # than the nearer sheet's hit: take the farther reach.
+            reach = np.where(np.isfinite(r0) & np.isfinite(r1), lerp, np.maximum(r0, r1))
         tol = 2.0 + rng * (2.0 * np.pi / FAN_RAYS) * 2.0
         return rng <= reach + tol, rng
 

@@ -22,6 +22,8 @@ from sim_backend.fisheye_atlas import Atlas, remap_flat
 from sim_backend.laser import HALL_RADIUS_MM, LaserFan, LaserPlane
 from sim_backend.world import AnalyticBox, AnalyticCylinder, Panel, SimWorld
 
+_BAND_SIGMAS = 5.0  # the stripe's Gaussian is drawn (and its shadows cast) out to this many sigma
+
 
 @dataclass
 class Hits:
@@ -107,9 +109,11 @@ class Shader:
         self.hall = np.asarray(ren.hall_color.rgb, np.float32)
         self.sky = np.asarray(ren.sky_color.rgb, np.float32)
         self.plane = LaserPlane(world.laser_normal, world.laser_distance)
-        self.fan = LaserFan.compute(world, self.plane) if laser_on else None
         las = scene.laser
         self.sigma = las.width_mm / (2.0 * np.sqrt(2.0 * np.log(2.0)))
+        self.fan = (
+            LaserFan.compute(world, self.plane, _BAND_SIGMAS * self.sigma) if laser_on else None
+        )
         self.no_laser = np.array(sorted(world.info.no_laser), np.int64)
         boxes = world.analytic_boxes()
         self.static = [self._tables(b) for b in boxes if not b.dynamic]
@@ -371,7 +375,7 @@ class Shader:
             s = hits.t * (rays @ self.plane.normal.astype(np.float32)) + np.float32(
                 self.plane.offset
             )
-        near = np.abs(s) < 5.0 * self.sigma
+        near = np.abs(s) < _BAND_SIGMAS * self.sigma
         if self.no_laser.size:
             near &= ~np.isin(hits.body, self.no_laser)
         idx = np.flatnonzero(near)
