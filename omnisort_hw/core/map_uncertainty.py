@@ -3,7 +3,8 @@
 A map point is its pixel's ray (camera model, R_SC) cut with the laser plane (n, d). Its 3x3
 covariance in S adds, linearised:
 * the stripe's pixel noise, measured on the stripe itself: per chain of stripe points, the
-  scatter of each point about the chord through its neighbours (`stripe_pixel_sigma`),
+  scatter of each point about the chords through its neighbours, over the chain and in a
+  window around the point (`stripe_pixel_sigma`),
   applied perpendicular to the stripe in the image (along it a centre only slides along
   its line);
 * the extrinsics' covariance from the one-image fit (system.json's `covariance.noise`);
@@ -33,6 +34,7 @@ from omnisort_hw.core.intrinsics_uncertainty import perturbed_models
 
 MIN_CHAIN_POINTS = 8  # a chain needs this many points for its own noise estimate
 SPACINGS = (1, 2, 4, 8)  # points between a centre and the chord's ends
+LOCAL_POINTS = 17  # window of the per-point scatter: 8 points either side
 NOISE_FLOOR_PX = 0.01  # below this a measured scatter is the quantisation of the fit, not noise
 
 
@@ -62,15 +64,21 @@ class PointSigmas:
 
 
 def stripe_pixel_sigma(pixels: np.ndarray, chains: np.ndarray | None) -> np.ndarray:
-    """(N,) pixel noise perpendicular to the stripe, per chain (see module docstring); chains
-    too short for their own estimate get the pooled one. The centres' errors are correlated
-    along the stripe (a sub-pixel estimator's bias follows the sub-pixel phase as the stripe
-    crosses the pixel grid, so it wanders over several points), which the distance from the
-    line through the next neighbours hardly sees: it is taken through the neighbours
-    SPACINGS points away on both sides too, and the largest scatter kept."""
+    """(N,) pixel noise perpendicular to the stripe, per point (see module docstring).
+
+    Per chain, the scatter of its centres about the chords through their neighbours SPACINGS
+    points away: the centres' errors are correlated along the stripe (a sub-pixel estimator's
+    bias follows the sub-pixel phase as the stripe crosses the pixel grid; an albedo edge
+    under the band pulls a few centres one way), which the nearest neighbours hardly see, so
+    the spacings are all used. Two scales: the chain's robust scatter (MAD, the largest over
+    the spacings; chains too short for their own get the pooled one) and, per point, the RMS
+    scatter in a window of LOCAL_POINTS around it (averaged over the spacings: a window's
+    estimate is noisy, and the largest of four noisy ones would be biased up), where a
+    structured error stands out of a clean chain; each point gets the larger."""
     n = len(pixels)
     chains = np.zeros(n, int) if chains is None else np.asarray(chains, int)
     dists: dict[int, list[np.ndarray]] = {}
+    local = np.zeros(n)
     for c in np.unique(chains):
         idx = np.flatnonzero(chains == c)
         if len(idx) < 3:
@@ -78,8 +86,13 @@ def stripe_pixel_sigma(pixels: np.ndarray, chains: np.ndarray | None) -> np.ndar
         p = pixels[idx]
         centred = p - p.mean(axis=0)
         axis = np.linalg.svd(centred, full_matrices=False)[2][0]
-        q = p[np.argsort(centred @ axis)]
-        dists[int(c)] = [_chord_distances(q, k) for k in SPACINGS if len(q) > 2 * k]
+        order = np.argsort(centred @ axis)
+        q = p[order]
+        chords = [(k, _chord_distances(q, k)) for k in SPACINGS if len(q) > 2 * k]
+        dists[int(c)] = [d for _, d in chords]
+        if len(q) >= LOCAL_POINTS:
+            var = np.mean([_local_rms(d, k, len(q)) ** 2 for k, d in chords], axis=0)
+            local[idx[order]] = np.sqrt(var)
     pooled_d = [np.concatenate(v) for v in zip(*[d for d in dists.values() if d], strict=False)]
     pooled = max((_robust_sigma(d) for d in pooled_d if len(d) >= 3), default=NOISE_FLOOR_PX)
     out = np.full(n, pooled)
@@ -87,7 +100,20 @@ def stripe_pixel_sigma(pixels: np.ndarray, chains: np.ndarray | None) -> np.ndar
         own = [_robust_sigma(d) for d in per_k if len(d) >= MIN_CHAIN_POINTS]
         if own:
             out[chains == c] = max(own)
-    return np.maximum(out, NOISE_FLOOR_PX)
+    return np.maximum(np.maximum(out, local), NOISE_FLOOR_PX)
+
+
+def _local_rms(d: np.ndarray, k: int, n: int) -> np.ndarray:
+    """(n,) per point of a sorted chain: the scatter of the chord distances `d` (of points
+    k..n-k-1) in a window of LOCAL_POINTS about it, less the window's mean (a curve's sagitta),
+    as one point's sigma; the chain's ends take their nearest window."""
+    w = min(LOCAL_POINTS, len(d))
+    c1 = np.concatenate([[0.0], np.cumsum(d)])
+    c2 = np.concatenate([[0.0], np.cumsum(d * d)])
+    lo = np.clip(np.arange(n) - k - w // 2, 0, len(d) - w)
+    mean = (c1[lo + w] - c1[lo]) / w
+    var = np.maximum((c2[lo + w] - c2[lo]) / w - mean**2, 0.0)
+    return np.sqrt(var / 1.5)
 
 
 def _chord_distances(q: np.ndarray, k: int) -> np.ndarray:
@@ -97,7 +123,7 @@ def _chord_distances(q: np.ndarray, k: int) -> np.ndarray:
     length = np.linalg.norm(ab, axis=1)
     ok = length > 1e-9
     cross = ab[:, 0] * (m - a)[:, 1] - ab[:, 1] * (m - a)[:, 0]
-    return cross[ok] / length[ok]
+    return np.where(ok, cross / np.where(ok, length, 1.0), 0.0)
 
 
 def _robust_sigma(d: np.ndarray) -> float:
