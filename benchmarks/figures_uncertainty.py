@@ -97,12 +97,13 @@ def uncertainty(r: dict[str, Any]) -> str:
 
 def uncertainty_rows(u: dict[str, Any]) -> list[list[str]]:
     """The summary table's rows: the sigmas' calibration against truth, the real lens."""
-    w, c = u["map"]["walls"], u["cubes"]
+    w, fl, c = u["map"]["walls"], u["map"]["floor"], u["cubes"]
     rows = [
         [
-            "predicted sigma against truth, held-out seeds: map points on walls / cube centres "
-            "(target: z std 0.8-1.25, 90-98 % in the 95 % interval)",
+            "predicted sigma against truth, held-out seeds: map points on walls / on the floor / "
+            "cube centres (target: z std 0.8-1.25, 90-98 % in the 95 % interval)",
             f"z std {w['z_std']:.2f}, {100 * w['within_95_fraction']:.1f} % ({w['n']} points) / "
+            f"{fl['z_std']:.2f}, {100 * fl['within_95_fraction']:.1f} % ({fl['n']} points) / "
             f"{c['z_std']:.2f}, {100 * c['within_95_fraction']:.1f} % ({c['n']} coordinates)",
             "[uncertainty](docs/uncertainty.md)",
         ]
