@@ -31,6 +31,13 @@ def _wall_pixels(calib: SystemCalibration, x_wall: float = 700.0, n: int = 300) 
     return MODEL.ray_to_pixel(pts @ calib.R_SC)
 
 
+def _across_stripe(px: np.ndarray) -> np.ndarray:
+    """(N, 2) unit image directions across a stripe of ordered points, from the neighbours."""
+    t = np.gradient(px, axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return np.stack([-t[:, 1], t[:, 0]], axis=1)
+
+
 def test_pixel_part_matches_monte_carlo_across_the_wall() -> None:
     calib = SystemCalibration.from_angles(MODEL, ANGLES, "truth")
     px = _wall_pixels(calib)
@@ -38,9 +45,7 @@ def test_pixel_part_matches_monte_carlo_across_the_wall() -> None:
     sig = point_sigmas(px, calib, np.full(len(px), sigma_px))
     rng = np.random.default_rng(0)
     # Noise across the stripe only: its image direction from the neighbours.
-    t = np.gradient(px, axis=0)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    across = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    across = _across_stripe(px)
     xs = [
         pixels_to_plane(px + across * rng.normal(0, sigma_px, (len(px), 1)), calib)[:, 0]
         for _ in range(400)
@@ -54,9 +59,7 @@ def test_pixel_part_matches_monte_carlo_across_the_wall() -> None:
 def test_stripe_noise_is_measured_from_the_stripe() -> None:
     calib = SystemCalibration.from_angles(MODEL, ANGLES, "truth")
     px = _wall_pixels(calib, n=400)
-    t = np.gradient(px, axis=0)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    across = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    across = _across_stripe(px)
     noisy = px + across * np.random.default_rng(1).normal(0, 0.05, (len(px), 1))
     est = stripe_pixel_sigma(noisy, np.zeros(len(px), int))
     # 400 points, MAD: about 5 % spread; the largest of four spacings is biased up a little.
@@ -69,9 +72,7 @@ def test_a_structured_error_raises_the_sigma_where_it_is() -> None:
     # its points, the window around them does.
     calib = SystemCalibration.from_angles(MODEL, ANGLES, "truth")
     px = _wall_pixels(calib, n=400)
-    t = np.gradient(px, axis=0)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    across = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    across = _across_stripe(px)
     err = np.random.default_rng(3).normal(0, 0.03, len(px))
     wave = slice(200, 224)
     err[wave] += 0.2 * np.sin(np.arange(24) * 2.0 * np.pi / 12.0)
