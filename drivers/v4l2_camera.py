@@ -528,13 +528,11 @@ class V4L2Camera(Camera):
         # were filled before the call, so the dequeue after them returns a buffer queued after
         # it, and each exposure period that may have begun before that adds one more.
         queued = self._queued_max() + math.ceil(self._exposure_ms / 1000.0 * cfg.fps)
-        dequeued = 0
-        for _ in range(queued + self._discard + 6):
+        for dequeued in range(1, queued + self._discard + 7):
             self._grab_once(deadline)
             kernel_ts = self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
             now = time.monotonic()
             on_monotonic = 0.0 < kernel_ts <= now + 0.01 and now - kernel_ts < 5.0
-            dequeued += 1
             if self._discard > 0:
                 self._discard -= 1
                 continue

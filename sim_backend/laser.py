@@ -108,7 +108,7 @@ class LaserFan:
         """(lit flags, range from the emitter in mm) of points near the plane: each point's
         range within its own sheet against that sheet's reach, interpolated between the two
         nearest cast sheets (exact on a planar surface, whose range is linear in the offset)."""
-        off = pts @ self.plane.normal + self.plane.offset
+        off = self.plane.signed_distance(pts)
         rel = pts - self.plane.emitter
         rel = rel - np.outer(rel @ self.plane.normal, self.plane.normal)
         e1, e2 = self.plane.basis
