@@ -1,12 +1,12 @@
 """The laser plane, its shadows, and the exact laser/scene intersection polylines.
 
 The emitter sits at E = (0, 0, -d). A point is lit when nothing lies between E and it:
-`LaserFan` casts a fan of rays in the plane (pybullet `rayTestBatch` on the collision shapes)
-and keeps the first hit distance per direction, in a few sheets parallel to the plane across the
-light's thickness; a stripe sample is lit when its range within its own sheet does not exceed
-that sheet's distance (interpolated between the cast sheets). The polylines intersect the plane
-with every known planar face analytically and keep the parts the camera sees and the laser
-reaches.
+`LaserFan` casts a fan of rays in the plane (pybullet `rayTestBatch` on the collision shapes),
+each direction when a frame first needs it, and keeps the first hit distance per direction, in
+a few sheets parallel to the plane across the light's thickness; a stripe sample is lit when its
+range within its own sheet does not exceed that sheet's distance (interpolated between the cast
+sheets). The polylines intersect the plane with every known planar face analytically and keep
+the parts the camera sees and the laser reaches.
 """
 
 from __future__ import annotations
@@ -83,26 +83,36 @@ class LaserFan:
     """First-hit range (mm) of the laser light per direction (FAN_RAYS bins) in the plane and in
     the sheets parallel to it at `offsets` (mm): the light off the plane travels in its own
     sheet, so a grazing surface (the floor) is reached at a range that changes with the offset,
-    and judging an off-plane point by the plane's own range would shadow half of its band."""
+    and judging an off-plane point by the plane's own range would shadow half of its band.
+
+    The rays are cast when a direction is first asked for (`lit`), in every sheet at once: a
+    frame's stripe uses a fraction of the fan, and a direction's rays are the same whenever
+    they are cast. So a fan belongs to one state of the world (one render)."""
 
     plane: LaserPlane
-    ranges: np.ndarray  # (len(offsets), FAN_RAYS)
-    offsets: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    client: int
+    offsets: np.ndarray
+    ranges: np.ndarray = field(init=False)  # (len(offsets), FAN_RAYS), NaN where not cast yet
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "ranges", np.full((len(self.offsets), FAN_RAYS), np.nan))
 
     @classmethod
     def compute(cls, world: SimWorld, plane: LaserPlane, half_width_mm: float = 0.0) -> LaserFan:
-        """Cast the fan in `world` (collision shapes; the emitter housing has none), in
-        FAN_SHEETS sheets across +-`half_width_mm` (one sheet, the plane, when 0)."""
-        phi = np.arange(FAN_RAYS) * (2.0 * np.pi / FAN_RAYS)
-        e1, e2 = plane.basis
-        dirs = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+        """The fan in `world` (collision shapes; the emitter housing has none), in FAN_SHEETS
+        sheets across +-`half_width_mm` (one sheet, the plane, when 0)."""
         offsets = np.linspace(-half_width_mm, half_width_mm, FAN_SHEETS if half_width_mm else 1)
-        ranges = np.empty((len(offsets), FAN_RAYS))
-        for j, off in enumerate(offsets):
-            emitter = plane.emitter + off * plane.normal
-            ids, frac = ray_hits(world.client, emitter + dirs * 1.0, emitter + dirs * FAN_RANGE_MM)
-            ranges[j] = np.where(ids >= 0, 1.0 + frac * (FAN_RANGE_MM - 1.0), np.inf)
-        return cls(plane, ranges, offsets)
+        return cls(plane, world.client, offsets)
+
+    def _cast(self, bins: np.ndarray) -> None:
+        """Cast the directions `bins` in every sheet and store their first-hit ranges."""
+        phi = bins * (2.0 * np.pi / FAN_RAYS)
+        e1, e2 = self.plane.basis
+        dirs = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+        for j, off in enumerate(self.offsets):
+            emitter = self.plane.emitter + off * self.plane.normal
+            ids, frac = ray_hits(self.client, emitter + dirs * 1.0, emitter + dirs * FAN_RANGE_MM)
+            self.ranges[j, bins] = np.where(ids >= 0, 1.0 + frac * (FAN_RANGE_MM - 1.0), np.inf)
 
     def lit(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(lit flags, range from the emitter in mm) of points near the plane: each point's
@@ -116,8 +126,13 @@ class LaserFan:
         rng = np.linalg.norm(rel, axis=1)
         k = np.rint(phi / (2.0 * np.pi) * FAN_RAYS).astype(np.int64) % FAN_RAYS
         # Neighbouring bins guard against the quantisation of directions at grazing surfaces.
+        near = (k, (k + 1) % FAN_RAYS, (k - 1) % FAN_RAYS)
+        need = np.unique(np.concatenate(near))
+        todo = need[np.isnan(self.ranges[0, need])]
+        if todo.size:
+            self._cast(todo)
         r = self.ranges
-        reach_all = np.maximum.reduce([r[:, k], r[:, (k + 1) % FAN_RAYS], r[:, (k - 1) % FAN_RAYS]])
+        reach_all = np.maximum.reduce([r[:, b] for b in near])
         if len(self.offsets) == 1:
             reach = reach_all[0]
         else:
