@@ -20,18 +20,19 @@ demo: $(STAMP)
 	$(BIN)/omnisort demo --out build/demo
 
 # Every test on every core (pytest-xdist; a module's tests stay on one worker, so its
-# fixtures are built once).
+# fixtures are built once; the modules go out longest first by tests/timings.json, so no
+# long one starts last while the other cores idle).
 test: lint
-	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile
+	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder
 
 # The edit loop: lint, types and the quick test modules (under 5 s each in tests/timings.json),
 # stopping at the first failure.
 check: lint
-	$(BIN)/python -m pytest -q -x -n auto --dist loadfile --quick
+	$(BIN)/python -m pytest -q -x -n auto --dist loadfile --no-loadscope-reorder --quick
 
 # Every test, recording each module's time in tests/timings.json (what `check` selects by).
 timings: lint
-	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --record-timings tests/timings.json
+	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder --record-timings tests/timings.json
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks --shared $(SHARED)

@@ -42,12 +42,21 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    if not config.getoption("--quick"):
-        return
+    """`--quick` leaves the slow modules out; otherwise the modules run longest first (by
+    timings.json; an unrecorded module first), each module's tests in their own
+    order. With `--dist loadfile --no-loadscope-reorder` the workers take the modules in this
+    order, so the longest ones do not start last and leave the other cores idle at the end."""
     import json
 
     timings = json.loads(TIMINGS.read_text(encoding="utf-8")) if TIMINGS.is_file() else {}
-    slow = [i for i in items if timings.get(i.nodeid.split("::")[0], 0.0) > QUICK_MODULE_S]
+
+    def seconds(item: pytest.Item, unrecorded: float) -> float:
+        return float(timings.get(item.nodeid.split("::")[0], unrecorded))
+
+    if not config.getoption("--quick"):
+        items.sort(key=lambda i: -seconds(i, float("inf")))  # stable: modules stay together
+        return
+    slow = [i for i in items if seconds(i, 0.0) > QUICK_MODULE_S]
     if slow:
         config.hook.pytest_deselected(items=slow)
         left_out = {id(i) for i in slow}
