@@ -48,6 +48,7 @@ from drivers.errors import (
     DeviceTimeoutError,
 )
 from drivers.ur_rtde_adapter import IOKind, URLink
+from drivers.ur_rtde_worker import ROBOT_MODE_RUNNING
 
 log = logging.getLogger("drivers.arm")
 
@@ -78,7 +79,6 @@ SAFETY_MODES = {
     12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
     13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
 }
-ROBOT_MODE_RUNNING = 7
 _EMERGENCY = {6, 7}
 _PROTECTIVE = {3, 4, 5, 8, 9, 12, 13}
 

@@ -21,7 +21,7 @@ from drivers.errors import (
     DeviceNotFoundError,
     DeviceTimeoutError,
 )
-from drivers.ur_rtde_worker import RTDEWorker
+from drivers.ur_rtde_worker import SAFETY_MODE_NORMAL, RTDEWorker
 
 IOKind = Literal["tool", "standard", "configurable"]
 RTDE_PORT = 30004
@@ -140,7 +140,13 @@ class RTDELink:
             raise DeviceDisconnectedError(
                 f"UR controller at {self.host or '?'} is not connected", device=self.host
             )
-        return self._worker.call(name, *args, timeout_s=self.call_timeout_s)
+        try:
+            return self._worker.call(name, *args, timeout_s=self.call_timeout_s)
+        except DeviceDisconnectedError:
+            # ur-rtde's own reconnect lost a command under it: a fresh worker (fresh
+            # interfaces) on the next reconnect instead of trusting that one to recover
+            self._worker.kill()
+            raise
 
     def open(self, host: str, timeout_s: float) -> None:
         self.host = host
@@ -200,7 +206,7 @@ class RTDELink:
 
     def _rejected(self, what: str) -> DeviceError:
         robot, safety = self._call("modes")
-        if safety != 1:
+        if safety != SAFETY_MODE_NORMAL:
             from drivers.errors import SafetyStopError, SafetyStopKind
 
             kind: SafetyStopKind = "emergency" if safety in (6, 7) else "protective"

@@ -29,6 +29,8 @@ from typing import Any
 from drivers.errors import DeviceDisconnectedError, DeviceError, DeviceTimeoutError
 
 _ROOT = str(Path(__file__).resolve().parents[1])
+ROBOT_MODE_RUNNING = 7  # RTDE robot_mode RUNNING
+SAFETY_MODE_NORMAL = 1  # RTDE safety_mode NORMAL
 _IO_BIT_OFFSET = {"standard": 0, "configurable": 8, "tool": 16}
 _SETTERS = {
     "tool": "setToolDigitalOut",
@@ -84,6 +86,15 @@ class _Session:
                 raise RuntimeError("the RTDE control script did not start within 2 s")
             time.sleep(0.005)
 
+    def script_lost(self) -> bool:
+        """Why a command was refused with safety NORMAL: the control script stopped, or the
+        controller is RUNNING and so would have taken it, which leaves only a script that
+        was not there (ur-rtde's isProgramRunning can still report the state from before a
+        dropped connection it re-established). Any other refusal is the controller's."""
+        if self.rcv.getSafetyMode() != SAFETY_MODE_NORMAL:
+            return False
+        return not self.ctl.isProgramRunning() or self.rcv.getRobotMode() == ROBOT_MODE_RUNNING
+
     def call(self, name: str, args: tuple) -> Any:
         rcv, ctl, io = self.rcv, self.ctl, self.io
         if name == "is_connected":
@@ -112,16 +123,16 @@ class _Session:
             self.ensure_program()
             fn = ctl.moveJ if name == "move_j" else ctl.moveL
             accepted = bool(fn(list(args[0]), float(args[1]), float(args[2]), True))
-            if not accepted and not ctl.isProgramRunning() and rcv.getSafetyMode() == 1:
+            if not accepted and self.script_lost():
                 raise _LostError(
-                    "the control script stopped during the command (ur-rtde re-established a "
-                    "dropped connection); the command was not carried out"
+                    "the control script was not there to take the command (ur-rtde "
+                    "re-established a dropped connection); the command was not carried out"
                 )
             return accepted
         if name == "move_path":
             self.ensure_program()
             accepted = bool(ctl.movePath(_ur_path(args[0]), True))
-            if not accepted and not ctl.isProgramRunning() and rcv.getSafetyMode() == 1:
+            if not accepted and self.script_lost():
                 raise _LostError("the control script stopped during the path; nothing carried out")
             return accepted
         if name == "is_moving":
