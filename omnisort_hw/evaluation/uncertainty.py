@@ -12,8 +12,10 @@ be N(0, 1): its standard deviation near 1 and 95 % of points within +-1.96.
 The camera intrinsics are the simulator's truth (no intrinsic covariance), as in Table 3: the
 intrinsics' part is checked in tests/core on synthetic calibrations.
 
-Cube trial: `omnisort`'s locate on the sorting scene with the true calibration, each cube's
-centre against the truth, normalised by its predicted sigma per axis (B's x and y).
+Cube trial: a random sorting scene calibrated by `joint` from its laser-on image (with the
+simulated camera's tone curve, as the cell passes its camera's), then `omnisort`'s locate in
+its laser-off image; each cube's centre against the truth, normalised by its predicted sigma
+per axis (B's x and y): the outline fit's and the calibration's rotation part.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane
+from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.evaluation.lighting import SPURIOUS_PX, nearest_on_polylines
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 from omnisort_hw.pipeline.laser_map import map_laser
@@ -158,7 +161,12 @@ def cube_trial(seed: int, width: int = 960, n_cubes: int = 5) -> Normalised:
     laser_image, _ = render_scene(scene, seed=2 * seed + 2, laser_on=True)
     model = OcamModel.from_dict(truth["camera"])
     calib = calibrate_system(
-        laser_image, model, "two-sided", "joint", separation_mm=truth["target"]["separation_mm"]
+        laser_image,
+        model,
+        "two-sided",
+        "joint",
+        separation_mm=truth["target"]["separation_mm"],
+        tone=ToneCurve.parse(truth["render"]["tone_curve"]),  # the simulated camera's curve
     )
     cfg = sim_sort_config(scene, SortConfig())
     T_SB = scene_T_SB(scene)
