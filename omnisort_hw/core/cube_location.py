@@ -18,7 +18,8 @@ How:
    laser plane lie on the sides of the footprint square; they join the fit with their own,
    much smaller, noise, which pins the faces they touch.
 4. The 1-sigma of the centre and yaw comes from the fit's covariance (residual scatter
-   propagated through the Jacobian).
+   propagated through the Jacobian), the outline's points counted as correlated as their
+   residuals are round the outline (neighbours share pixels' quantisation).
 
 Everything is array in, array out; the caller supplies the image(s), the camera model and
 rotation, T_SB and the floor height.
@@ -39,6 +40,7 @@ from scipy.optimize import least_squares
 from scipy.spatial import ConvexHull, QhullError
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.residual_correlation import correlation_inflation
 from omnisort_hw.errors import ConfigError, InputError
 
 UNKNOWN = "unknown"
@@ -357,6 +359,13 @@ def _fit_cube(
     return best.x, best.fun, best.jac
 
 
+def _outline_order(xy: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """Indices that walk the outline points (N, 2) round a convex blob: by angle about its
+    centre."""
+    d = xy - centre
+    return np.argsort(np.arctan2(d[:, 1], d[:, 0]), kind="stable")
+
+
 def blob_verdict(
     centroid_px: np.ndarray,
     area_px: float,
@@ -533,6 +542,12 @@ def _locate_one(
     r_edge = res[:n_edge]
     rms_px = float(np.sqrt(np.mean(r_edge**2)))
     scale = max(float(np.median(np.abs(r_edge))) * 1.4826, PIXEL_SIGMA_FLOOR_PX)
+    # Neighbouring outline points share their pixels' quantisation and threshold errors: the
+    # edge rows count as n / tau independent ones (tau from the residuals' own correlation,
+    # walked round the outline).
+    tau = correlation_inflation(r_edge[_outline_order(xy, params[:2])])
+    jac = jac.copy()
+    jac[:n_edge] /= math.sqrt(tau)
     try:
         cov = scale**2 * np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:

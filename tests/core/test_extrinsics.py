@@ -7,12 +7,12 @@ import pytest
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.joint import calibrate_joint, closed_form, observations
-from omnisort_hw.core.extrinsics.joint_weighted import correlation_inflation
 from omnisort_hw.core.extrinsics.method1 import calibrate_method1
 from omnisort_hw.core.extrinsics.method2 import calibrate_method2
 from omnisort_hw.core.extrinsics.paper import calibrate_paper
 from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS, SystemCalibration
 from omnisort_hw.core.mapping import pixels_to_plane, segments
+from omnisort_hw.core.residual_correlation import correlation_inflation
 from omnisort_hw.errors import CalibrationError
 from tests.core.synthetic_target import Scene, checkerboards, random_angles, three_sided, two_sided
 

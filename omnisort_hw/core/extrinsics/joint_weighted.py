@@ -11,6 +11,7 @@ from scipy.optimize import least_squares
 
 from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS
 from omnisort_hw.core.frames import great_circle_normal
+from omnisort_hw.core.residual_correlation import correlation_inflation
 
 
 def _order_along(rays: np.ndarray) -> np.ndarray:
@@ -21,25 +22,6 @@ def _order_along(rays: np.ndarray) -> np.ndarray:
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(m, e1)
     return np.argsort(np.arctan2(rays @ e2, rays @ e1))
-
-
-def correlation_inflation(residuals: np.ndarray, max_lag: int = 10) -> float:
-    """Variance inflation 1 + 2 sum(rho_k) of an average of residuals ordered along a line,
-    from their autocorrelation up to the first lag within the noise of an estimate from n
-    points (2 / sqrt(n)); 1 for independent points, about the number of points sharing each
-    pixel otherwise."""
-    r = np.asarray(residuals, float) - np.mean(residuals)
-    n = r.size
-    denom = float(r @ r)
-    if n < 8 or denom <= 0:
-        return 1.0
-    total = 0.0
-    for k in range(1, min(max_lag, n // 4) + 1):
-        rho = float(r[:-k] @ r[k:]) / denom
-        if rho <= 2.0 / np.sqrt(n):  # indistinguishable from no correlation
-            break
-        total += rho
-    return float(np.clip(1.0 + 2.0 * total, 1.0, 10.0))
 
 
 def line_inflation(blocks: dict[str, np.ndarray], rays: dict[str, np.ndarray]) -> dict[str, float]:
