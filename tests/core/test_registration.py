@@ -112,12 +112,17 @@ def test_registration_with_the_joint_calibration_of_the_same_image(parked: tuple
     """The whole chain from one image: the joint camera-laser calibration, then the robot.
     The registration may only be worse than on the truth by what the calibration's own
     rotation error carries to the base (about 1.8 m from the camera)."""
+    from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.pipeline.extrinsics import calibrate_system
 
     image, truth, scene = parked
     true_calib = SystemCalibration.from_json(truth)
     calib = calibrate_system(
-        image, true_calib.model, "two-sided", separation_mm=truth["target"]["separation_mm"]
+        image,
+        true_calib.model,
+        "two-sided",
+        separation_mm=truth["target"]["separation_mm"],
+        tone=ToneCurve.parse(truth["render"]["tone_curve"]),  # the simulated camera's curve
     )
     R_err = Rotation.from_matrix(calib.R_SC @ true_calib.R_SC.T).magnitude()
     rc = sim_registration_config(scene)
