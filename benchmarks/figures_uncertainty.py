@@ -90,7 +90,8 @@ def uncertainty(r: dict[str, Any]) -> str:
         f"{c['map_laser_1920_with_sigmas_and_intrinsic_modes_ms_one_core']} ms "
         f"(load average {c['load_average_1min']}).",
         f"Seeds {u['seeds'][0]}-{u['seeds'][-1]} (`OMNISORT_UNCERTAINTY_SEEDS`; the model "
-        f"was built on 0-3), {u['width_px']} px.",
+        "was built on 0-3, its cube part corrected on 100-105), "
+        f"{u['width_px']} px.",
     ]
     return "\n".join(out + lines) + "\n"
 
