@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+IO_ERROR = "io_error"  # an OSError no earlier check caught, reported with its file
+
 
 class OmnisortError(Exception):
     """Base of every error the product raises on purpose; `code` is stable for the protocol."""

@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.errors import StorageError
+from omnisort_hw.errors import CalibrationFileError, StorageError
 
 HISTORY_DIRNAME = "history"
 
@@ -22,6 +22,32 @@ def os_error_text(exc: OSError) -> str:
     text = exc.strerror or str(exc)
     where = f" ({exc.filename})" if exc.filename else ""
     return f"[Errno {exc.errno}] {name}: {text}{where}" if exc.errno else f"{text}{where}"
+
+
+def read_calibration_json(path: str | os.PathLike[str], what: str) -> dict[str, Any]:
+    """The JSON object in the calibration file `path` (`what`: "camera", "system"), or a
+    CalibrationFileError naming the file: missing, a folder, empty, unreadable, not JSON (an
+    image given as a calibration), or not an object."""
+    p = Path(path)
+    if p.is_dir():
+        raise CalibrationFileError(f"{p}: is a folder, not a {what} calibration file")
+    if not p.is_file():
+        raise CalibrationFileError(f"{p}: {what} calibration file not found")
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise CalibrationFileError(f"{p}: cannot be read: {os_error_text(exc)}") from None
+    if not data.strip():
+        raise CalibrationFileError(f"{p}: the {what} calibration file is empty")
+    try:
+        obj = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise CalibrationFileError(
+            f"{p}: corrupt, not a readable JSON {what} calibration ({exc})"
+        ) from None
+    if not isinstance(obj, dict):
+        raise CalibrationFileError(f"{p}: corrupt, top level is not a JSON object")
+    return obj
 
 
 def check_writable(directory: str | os.PathLike[str], what: str) -> Path:
@@ -44,8 +70,18 @@ def _creation_problem(target: Path) -> str | None:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
         return f"{ancestor} is not a folder, so {target} cannot be created"
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        return f"{ancestor} is not writable, so {target} cannot be created"
+    problem = _write_problem(ancestor)
+    return f"{problem}, so {target} cannot be created" if problem else None
+
+
+def _write_problem(folder: Path) -> str | None:
+    """Why no file can be created in the existing `folder`, found by creating (and removing)
+    an empty one: permission bits say nothing for root, nor for /proc, a read-only mount or a
+    full disk."""
+    try:
+        write_temp(folder, "write-check", b"").unlink()
+    except OSError as exc:
+        return f"{folder} is not writable ({os_error_text(exc)})"
     return None
 
 
@@ -56,8 +92,7 @@ def output_file_problem(path: str | os.PathLike[str]) -> str | None:
     if target.is_dir():
         return f"{target} is a folder; give a file name inside it"
     if target.exists():
-        writable = os.access(target.parent, os.W_OK | os.X_OK)
-        return None if writable else f"{target.parent} is not writable"
+        return _write_problem(target.parent)
     return _creation_problem(target)
 
 
@@ -68,7 +103,7 @@ def output_folder_problem(path: str | os.PathLike[str]) -> str | None:
         return _creation_problem(target)
     if not target.is_dir():
         return f"{target} is a file, not a folder"
-    return None if os.access(target, os.W_OK | os.X_OK) else f"{target} is not writable"
+    return _write_problem(target)
 
 
 def _fsync_dir(directory: Path) -> None:

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
 from omnisort_hw.cli.output import print_error, report_error
-from omnisort_hw.errors import OmnisortError
+from omnisort_hw.errors import IO_ERROR, OmnisortError
+from omnisort_hw.fileio import os_error_text
 
 # Each module defines `register(subparsers)` and sets `func` on its parsers; `func(args)`
 # returns the exit code. Heavy imports stay inside the command functions.
@@ -55,13 +57,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     _ARGV[:] = list(argv) if argv is not None else sys.argv[1:]
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # a reader gone shows here, inside the handlers below
+        return status
     except OmnisortError as exc:
         report_error(getattr(args, "json", False) is True, exc.code, str(exc))
         return exc.exit_code
     except KeyboardInterrupt:
         report_error(getattr(args, "json", False) is True, "interrupted", "interrupted")
         return 130
+    except BrokenPipeError:
+        return _reader_gone()
+    except OSError as exc:
+        # A file the command reads or writes failed in a way no check before could see (a
+        # disk filled, a mount went away): the file and the OS error, never a traceback.
+        report_error(getattr(args, "json", False) is True, IO_ERROR, os_error_text(exc))
+        return 2
     except Exception as exc:
         # Device errors live in drivers/ and do not derive from OmnisortError; any class with
         # a `code` attribute is one of ours and gets the same treatment.
@@ -70,6 +81,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             report_error(getattr(args, "json", False) is True, code, str(exc))
             return 2
         raise
+
+
+def _reader_gone() -> int:
+    """stdout's reader has gone (`omnisort ctl status | head -1`): end quietly, as a Unix
+    tool killed by SIGPIPE would (exit 141), with stdout sent to /dev/null so the
+    interpreter's own flush at exit does not print a second error."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return 141
 
 
 if __name__ == "__main__":

@@ -8,7 +8,6 @@ so both are converted here and nowhere else.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +15,7 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import CalibrationFileError, InputError
-from omnisort_hw.fileio import atomic_write_bytes, atomic_write_json
+from omnisort_hw.fileio import atomic_write_bytes, atomic_write_json, read_calibration_json
 
 MODEL_KEYS = (
     "model",
@@ -42,12 +41,7 @@ def save_camera_json(path: str | Path, model: OcamModel, **meta: Any) -> Path:
 def load_camera_json(path: str | Path) -> tuple[OcamModel, dict[str, Any]]:
     """Read camera.json; a missing, unreadable or malformed file is a CalibrationFileError."""
     p = Path(path)
-    if not p.is_file():
-        raise CalibrationFileError(f"{p}: camera calibration file not found")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CalibrationFileError(f"{p}: not a readable JSON camera calibration ({exc})") from exc
+    data = read_calibration_json(p, "camera")
     try:
         model = OcamModel.from_dict(data, source=str(p))
     except InputError as exc:

@@ -7,7 +7,6 @@ intact, recent enough and has the robot registered: the service's store, a syste
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import CalibrationFileError, MotionRefusedError, NotRegisteredError
+from omnisort_hw.fileio import read_calibration_json
 
 
 class CalibrationSource:
@@ -47,14 +47,7 @@ def read_system_payload(path: str | Path) -> tuple[dict[str, Any], str | None]:
     """A system.json's payload and, for one written by the store, its save time, the store's
     checksum verified (a tampered file is refused); a plain file (the CLI's) as it is."""
     path = Path(path)
-    if not path.is_file():
-        raise CalibrationFileError(f"{path}: system calibration file not found")
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise CalibrationFileError(f"{path}: corrupt, not valid JSON ({exc})") from None
-    if not isinstance(raw, dict):
-        raise CalibrationFileError(f"{path}: corrupt, top level is not a JSON object")
+    raw = read_calibration_json(path, "system")
     if "checksum" not in raw:
         return raw, None
     from omnisort_hw.pipeline.calibration_store import read_calibration_file

@@ -33,17 +33,24 @@ def truncation_problem(data: bytes) -> str | None:
 def read_image(path: str | Path) -> np.ndarray:
     """The colour image at `path` (BGR, uint8), or an InputError naming the file."""
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not an image file")
     if not p.is_file():
         raise InputError(f"{p}: no such image file")
     try:
         data = p.read_bytes()
     except OSError as exc:
         raise InputError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    if not data:
+        raise InputError(f"{p}: the file is empty (0 bytes); copy the image again")
     problem = truncation_problem(data)
     if problem:
         raise InputError(f"{p}: {problem}; copy the file again")
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-    if image is None:
+    try:
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    except cv2.error:
+        image = None
+    if image is None or image.size == 0:
         raise InputError(f"{p}: not a readable image (unknown format or corrupt)")
     return image
 

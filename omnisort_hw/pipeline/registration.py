@@ -9,7 +9,6 @@ and writing it into a system.json file.
 
 from __future__ import annotations
 
-import json
 import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -103,14 +102,7 @@ def write_robot_base(path: str | Path, record: Mapping[str, Any]) -> Path:
     from omnisort_hw import fileio
 
     p = Path(path)
-    try:
-        raw = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CalibrationFileError(f"{p}: system calibration file not found") from None
-    except (OSError, ValueError) as exc:
-        raise CalibrationFileError(f"{p}: not a readable JSON system calibration ({exc})") from None
-    if not isinstance(raw, dict):
-        raise CalibrationFileError(f"{p}: top level is not a JSON object")
+    raw = fileio.read_calibration_json(p, "system")
     if "checksum" in raw:
         from omnisort_hw.pipeline.calibration_store import CalibrationStore, read_calibration_file
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from omnisort_hw.errors import OmnisortError
+from omnisort_hw.errors import IO_ERROR, OmnisortError
+from omnisort_hw.fileio import os_error_text
 from omnisort_hw.service import protocol as proto
 
 
@@ -23,6 +24,8 @@ def error_from_exception(exc: BaseException) -> tuple[str, str, dict[str, Any]]:
         if code == "motion_refused":
             return proto.MOTION_REFUSED, str(exc), details
         return proto.DEVICE_ERROR, str(exc), details
+    if isinstance(exc, OSError) and exc.filename:
+        return IO_ERROR, os_error_text(exc), {"path": str(exc.filename)}
     return proto.INTERNAL, f"internal error ({type(exc).__name__}): {exc}", {}
 
 

@@ -199,12 +199,14 @@ class JobRunner:
             code, msg, details = error_from_exception(exc)
             if job.cancel.is_set():
                 reply = self._stopped_reply(job, req, msg)
-            elif code in (proto.DEVICE_ERROR, proto.INTERNAL) and getattr(exc, "faults_cell", True):
+            elif _faults_cell(job, code, exc):
                 if code == proto.INTERNAL:
                     log.error("%s failed", req.cmd, exc_info=exc)
                 reply = proto.error_reply(req.id, code, msg, **details)
                 self._end_job(job, State.FAULT, f"{req.cmd} failed: {msg}")
             else:
+                if code == proto.INTERNAL:
+                    log.error("%s failed", req.cmd, exc_info=exc)
                 reply = proto.error_reply(req.id, code, msg, **details)
                 self._end_job(job, resting, f"{req.cmd} refused: {code}")
         finally:
@@ -229,6 +231,20 @@ class JobRunner:
         with self._job_lock:
             if self.states.state == job.state and not job.cancel.is_set():
                 self.states.set(new, reason)
+
+
+MOTION_STATES = frozenset({State.MOVING, State.SORTING})
+
+
+def _faults_cell(job: Job, code: str, exc: BaseException) -> bool:
+    """Whether a job's failure latches `fault`: a device or internal failure while the arm
+    may be moving. A bad file, a missing board or a camera that times out during a
+    calibration or a map is that request's error and nothing more."""
+    return (
+        job.state in MOTION_STATES
+        and code in (proto.DEVICE_ERROR, proto.INTERNAL)
+        and getattr(exc, "faults_cell", True)
+    )
 
 
 def _emit_unless(replied: threading.Event, emit: Emit, event: dict[str, Any]) -> None:

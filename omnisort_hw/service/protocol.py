@@ -51,6 +51,7 @@ ERROR_CODES: tuple[str, ...] = (
     "feature_not_found",
     "bad_calibration_file",
     "storage_error",
+    "io_error",
     "gripper_loaded",
     "instance_locked",
     "calibration_drift",

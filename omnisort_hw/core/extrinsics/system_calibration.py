@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -143,16 +142,10 @@ class SystemCalibration:
 
 def load_system_json(path: str | Path) -> SystemCalibration:
     """Read a system.json / truth.json file with errors that name it."""
+    from omnisort_hw.fileio import read_calibration_json
+
     p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise CalibrationFileError(f"{p}: system calibration file not found") from exc
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CalibrationFileError(f"{p}: not a readable JSON system calibration ({exc})") from exc
-    if not isinstance(data, dict):
-        raise CalibrationFileError(f"{p}: top level is not a JSON object")
-    return SystemCalibration.from_json(data, source=str(p))
+    return SystemCalibration.from_json(read_calibration_json(p, "system"), source=str(p))
 
 
 def place_side_walls(
