@@ -55,14 +55,16 @@ BAD_CALIBRATIONS: dict[str, tuple[str, Callable[[Path], Path]]] = {
 }
 
 
-def good_calibration(size: int = 640) -> tuple[dict, dict]:
+def good_calibration(
+    size: int = 640, height: int | None = None, fov_deg: float = 185.0
+) -> tuple[dict, dict]:
     """A camera.json and a registered system.json record, valid in every field, so that a
     command reaches the file under test."""
     from omnisort_hw.core.camera_io import camera_record
     from omnisort_hw.core.camera_model import OcamModel
     from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 
-    model = OcamModel.equidistant(size, size, 185.0)
+    model = OcamModel.equidistant(size, height or size, fov_deg)
     angles = dict.fromkeys(
         ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg"),
         0.0,

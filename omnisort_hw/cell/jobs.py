@@ -21,6 +21,7 @@ from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.errors import MotionRefusedError
+from omnisort_hw.pipeline.adopt import AdoptRequest
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.requests import (
     ExtrinsicsRequest,
@@ -133,6 +134,15 @@ class CellJobs:
         from omnisort_hw.pipeline import locate
 
         return locate.run(self, request, cancel).reply(request.colors)
+
+    def adopt(self, request: AdoptRequest) -> dict[str, Any]:
+        """The CLI's camera.json and system.json, verified against this cell, as its own."""
+        from omnisort_hw.pipeline import adopt
+
+        return adopt.run(self, request).reply()
+
+    def save_drift_reference(self, image: np.ndarray) -> None:
+        self.drift.save_reference(image)
 
     # -- what makes the cell a `pipeline.rig.Rig` ------------------------------------------
 

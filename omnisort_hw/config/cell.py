@@ -51,6 +51,9 @@ SECTIONS = (
 )
 
 
+TARGET_KEYS = frozenset({"kind", "separation_mm"})
+
+
 @dataclass(frozen=True)
 class TargetConfig:
     """`[target]`: the calibration target's kind and wall separation (mm), as defaults for
@@ -61,7 +64,7 @@ class TargetConfig:
 
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any]) -> TargetConfig:
-        unknown = sorted(set(section) - {"kind", "separation_mm"})
+        unknown = sorted(set(section) - TARGET_KEYS)
         if unknown:
             raise ConfigError(f"[target].{unknown[0]}: unknown key (known: kind, separation_mm)")
         kind = section.get("kind")
@@ -135,3 +138,28 @@ def load_cell_config(path: str | Path) -> CellConfig:
         err = ConfigError(f"{p}: {exc}")
         err.key = getattr(exc, "key", None)  # type: ignore[attr-defined]
         raise err from None
+
+
+def section_keys() -> dict[str, frozenset[str]]:
+    """Every key the loader reads in each section but the device sections (whose keys are
+    their backend's config dataclass, or `devices.SIM_SETTINGS`): what deploy/cell.example.toml
+    must document."""
+    from dataclasses import fields
+
+    from omnisort_hw.config.capture import CaptureSettings
+    from omnisort_hw.config.service import LOGGING_KEYS, SERVICE_KEYS
+    from omnisort_hw.config.sorting import REGISTRATION_KEYS, SORT_KEYS
+    from omnisort_hw.config.storage import STORAGE_KEYS
+    from omnisort_hw.config.watchdog import PLC_KEYS, WATCHDOG_KEYS
+
+    return {
+        "service": SERVICE_KEYS,
+        "storage": STORAGE_KEYS,
+        "logging": LOGGING_KEYS,
+        "target": TARGET_KEYS,
+        "sorting": frozenset(SORT_KEYS),
+        "registration": REGISTRATION_KEYS,
+        "watchdog": WATCHDOG_KEYS,
+        "plc": PLC_KEYS,
+        "capture": frozenset(f.name for f in fields(CaptureSettings)),
+    }

@@ -25,7 +25,33 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-def _check_keys(section: Mapping[str, Any], name: str, known: set[str]) -> None:
+SERVICE_KEYS = frozenset(
+    {
+        "host",
+        "port",
+        "token",
+        "token_file",
+        "max_line_bytes",
+        "max_clients",
+        "max_inflight_per_client",
+        "max_clients_per_peer",
+        "idle_timeout_s",
+        "line_timeout_s",
+        "write_timeout_s",
+        "overflow_grace_s",
+        "quick_timeout_s",
+        "job_timeout_s",
+        "shutdown_timeout_s",
+        "capture_keep",
+    }
+)
+LOGGING_KEYS = (
+    frozenset({"log_dir", "rerun", "rrd_keep", "rrd_max_total_mb", "rrd_max_file_mb", "level"})
+    | LIVE_KEYS
+)
+
+
+def _check_keys(section: Mapping[str, Any], name: str, known: frozenset[str]) -> None:
     unknown = sorted(set(section) - known)
     if unknown:
         raise ConfigError(f"[{name}]: unknown key(s) {', '.join(unknown)}")
@@ -86,28 +112,7 @@ class ServiceConfig:
     ) -> ServiceConfig:
         """Parse `[service]`; a token may come inline (`token`) or from a file (`token_file`)."""
         name = "service"
-        _check_keys(
-            section,
-            name,
-            {
-                "host",
-                "port",
-                "token",
-                "token_file",
-                "max_line_bytes",
-                "max_clients",
-                "max_inflight_per_client",
-                "max_clients_per_peer",
-                "idle_timeout_s",
-                "line_timeout_s",
-                "write_timeout_s",
-                "overflow_grace_s",
-                "quick_timeout_s",
-                "job_timeout_s",
-                "shutdown_timeout_s",
-                "capture_keep",
-            },
-        )
+        _check_keys(section, name, SERVICE_KEYS)
         host = section.get("host", "127.0.0.1")
         if not isinstance(host, str) or not host:
             raise ConfigError("[service] host must be a non-empty string")
@@ -174,12 +179,7 @@ class LoggingConfig:
     ) -> LoggingConfig:
         """Parse `[logging]`."""
         name = "logging"
-        _check_keys(
-            section,
-            name,
-            {"log_dir", "rerun", "rrd_keep", "rrd_max_total_mb", "rrd_max_file_mb", "level"}
-            | LIVE_KEYS,
-        )
+        _check_keys(section, name, LOGGING_KEYS)
         rerun = section.get("rerun", True)
         if not isinstance(rerun, bool):
             raise ConfigError("[logging] rerun must be true or false")

@@ -93,7 +93,8 @@ _SORT_NUMBERS = (
     "max_sigma_mm",
     "capture_tolerance_mm",
 )
-_SORT_KEYS = {
+REGISTRATION_KEYS = frozenset({"board", "square_mm", "offset", "fit", "camera_height_mm"})
+SORT_KEYS = {
     *_SORT_NUMBERS,
     "from_scene",
     "robot_model",
@@ -114,10 +115,10 @@ def parse_sort_config(
 ) -> SortConfig:
     """`[sorting]` -> SortConfig (on top of `base`); a wrong key names `[sorting].key`."""
     path = "[sorting]"
-    unknown = sorted(set(data) - _SORT_KEYS)
+    unknown = sorted(set(data) - SORT_KEYS)
     if unknown:
         raise ConfigError(
-            f"{path}.{unknown[0]}: unknown key (known: {', '.join(sorted(_SORT_KEYS))})"
+            f"{path}.{unknown[0]}: unknown key (known: {', '.join(sorted(SORT_KEYS))})"
         )
     cfg = base or SortConfig()
     changes: dict[str, Any] = {}
@@ -192,10 +193,10 @@ def parse_sort_config(
 def parse_registration_config(data: Mapping[str, Any]) -> RegistrationConfig:
     """`[registration]`: board = "9x6", square_mm, offset = [X, Y, Z, RX, RY, RZ], fit."""
     path = "[registration]"
-    known = {"board", "square_mm", "offset", "fit", "camera_height_mm"}
-    unknown = sorted(set(data) - known)
+    unknown = sorted(set(data) - REGISTRATION_KEYS)
     if unknown:
-        raise ConfigError(f"{path}.{unknown[0]}: unknown key (known: {', '.join(sorted(known))})")
+        known = ", ".join(sorted(REGISTRATION_KEYS))
+        raise ConfigError(f"{path}.{unknown[0]}: unknown key (known: {known})")
     for key in ("square_mm", "offset"):
         if key not in data:
             raise ConfigError(f"{path}.{key}: missing")

@@ -9,6 +9,8 @@ from typing import Any
 
 from omnisort_hw.errors import ConfigError
 
+STORAGE_KEYS = frozenset({"state_dir", "max_age_days", "history_keep", "camera_serial"})
+
 
 @dataclass(frozen=True)
 class StorageConfig:
@@ -24,8 +26,7 @@ class StorageConfig:
         cls, section: Mapping[str, Any], base_dir: Path | None = None
     ) -> StorageConfig:
         """Build from a parsed TOML section; relative paths are taken from `base_dir`."""
-        known = {"state_dir", "max_age_days", "history_keep", "camera_serial"}
-        unknown = sorted(set(section) - known)
+        unknown = sorted(set(section) - STORAGE_KEYS)
         if unknown:
             raise ConfigError(f"[storage]: unknown key(s) {', '.join(unknown)}")
         raw_dir = section.get("state_dir", "/var/lib/omnisort")

@@ -9,8 +9,11 @@ from typing import Any
 from omnisort_hw.config.service import is_loopback
 from omnisort_hw.errors import ConfigError
 
+WATCHDOG_KEYS = frozenset({"period_s", "before_sort", "false_alarm_rate", "min_angle_deg"})
+PLC_KEYS = frozenset({"modbus_port", "host", "allow_commands"})
 
-def _unknown(section: Mapping[str, Any], name: str, known: set[str]) -> None:
+
+def _unknown(section: Mapping[str, Any], name: str, known: frozenset[str]) -> None:
     extra = sorted(set(section) - known)
     if extra:
         raise ConfigError(f"[{name}].{extra[0]}: unknown key (known: {', '.join(sorted(known))})")
@@ -46,7 +49,7 @@ class WatchdogConfig:
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any]) -> WatchdogConfig:
         n = "watchdog"
-        _unknown(section, n, {"period_s", "before_sort", "false_alarm_rate", "min_angle_deg"})
+        _unknown(section, n, WATCHDOG_KEYS)
         return cls(
             period_s=_num(section, n, "period_s", 600.0, 0.0, 86400.0),
             before_sort=_bool(section, n, "before_sort", True),
@@ -67,7 +70,7 @@ class PlcConfig:
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any]) -> PlcConfig:
         n = "plc"
-        _unknown(section, n, {"modbus_port", "host", "allow_commands"})
+        _unknown(section, n, PLC_KEYS)
         port = section.get("modbus_port")
         if port is not None and (
             isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535

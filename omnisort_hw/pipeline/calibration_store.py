@@ -351,7 +351,10 @@ def read_calibration_file(path: str | Path, kind: str) -> CalibrationRecord:
         raise CalibrationFileError(f"{path}: corrupt, top level is not a JSON object")
     stored = doc.pop(CHECKSUM_KEY, None)
     if not isinstance(stored, str):
-        raise CalibrationFileError(f"{path}: no checksum; not written by omnisort storage")
+        raise CalibrationFileError(
+            f"{path}: no checksum; not written by omnisort storage (a file made by the "
+            "command line is taken in with `omnisort ctl adopt camera=... system=...`)"
+        )
     actual = checksum_of(doc)
     if stored != actual:
         raise CalibrationFileError(

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from omnisort_hw.cell.cell import Cell
+from omnisort_hw.pipeline.adopt import AdoptRequest
 from omnisort_hw.pipeline.requests import (
     ExtrinsicsRequest,
     IntrinsicsRequest,
@@ -114,6 +115,10 @@ def check(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
     return ctx.cell.drift.check(args["image"])
 
 
+def adopt(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+    return ctx.cell.adopt(AdoptRequest(args["camera"], args["system"]))
+
+
 def acknowledge_drift(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
     return ctx.cell.drift.acknowledge()
 
@@ -130,4 +135,5 @@ HANDLERS: dict[str, Handler] = {
     "sort": sort,
     "check": check,
     "acknowledge_drift": acknowledge_drift,
+    "adopt": adopt,
 }

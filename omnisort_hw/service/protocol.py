@@ -262,6 +262,16 @@ COMMANDS: dict[str, Command] = {
             help="drift check: a laser-off capture against the stored calibration",
         ),
         Command(
+            "adopt",
+            "job",
+            (
+                Arg("camera", "path", help="absolute path of a camera.json made by the CLI"),
+                Arg("system", "path", help="absolute path of a system.json made by the CLI"),
+            ),
+            job_state="calibrating",
+            help="take calibration files made by the CLI as the cell's, verified against it",
+        ),
+        Command(
             "acknowledge_drift",
             "quick",
             help="accept a detected calibration drift: motion allowed again",

@@ -1,6 +1,8 @@
 """The commissioning steps of docs/simulator.md, run as written on `deploy/cell.sim.toml`:
 render the checkerboard views, intrinsics, extrinsics, register-robot, map, locate, sort (the
-last four capture with the simulated camera and laser, no image files)."""
+last four capture with the simulated camera and laser, no image files); then the service on
+the same cell file adopts the command line's calibration and sorts, with no second
+calibration."""
 
 from __future__ import annotations
 
@@ -31,6 +33,12 @@ STEPS = (
     "omnisort locate --config deploy/cell.sim.toml --system build/sim-cell/system.json",
     "omnisort sort --config deploy/cell.sim.toml --system build/sim-cell/system.json",
 )
+# Then the service (started by the test on a free port, `omnisort serve --config
+# deploy/cell.sim.toml` in the doc) takes the same files and sorts.
+SERVICE_STEPS = (
+    "omnisort ctl adopt camera=build/sim-cell/camera.json system=build/sim-cell/system.json",
+    "omnisort ctl sort",
+)
 
 
 def _run(step: str, cwd: Path) -> subprocess.CompletedProcess[str]:
@@ -48,7 +56,7 @@ def _run(step: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 def test_the_doc_gives_these_steps() -> None:
     text = " ".join(DOC.read_text().split())
-    for step in STEPS:
+    for step in (*STEPS, *SERVICE_STEPS):
         assert step in text, step
 
 
@@ -69,6 +77,25 @@ def test_commissioning_steps_run_on_the_shipped_sim_cell(tmp_path: Path) -> None
     # The sort is in the cell's job journal as the service would have it, nothing in flight.
     job = json.loads((tmp_path / "build" / "sim-cell" / "state" / "job.json").read_text())
     assert (job["job"], job["state"], job["in_flight"]) == ("sort", "done", None), job
+    _service_steps(tmp_path)
+
+
+def _service_steps(tmp_path: Path) -> None:
+    """The service on the commissioned cell file: the CLI's files adopted, then a sort of the
+    (new) world's four cubes, every one in its bin."""
+    from omnisort_hw.service.launch import start_service
+
+    with start_service(tmp_path / "deploy" / "cell.sim.toml", tmp_path / "serve") as service:
+        replies = []
+        for step in SERVICE_STEPS:
+            ctl, rest = step.split(" ctl ")
+            proc = _run(f"{ctl} ctl --port {service.port} --json {rest}", tmp_path)
+            assert proc.returncode == 0, f"{step}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+            replies.append(json.loads(proc.stdout)["result"])
+    assert set(replies[0]["adopted"]) == {"camera", "system"}
+    assert replies[0]["drift_reference"] is True
+    totals = replies[1]["totals"]
+    assert (totals["cubes"], totals["sorted"], totals["failed"]) == (4, 4, 0), totals
 
 
 def test_register_robot_without_registration_settings_is_an_input_error(tmp_path: Path) -> None:
