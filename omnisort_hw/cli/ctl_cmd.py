@@ -4,7 +4,8 @@ Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0
 `max_objects=3`) and as plain strings otherwise (`folder=/data/calib`; a relative path is made
 absolute here). `status` prints a one-screen summary (`--json`: the whole reply); other replies
 are printed as JSON; a job shows its progress on the terminal. The exit code is 0 for an ok
-reply, 1 for an error reply, 3 when the service cannot be reached or does not answer in time.
+reply, 1 for an error reply, 3 when the service cannot be reached or does not answer in time,
+4 when `check` found the camera turned (as `omnisort check`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import json
 import os
 import sys
 from typing import Any
+
+from omnisort_hw.cli.output import EXIT_DRIFT
 
 EXIT_ERROR_REPLY = 1
 EXIT_UNREACHABLE = 3
@@ -122,7 +125,9 @@ def run(args: argparse.Namespace) -> int:
         print(summarise(reply["result"]))
     else:
         print(json.dumps(reply, indent=None if args.compact else 2))
-    return 0 if reply.get("ok") else EXIT_ERROR_REPLY
+    if not reply.get("ok"):
+        return EXIT_ERROR_REPLY
+    return EXIT_DRIFT if args.command == "check" and reply["result"].get("drift") else 0
 
 
 def _refused_progress(reply: dict[str, Any]) -> bool:

@@ -9,6 +9,10 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
+EXIT_DRIFT = 4
+"""`omnisort check` and `omnisort ctl check`: the check ran and found the camera turned (0: it
+did not; errors keep their own codes), so a script can stop the line on it."""
+
 
 def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
     """A command's result as one JSON document on stdout (NaN as null, as on the protocol:

@@ -164,6 +164,11 @@ def check_drift(
     log: RunLog = NullLog,
 ) -> DriftResult:
     """Compare a laser-off capture with the stored calibration (and its reference image)."""
+    from omnisort_hw.pipeline.image_files import check_image_size
+
+    check_image_size(image, calib.model, source)
+    if reference is not None:
+        check_image_size(reference, calib.model, f"{source}'s reference image")
     cfg = config or WatchdogConfig()
     est: RotationEstimate | None = None
     if reference is not None:

@@ -1,4 +1,4 @@
-"""`omnisort check IMAGE`: exit 0 and no drift for the camera as registered, exit 1 and the
+"""`omnisort check IMAGE`: exit 0 and no drift for the camera as registered, exit 4 and the
 turn's angle (within the issue's 0.02 deg) once the simulated mount was knocked."""
 
 from __future__ import annotations
@@ -43,13 +43,19 @@ def test_check_an_image_against_system_json(tmp_path: Path, capsys: pytest.Captu
     assert ok["drift"] is False and ok["source"] == "image" and ok["angle_deg"] < 0.01
     # Degraded 640 px frames: squares ~5 px wide, a few corners fail the saddle test.
     assert ok["board"]["visible"] >= 0.8 * rc.board.cols * rc.board.rows
-    assert main([*base, str(tmp_path / "ref.png"), str(tmp_path / "knocked.png"), "--json"]) == 1
+    assert main([*base, str(tmp_path / "ref.png"), str(tmp_path / "knocked.png"), "--json"]) == 4
     bad = json.loads(capsys.readouterr().out)["result"]
     assert bad["drift"] is True
     assert bad["rotvec_deg"][0] == pytest.approx(0.2, abs=0.02)
     assert np.hypot(*bad["rotvec_deg"][1:]) < 0.02
     # A re-registration would move the base by millimetres: what the knock costs at the robot.
     assert bad["board"]["base_shift_mm"] > 2.0
+    # An image of another size is refused as that, before any reference is looked for.
+    cv2.imwrite(str(tmp_path / "small.png"), cv2.resize(same, (320, 320)))
+    assert main([*base, str(tmp_path / "ref.png"), str(tmp_path / "small.png"), "--json"]) == 2
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert err["code"] == "bad_input" and "320x320" in err["message"], err
+    assert "640x640" in err["message"] and "small.png" in err["message"], err
 
 
 def test_check_refuses_a_tampered_store_file(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

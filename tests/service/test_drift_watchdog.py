@@ -60,8 +60,9 @@ def test_bump_is_detected_refuses_motion_until_acknowledged_or_recalibrated(
             ack = c.call("acknowledge_drift")
             assert ack["ok"] and ack["result"]["acknowledged"] is True
             assert c.call("status")["result"]["drift"]["motion_refused"] is False
-            # The next check still sees the turned camera and refuses again.
-            assert c.call("check")["result"]["drift"] is True
+            # The next check still sees the turned camera and refuses again; `ctl check`
+            # says so by its exit code, as `omnisort check` does.
+            assert _ctl_check(running.port) == 4
             assert c.call("status")["result"]["drift"]["motion_refused"] is True
 
             # A new registration (with the camera as it is now) is a new calibration.
@@ -70,5 +71,15 @@ def test_bump_is_detected_refuses_motion_until_acknowledged_or_recalibrated(
             assert c.call("status")["result"]["drift"]["motion_refused"] is False
             after = c.call("check")["result"]
             assert after["source"] == "image" and after["drift"] is False
+            assert _ctl_check(running.port) == 0
     finally:
         running.stop()
+
+
+def _ctl_check(port: int) -> int:
+    """`omnisort ctl check`'s exit code."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "omnisort_hw.cli", "ctl", "--port", str(port), "check"]
+    return subprocess.run(cmd, capture_output=True, timeout=240).returncode
