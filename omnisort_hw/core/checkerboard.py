@@ -45,6 +45,10 @@ _RING_SAMPLES = 32
 # Inner corners per side: far beyond any printable calibration board, and a bound on the
 # detector's work for a mistyped size.
 MAX_CORNERS = 60
+SQUARE_RANGE_MM = (1.0, 1000.0)
+"""What a checkerboard's square can be: below 1 mm no fisheye pixel resolves it at a cell's
+distances; 1 m squares make a 9x6 board 10 m x 7 m, larger than a cell (a square given in
+micrometres or metres by mistake lands outside)."""
 
 
 @dataclass(frozen=True)
@@ -62,10 +66,11 @@ class BoardSpec:
             cols, rows = (int(x) for x in text.lower().split("x"))
         except ValueError as exc:
             raise ValueError(f"board must look like 9x6 (inner corners), got {text!r}") from exc
-        if not (2 <= cols <= MAX_CORNERS and 2 <= rows <= MAX_CORNERS) or not square_mm > 0:
+        lo, hi = SQUARE_RANGE_MM
+        if not (2 <= cols <= MAX_CORNERS and 2 <= rows <= MAX_CORNERS) or not lo <= square_mm <= hi:
             raise ValueError(
-                f"board {text!r} with square {square_mm} mm is not a board (2 to {MAX_CORNERS} "
-                "inner corners each way, a positive square)"
+                f"board {text!r} with square {square_mm:g} mm is not a board (2 to {MAX_CORNERS} "
+                f"inner corners each way, a square of {lo:g} to {hi:g} mm)"
             )
         return cls(cols, rows, float(square_mm))
 

@@ -194,7 +194,7 @@ COMMANDS: dict[str, Command] = {
                 Arg("what", "str", required=True, choices=("intrinsics", "extrinsics")),
                 Arg("folder", "path", help="intrinsics: absolute path of the image folder"),
                 Arg("board", "str", max_chars=16, help="board inner corners COLSxROWS"),
-                Arg("square_mm", "number", lo=0.1, hi=10000.0, help="board square size"),
+                Arg("square_mm", "number", lo=1.0, hi=1000.0, help="board square size, mm"),
                 Arg("degree", "int", lo=2, hi=12, help="intrinsics: polynomial degree"),
                 _IMAGE,
                 Arg("target", "str", choices=("two-sided", "three-sided", "checkerboards")),

@@ -125,3 +125,19 @@ def test_the_doc_lists_every_row_the_tests_try() -> None:
         assert ("CLI", kind) in rows, kind
     for kind in BAD_CALIBRATIONS:
         assert ("CLI", kind) in rows, kind
+
+
+@pytest.mark.parametrize("square", ["1e9", "0", "-5", "0.01", "5000", "nan"])
+@pytest.mark.parametrize("command", ["intrinsics calibrate", "register-robot"])
+def test_a_square_no_board_can_have_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str, square: str
+) -> None:
+    """`--square 1e9` calibrated and put the robot base 3e10 mm away, exit 0."""
+    files = _good_files(tmp_path)
+    template = IMAGE_COMMANDS[command].replace("--square 30", "").replace("--square 40", "")
+    error = _run(f"{template} --square {square}", files, capsys)
+    assert error["code"] == "bad_input", error
+    assert "--square" in error["message"] and "1 to 1000 mm" in error["message"], error
+    assert json.loads(files["system"].read_text()).get("robot_base") == {
+        "matrix": np.eye(4).tolist()
+    }
