@@ -124,8 +124,7 @@ class CellJobs:
         laser-off capture), saved as `robot_base` in the store's system.json."""
         from omnisort_hw.pipeline import registration
 
-        result = registration.run(self, request, cancel)
-        return {"robot_base": result.record, "path": str(result.path)}
+        return registration.run(self, request, cancel).reply()
 
     def locate(
         self, request: LocateRequest, cancel: threading.Event | None = None
@@ -216,8 +215,9 @@ class CellJobs:
         self.drift.save_reference(image)
         return path
 
-    def map_picture_path(self, image: str | None) -> Path:
-        return self.store.path("system").with_name("map_overlay.png")
+    def picture_path(self, kind: str, image: str | None) -> Path:
+        """One per kind beside system.json, replaced by the next."""
+        return self.store.path("system").with_name(f"{kind}_overlay.png")
 
     def sort(
         self,

@@ -2,8 +2,9 @@
 
 Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0]`,
 `max_objects=3`) and as plain strings otherwise (`folder=/data/calib`; a relative path is made
-absolute here). `status` prints a one-screen summary (`--json`: the whole reply); other replies
-are printed as JSON; a job shows its progress on the terminal. The exit code is 0 for an ok
+absolute here). `status` and a job's reply print a one-screen summary (a job's: its verdict,
+figures and files; `--json`: the whole reply); other replies are printed as JSON; a job shows
+its progress on the terminal. The exit code is 0 for an ok
 reply, 1 for an error reply, 3 when the service cannot be reached or does not answer in time,
 4 when `check` found the camera turned (as `omnisort check`).
 """
@@ -123,6 +124,10 @@ def run(args: argparse.Namespace) -> int:
         from omnisort_hw.cli.status_summary import summarise
 
         print(summarise(reply["result"]))
+    elif reply.get("ok") and progress.is_job and not (args.json or args.compact):
+        from omnisort_hw.cli.reply_summary import summarise_reply
+
+        print(summarise_reply(args.command, reply["result"]))
     else:
         print(json.dumps(reply, indent=None if args.compact else 2))
     if not reply.get("ok"):
@@ -145,7 +150,8 @@ class JobProgress:
 
         spec = COMMANDS.get(command)
         self.command = command
-        self.on_event = self._event if spec is not None and spec.kind == "job" else None
+        self.is_job = spec is not None and spec.kind == "job"
+        self.on_event = self._event if self.is_job else None
         self._bar: Any = None
 
     def __enter__(self) -> JobProgress:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from omnisort_hw.cli.arg_types import output_file
-from omnisort_hw.cli.output import EXIT_DRIFT, print_result
+from omnisort_hw.cli.output import EXIT_DRIFT, print_result, print_verdict
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 
 if TYPE_CHECKING:
@@ -100,6 +100,7 @@ def cmd_check(args: argparse.Namespace) -> int:
                 f"{b['residual_px_median']} px, max {b['residual_px_max']} px; base shift "
                 f"{b['base_shift_mm']} mm"
             )
+        print_verdict(s)
     return EXIT_DRIFT if res.drift else 0
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
-from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.pipeline.requests import DEFAULT_BOARD, DEFAULT_SQUARE_MM
 
 
@@ -135,8 +135,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             std = result["std"].get(key)
             extra = f"  +- {std:.4f}" if std is not None else ""
             print(f"  {key:<20} {value:10.4f}{extra}")
-        if result["overlay_png"]:
-            print(f"picture of what was detected and fitted: {result['overlay_png']}")
+        print_verdict(result)
     return 0
 
 
@@ -158,7 +157,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         picture=True,
     )
     with RunLog(args.log) as log:
-        rig = FileRig(config=args.config, system=args.system, map_png=args.png, log=log)
+        rig = FileRig(config=args.config, system=args.system, png=args.png, log=log)
         result = laser_map.run(rig, request)
     _warn(result.picture)
     if args.json:
@@ -171,6 +170,5 @@ def cmd_map(args: argparse.Namespace) -> int:
                 f"  segment {i}: {len(s.points_S):5d} points  distance {s.distance_mm:8.1f} mm"
                 f"  bearing {s.bearing_deg:7.1f} deg  length {s.length_mm:7.1f} mm"
             )
-        if result.picture["overlay_png"]:
-            print(f"picture of the points and their top view: {result.picture['overlay_png']}")
+        print_verdict(result.reply())
     return 0

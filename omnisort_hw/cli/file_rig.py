@@ -55,7 +55,7 @@ class FileRig:
     system: Path | None = None
     camera: Path | None = None
     out: Path | None = None
-    map_png: Path | None = None
+    png: Path | None = None
     tone: ToneCurve = SRGB
     log: RunLog = NullLog
     sort_config: SortConfig | None = UNSET
@@ -148,12 +148,12 @@ class FileRig:
 
         return write_robot_base(self.system_path, record)
 
-    def map_picture_path(self, image: str | None) -> Path:
-        """`--png`, else named after the image, beside system.json."""
-        if self.map_png is not None:
-            return self.map_png
+    def picture_path(self, kind: str, image: str | None) -> Path:
+        """`--png`, else named after the image and the kind, beside system.json."""
+        if self.png is not None:
+            return self.png
         stem = Path(image).stem if image is not None else "capture"
-        return self.system_path.with_name(f"{stem}_map_overlay.png")
+        return self.system_path.with_name(f"{stem}_{kind}_overlay.png")
 
     def run_logged(
         self,

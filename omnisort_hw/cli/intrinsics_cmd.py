@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
-from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.pipeline.requests import DEFAULT_BOARD
 
 
@@ -98,9 +98,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         for cr in result.corners_rejected:
             print(f"  corner {cr.corner} of {cr.name} left out: {cr.reason}")
         print(f"  outer {OUTER_BAND:.0%} of the image circle covered: {figures.outer_coverage:.0%}")
-        if figures.warning:
-            print(f"  WARNING: {figures.warning}")
         print(f"  report                  {report_path}")
+        print_verdict(summary)
     return 0
 
 

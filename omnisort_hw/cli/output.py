@@ -23,6 +23,18 @@ def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
     print(json.dumps(doc, indent=indent))
 
 
+def print_verdict(reply: Mapping[str, Any]) -> None:
+    """A reply's verdict and its picture, as the last lines of a command's human output."""
+    from omnisort_hw.pipeline.verdict import verdict_lines
+
+    if reply.get("overlay_png"):
+        print(f"picture: {reply['overlay_png']}")
+    elif reply.get("overlay_problem"):
+        print(f"no picture: {reply['overlay_problem']}")
+    if "verdict" in reply:
+        print("\n".join(verdict_lines(reply["verdict"])))
+
+
 def print_error(code: str, message: str) -> None:
     """A command's error as one JSON document on stdout."""
     print(json.dumps({"ok": False, "error": {"code": code, "message": message}}))

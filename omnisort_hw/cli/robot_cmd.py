@@ -23,7 +23,7 @@ from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.cell_file import load_cell, sorting_config
-from omnisort_hw.cli.output import print_result
+from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.pipeline.requests import DEFAULT_BOARD
@@ -195,23 +195,13 @@ def cmd_register(args: argparse.Namespace) -> int:
             registration_config=_registration(args),
         )
         result = registration.run(rig, request)
-    record, reg, written = result.record, result.registration, result.path
+    reply = result.reply()
     if args.json:
-        print_result({**record, "written": str(written) if written else None})
-    else:
-        x, y, z = record["xyz_mm"]
-        r, p, w = record["rpy_deg"]
-        std = reg.std
-        print(
-            f"robot base T_SB: xyz ({x:.2f}, {y:.2f}, {z:.2f}) mm, "
-            f"rpy ({r:.3f}, {p:.3f}, {w:.3f}) deg"
-        )
-        print(
-            f"  1-sigma: x {std['x_mm']:.2f}, y {std['y_mm']:.2f}, z {std['z_mm']:.2f} mm, "
-            f"yaw {std['yaw_deg']:.3f} deg (corners +- {reg.corner_sigma_px:.3f} px); "
-            f"free-fit tilt {reg.free_tilt_deg:.3f} deg"
-        )
-        print(f"written to {written}" if written else "not written (--dry-run)")
+        print_result(reply)
+        return 0
+    print("\n".join(result.lines(with_verdict=False)))
+    print(f"written to {result.path}" if result.path else "not written (--dry-run)")
+    print_verdict(reply)
     return 0
 
 
@@ -259,8 +249,9 @@ def cmd_locate(args: argparse.Namespace) -> int:
             registration_config=None,
         )
         result = locate.run(rig, request)
+    reply = result.reply()
     if args.json:
-        print_result(result.reply())
+        print_result(reply)
         return 0
     cubes = result.cubes
     print(f"{len(cubes)} cubes")
@@ -271,6 +262,7 @@ def cmd_locate(args: argparse.Namespace) -> int:
             f"B ({b[0]:8.1f}, {b[1]:8.1f}, {b[2]:8.1f}) mm  yaw {c.yaw_B_deg:6.1f} deg (B)  "
             f"+- {c.sigma_mm:.2f} mm" + (f"  [{'; '.join(c.notes)}]" if c.notes else "")
         )
+    print_verdict(reply)
     return 0
 
 

@@ -195,32 +195,39 @@ def projection_covariances(result: IntrinsicResult, rays: np.ndarray) -> np.ndar
     return np.einsum("gcp,pq,gdq->gcd", J, result.covariance, J)
 
 
-def uncertainty_png(unc: ProjectionUncertainty, limit_px: float | None = None) -> np.ndarray:
+def uncertainty_top(unc: ProjectionUncertainty, within_deg: float | None = None) -> float:
+    """The colour scale's top (px): the 99th percentile of the sigmas inside `within_deg` off
+    the axis (the image circle; all when None), so the few cells beyond the circle, where the
+    polynomial is extrapolated and the sigma explodes, do not paint the circle one colour."""
+    ok = np.isfinite(unc.sigma_px)
+    if within_deg is not None:
+        inside = ok & (unc.angle_deg <= within_deg)
+        ok = inside if inside.any() else ok
+    return float(np.percentile(unc.sigma_px[ok], 99)) if ok.any() else 1.0
+
+
+def uncertainty_png(
+    unc: ProjectionUncertainty, limit_px: float | None = None, within_deg: float | None = None
+) -> np.ndarray:
     """The uncertainty map as a BGR picture (one cell per grid point, scaled up), colour from
-    0 (blue) to `limit_px` (red; default: the 99th percentile), black outside the view."""
+    0 (blue) to `limit_px` (red; default: `uncertainty_top` within `within_deg`; beyond it,
+    red), black outside the view."""
     import cv2
+
+    from omnisort_hw.core.overlays import put_text
 
     grid = unc.sigma_px.reshape(unc.shape)
     finite = np.isfinite(grid)
-    top = limit_px or (float(np.percentile(grid[finite], 99)) if finite.any() else 1.0)
+    top = limit_px or uncertainty_top(unc, within_deg)
     scaled = np.clip(np.nan_to_num(grid / max(top, 1e-9)) * 255, 0, 255).astype(np.uint8)
     img = cv2.applyColorMap(scaled, cv2.COLORMAP_JET)
     img[~finite] = 0
     img = cv2.resize(img, None, fx=unc.step_px, fy=unc.step_px, interpolation=cv2.INTER_NEAREST)
-    legend = f"projection sigma, worst direction: blue 0 .. red {top:.3f} px"
-    cv2.putText(img, legend, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
-    for a, s in unc.at_angles().items():
+    legend = f"projection sigma, worst direction: blue 0 .. red {top:.3f} px and more"
+    put_text(img, legend, (8, 20))
+    for i, (a, s) in enumerate(unc.at_angles().items()):
         if s is not None:
-            y = 40 + 18 * list(unc.at_angles()).index(a)
-            cv2.putText(
-                img,
-                f"{a} deg: {s:.3f} px",
-                (8, y),
-                cv2.FONT_HERSHEY_SIMPLEX,
-                0.45,
-                (255, 255, 255),
-                1,
-            )
+            put_text(img, f"{a} deg: {s:.3f} px", (8, 40 + 18 * i), scale=0.45)
     return img
 
 

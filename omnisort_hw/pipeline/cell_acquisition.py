@@ -90,5 +90,7 @@ def acquire(rig: CaptureRig, image: str | None, board: bool = True) -> Acquired:
     else:
         record.update(stripe)
     rig.prune_captures()
-    board_img = cap.board_image if cap.board_image is not None else cap.stripe_image
+    board_img = next(
+        i for i in (cap.board_image, cap.scene_image, cap.stripe_image) if i is not None
+    )
     return Acquired(board_img, cap.stripe_image, cap.stripe_px, record, record["path"], cap.tone)

@@ -34,6 +34,7 @@ from omnisort_hw.core.drift import (
 )
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
+from omnisort_hw.pipeline.verdict import Check, Verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
 REFERENCE_NAME = "drift_reference.png"
@@ -127,7 +128,25 @@ class DriftResult:
         }
         if self.board_problem:
             out["board_problem"] = self.board_problem
+        out["verdict"] = self.verdict().to_dict()
         return out
+
+    def verdict(self) -> Verdict:
+        """The turn against the decision's own threshold (its false-alarm rate and the
+        estimate's sigma): beyond it motion is refused until a recalibration or an
+        acknowledgement."""
+        d = self.decision
+        turned = Check(
+            "camera turned since the registration",
+            "fail" if d.drift else "pass",
+            f"{d.angle_deg:.4f} deg",
+            f"drift above {d.threshold_deg:.4f} deg",
+            "motion is refused: register the robot again (or recalibrate), or acknowledge "
+            "the drift if the cell was checked by hand"
+            if d.drift
+            else "",
+        )
+        return Verdict("drift check", (turned,))
 
 
 def registration_for(

@@ -28,6 +28,7 @@ from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.requests import ExtrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
+from omnisort_hw.pipeline.verdict import Check, Verdict, graded
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -234,7 +235,44 @@ def calibration_result(
         "residuals": calib.residuals,
         "image": image,
         "tone_curve": tone.name,
+        "verdict": calibration_verdict(calib).to_dict(),
     }
+
+
+ANGLE_STD_DEG = (0.015, 0.03)
+"""An angle's 1-sigma (deg) that passes, and beyond which the calibration fails: the cell's
+goal is each angle within 0.03 deg (commissioning), so 2 sigma within it passes."""
+DISTANCE_STD_MM = (0.5, 1.0)
+"""The laser distance's 1-sigma (mm) likewise, against its goal of 1 mm."""
+
+
+def calibration_verdict(calib: SystemCalibration) -> Verdict:
+    """The fitted parameters' sigmas against the cell's goals; a method that gives none is a
+    warning (the joint method does)."""
+    std = calib.std or {}
+    angles = [float(v) for k, v in std.items() if k.endswith("_deg") and v is not None]
+    distance = std.get("laser_distance_mm")
+    if not angles or distance is None:
+        return Verdict(
+            "extrinsics",
+            (
+                Check(
+                    "parameter sigmas",
+                    "warn",
+                    f"not estimated by {calib.method}",
+                    "the joint method gives them",
+                    "calibrate with the joint method to know how good the result is",
+                ),
+            ),
+        )
+    advice = "retake with the whole target in view, its borders and stripe sharp"
+    return Verdict(
+        "extrinsics",
+        (
+            graded("worst angle sigma", max(angles), "deg", *ANGLE_STD_DEG, advice=advice),
+            graded("laser distance sigma", float(distance), "mm", *DISTANCE_STD_MM, advice=advice),
+        ),
+    )
 
 
 def _log_calibration(log: RunLog, calib: SystemCalibration) -> None:

@@ -21,6 +21,7 @@ import numpy as np
 from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.intrinsics import IntrinsicResult, calibrate_images
 from omnisort_hw.core.intrinsics_report import (
+    LOW_COVERAGE,
     OUTER_BAND,
     ReportFigures,
     build_report,
@@ -39,6 +40,7 @@ from omnisort_hw.errors import InputError, MotionRefusedError
 from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.requests import IntrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
+from omnisort_hw.pipeline.verdict import Check, Verdict, graded
 from omnisort_hw.runlog import NullLog, RunLog
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -99,6 +101,12 @@ def read_images(
     return images
 
 
+CORNER_RMS_PX = (0.5, 1.0)
+"""Corner RMS (px) that passes, and beyond which a calibration fails: twice what the renders
+give (0.23 px, Unity's point-sampled faces; a real lens gives 0.08 px), and the pixel beyond
+which corners were not found where they are."""
+
+
 @dataclass
 class IntrinsicsResult:
     """A calibration, the camera.json it was saved as and its report picture."""
@@ -126,7 +134,32 @@ class IntrinsicsResult:
                 "image_circle": figures.circle_field_deg,
                 "corners_seen": figures.corners_field_deg,
             },
+            "verdict": self.verdict().to_dict(),
         }
+
+    def verdict(self) -> Verdict:
+        """The corners' RMS against what a corner detector gives (CORNER_RMS_PX), and the
+        image circle's rim covered (where the targets and the laser line are)."""
+        figures = self.calibration.figures
+        coverage = figures.outer_coverage
+        covered = Check(
+            f"outer {OUTER_BAND:.0%} of the image circle covered",
+            "pass" if coverage >= LOW_COVERAGE else "warn",
+            f"{coverage:.0%}",
+            f">= {LOW_COVERAGE:.0%}",
+            ""
+            if coverage >= LOW_COVERAGE
+            else "add views with the board near the rim; go on only if the targets and the "
+            "laser line stay where corners were (the report's uncertainty map shows where)",
+        )
+        rms = graded(
+            "corner RMS",
+            self.calibration.result.rms_px,
+            "px",
+            *CORNER_RMS_PX,
+            advice="look at the report's residuals: a blurred or moved view, a wrong board size",
+        )
+        return Verdict("intrinsics", (rms, covered))
 
 
 def run(
@@ -232,4 +265,5 @@ def calibrate_intrinsics(
         "calibration/intrinsics/parameters",
         json.dumps({"model": result.model.to_dict(), "std": result.std}, indent=1, default=str),
     )
-    return IntrinsicCalibration(result, record, figures, picture, uncertainty_png(unc))
+    map_png = uncertainty_png(unc, within_deg=figures.circle_field_deg / 2.0)
+    return IntrinsicCalibration(result, record, figures, picture, map_png)

@@ -27,6 +27,7 @@ from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
+from omnisort_hw.pipeline.verdict import Verdict, at_least
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -118,7 +119,8 @@ def map_laser(
     else:
         finite = np.all(np.isfinite(points), axis=1)
         log.points3d("map/points_S", points[finite], color=sigma_colours(sigmas.normal_mm[finite]))
-        log.scalar("map/sigma_normal_mm_median", float(np.nanmedian(sigmas.normal_mm)))
+        if np.isfinite(sigmas.normal_mm).any():
+            log.scalar("map/sigma_normal_mm_median", float(np.nanmedian(sigmas.normal_mm)))
     for i, seg in enumerate(result.segments):
         log.points3d(f"map/segments/{i}", seg.points_S, color=(0, 200, 255))
     return result
@@ -162,7 +164,23 @@ class MapResult:
 
     def reply(self, with_points: bool = False) -> dict[str, Any]:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
-        return {"image": self.image, **self.laser_map.summary(with_points), **self.picture}
+        return {
+            "image": self.image,
+            **self.laser_map.summary(with_points),
+            **self.picture,
+            "verdict": self.verdict().to_dict(),
+        }
+
+    def verdict(self) -> Verdict:
+        """A map with no segment maps nothing: a laser off, or its line out of view."""
+        n_points = len(self.laser_map.pixels)
+        advice = (
+            f"nothing was mapped ({n_points} laser points, none forming a segment): is the "
+            "laser on, and does its line fall on a surface in view?"
+        )
+        return Verdict(
+            "laser map", (at_least("segments", len(self.laser_map.segments), 1, "warn", advice),)
+        )
 
 
 def run(rig: Rig, request: MapRequest, cancel: threading.Event | None = None) -> MapResult:
@@ -179,7 +197,7 @@ def run(rig: Rig, request: MapRequest, cancel: threading.Event | None = None) ->
     result = MapResult(laser_map, acq.record)
     if request.picture:
         result.picture = write_picture(
-            rig.map_picture_path(request.image),
-            lambda: map_overlay(stripe, laser_map, calib, acq.source),
+            rig.picture_path("map", request.image),
+            lambda: map_overlay(acq.board, laser_map, calib, acq.source),
         )
     return result

@@ -17,11 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.core.cell_pictures import draw_cubes
 from omnisort_hw.core.cube_location import Cube, LocateSettings, locate_cubes
 from omnisort_hw.core.cube_uncertainty import add_calibration_part, rotation_covariance
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
+from omnisort_hw.core.overlays import write_picture
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.core.registration import Registration
 from omnisort_hw.errors import NotAvailableError
@@ -30,6 +32,7 @@ from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.requests import LocateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
+from omnisort_hw.pipeline.verdict import Verdict, at_least, graded, verdict_lines
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -51,6 +54,38 @@ class LocateResult:
 
     cubes: list[Cube]
     diagnostics: dict[str, Any] = field(repr=False)
+    max_sigma_mm: float = SortConfig.max_sigma_mm
+    picture: dict[str, Any] = field(default_factory=dict)
+
+    def lines(self) -> list[str]:
+        """The location in a few lines for people (the picture's legend, the CLI)."""
+        out = [f"{len(self.cubes)} cubes"]
+        for i, c in enumerate(self.cubes):
+            x, y, z = c.center_B
+            out.append(
+                f"{i} {c.color}: B ({x:.1f}, {y:.1f}, {z:.1f}) mm, yaw {c.yaw_B_deg:.1f} deg, "
+                f"sigma {c.sigma_mm:.2f} mm"
+            )
+        return [*out, *verdict_lines(self.verdict().to_dict())]
+
+    def verdict(self, colors: Sequence[str] | None = None) -> Verdict:
+        """A cube located worse than `[sorting] max_sigma_mm` is skipped by a sort (its
+        outline fit's own sigma, as the sort judges it); no cube is worth a look."""
+        cubes = [c for c in self.cubes if colors is None or c.color in colors]
+        found = at_least(
+            "cubes", len(cubes), 1, "warn", "no cube found: look at the picture (light, colours)"
+        )
+        fits = [float(np.hypot(*c.sigma_xy_mm)) for c in cubes]
+        worst = max(fits, default=0.0)
+        uncertain = sum(not s <= self.max_sigma_mm for s in fits)
+        sigma = graded(
+            "worst outline fit sigma",
+            worst,
+            "mm",
+            self.max_sigma_mm,
+            advice=f"{uncertain} cube(s) would be skipped by a sort as too uncertain",
+        )
+        return Verdict("locate", (found, sigma) if cubes else (found,))
 
     def reply(self, colors: Sequence[str] | None = None) -> dict[str, Any]:
         """The answer at every door: the cubes (of `colors` when given), their count, and the
@@ -61,7 +96,13 @@ class LocateResult:
             for r in self.diagnostics.get("rejected", [])
             if r["reason"] != "outside the search region"
         ]
-        return {"cubes": found, "count": len(found), "rejected": rejected}
+        return {
+            "cubes": found,
+            "count": len(found),
+            "rejected": rejected,
+            **self.picture,
+            "verdict": self.verdict(colors).to_dict(),
+        }
 
 
 def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None) -> LocateResult:
@@ -100,7 +141,12 @@ def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None)
         cancel=cancel,
         what="location",
     )
-    return LocateResult(cubes, diag)
+    result = LocateResult(cubes, diag, cfg.max_sigma_mm)
+    result.picture = write_picture(
+        rig.picture_path("locate", request.image),
+        lambda: draw_cubes(colour, calib, T_SB, cubes, result.lines()),
+    )
+    return result
 
 
 def locate_in_images(

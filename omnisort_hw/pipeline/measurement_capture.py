@@ -96,6 +96,7 @@ class MeasurementCapture:
     board_image: np.ndarray | None
     record: dict[str, Any] = field(default_factory=dict)
     tone: ToneCurve | None = None  # the camera's curve as measured (None: not measured)
+    scene_image: np.ndarray | None = None  # a laser-off frame of the stripe's: the pictures'
 
 
 class _Timer:
@@ -288,7 +289,7 @@ def capture_measurement(
         "stripe_points": int(pixels.shape[0]),
     }
     log.text("capture/record", str(record))
-    return MeasurementCapture(diff.image, pixels, board_image, record, tone)
+    return MeasurementCapture(diff.image, pixels, board_image, record, tone, off[-1])
 
 
 def _restore(

@@ -11,29 +11,87 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from omnisort_hw.config.sorting import RegistrationConfig
+from omnisort_hw.core.cell_pictures import draw_registration
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.overlays import write_picture
 from omnisort_hw.core.registration import Registration, register_robot
-from omnisort_hw.errors import CalibrationFileError, NotAvailableError
+from omnisort_hw.errors import CalibrationError, CalibrationFileError, NotAvailableError
 from omnisort_hw.pipeline.intrinsics import board_record
 from omnisort_hw.pipeline.requests import RegisterRequest
 from omnisort_hw.pipeline.rig import Rig
+from omnisort_hw.pipeline.verdict import Verdict, graded, verdict_lines
 from omnisort_hw.runlog import NullLog, RunLog
+
+MAX_BASE_DISTANCE_MM = 10000.0
+"""No robot base of a cell is farther than this from its camera (a UR10e reaches 1.3 m; the
+camera sees the floor a few metres around it): farther is a wrong offset or square size."""
+BASE_SIGMA_MM = (2.5, 5.0)
+"""The base's 1-sigma position that passes, and beyond which it fails: every cube's position in
+B carries it, and `[sorting] max_sigma_mm` (5 mm by default) skips cubes located worse."""
 
 
 @dataclass
 class RegisterResult:
-    """A registration, its `robot_base` record and where it was saved (None: not saved)."""
+    """A registration, its `robot_base` record, where it was saved (None: not saved) and its
+    picture."""
 
     registration: Registration
     record: dict[str, Any]
     path: Path | None
+    picture: dict[str, Any] = field(default_factory=dict)
+
+    def verdict(self) -> Verdict:
+        """The board corners' RMS as the intrinsics' are judged, and the base's sigma."""
+        from omnisort_hw.pipeline.intrinsics import CORNER_RMS_PX
+
+        reg = self.registration
+        rms = graded(
+            "board corner RMS",
+            reg.rms_px,
+            "px",
+            *CORNER_RMS_PX,
+            advice="is the whole board flat on the floor, in view and in focus?",
+        )
+        worst = max(reg.std.get("x_mm", 0.0), reg.std.get("y_mm", 0.0), reg.std.get("z_mm", 0.0))
+        sigma = graded(
+            "base position sigma",
+            worst,
+            "mm",
+            *BASE_SIGMA_MM,
+            advice="the board is small or far in the image: a larger board, or nearer the camera",
+        )
+        return Verdict("robot registration", (rms, sigma))
+
+    def reply(self) -> dict[str, Any]:
+        """The answer at every door: the `robot_base` record, where it was saved, the picture
+        and the verdict."""
+        return {
+            "robot_base": self.record,
+            "path": str(self.path) if self.path is not None else None,
+            **self.picture,
+            "verdict": self.verdict().to_dict(),
+        }
+
+    def lines(self, with_verdict: bool = True) -> list[str]:
+        """The registration in a few lines for people (the picture's legend, the CLI)."""
+        x, y, z = self.record["xyz_mm"]
+        r, p, w = self.record["rpy_deg"]
+        std, reg = self.registration.std, self.registration
+        return [
+            f"robot base T_SB: xyz ({x:.1f}, {y:.1f}, {z:.1f}) mm, "
+            f"rpy ({r:.2f}, {p:.2f}, {w:.2f}) deg",
+            f"1-sigma: x {std['x_mm']:.2f}, y {std['y_mm']:.2f}, z {std['z_mm']:.2f} mm, "
+            f"yaw {std['yaw_deg']:.3f} deg",
+            f"{len(reg.corners_px)} board corners, RMS {reg.rms_px:.3f} px",
+            *(verdict_lines(self.verdict().to_dict()) if with_verdict else []),
+        ]
 
 
 def run(
@@ -51,9 +109,21 @@ def run(
     image = rig.frame(request.image, laser=False)
     rig.runlog.image("registration/image", image)
     reg = rig.run_logged(register_from_image, image, calib, rc, cancel=cancel, what="registration")
+    distance = float(np.linalg.norm(reg.T_SB[:3, 3]))
+    if not distance <= MAX_BASE_DISTANCE_MM:
+        raise CalibrationError(
+            f"registration: the robot base would be {distance:.0f} mm from the camera, farther "
+            f"than any cell ({MAX_BASE_DISTANCE_MM:.0f} mm); check [registration] offset and "
+            "square_mm (nothing was saved)"
+        )
     record = robot_base_record(reg, rc, request.image or "capture", request.model)
     path = rig.save_robot_base(record, image) if request.save else None
-    return RegisterResult(reg, record, path)
+    result = RegisterResult(reg, record, path)
+    result.picture = write_picture(
+        rig.picture_path("registration", request.image),
+        lambda: draw_registration(image, calib, reg.corners_px, reg.T_SB, result.lines()),
+    )
+    return result
 
 
 def register_from_image(

@@ -84,8 +84,9 @@ class Rig(CaptureRig, Protocol):
         the rig watches drift); the file's path."""
         ...
 
-    def map_picture_path(self, image: str | None) -> Path:
-        """Where the map's picture of `image` (None: a capture) goes."""
+    def picture_path(self, kind: str, image: str | None) -> Path:
+        """Where the picture of a `kind` ("map", "registration", "locate") of `image` (None: a
+        capture) goes."""
         ...
 
 

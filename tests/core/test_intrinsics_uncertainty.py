@@ -138,3 +138,23 @@ def test_model_carries_its_covariance() -> None:
 
     pairs = perturbed_models(replace(result.model, uncertainty=unc))
     assert len(pairs) == result.n_intrinsic
+
+
+def test_the_colour_scale_is_fitted_to_the_image_circle() -> None:
+    """Beyond the image circle the polynomial is extrapolated and the sigma explodes: scaled by
+    all cells, the circle itself was one colour."""
+    from omnisort_hw.core.intrinsics_uncertainty import (
+        ProjectionUncertainty,
+        uncertainty_png,
+        uncertainty_top,
+    )
+
+    angle = np.linspace(0.0, 110.0, 400)
+    sigma = np.where(angle <= 92.5, 0.01 + 0.01 * angle / 92.5, 50.0)
+    unc = ProjectionUncertainty(4, np.zeros((400, 2)), sigma, angle, (20, 20), 0.01)
+    inside = uncertainty_top(unc, within_deg=92.5)
+    assert 0.019 <= inside <= 0.02
+    assert uncertainty_top(unc) == 50.0
+    img = uncertainty_png(unc, within_deg=92.5)
+    colours = {tuple(c) for c in img.reshape(-1, 3)[:: 16 * 4]}
+    assert len(colours) > 10  # the circle shows its gradient, not one colour

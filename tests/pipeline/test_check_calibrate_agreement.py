@@ -69,7 +69,7 @@ def test_cli_check_is_the_watchdogs_check(tmp_path: Path) -> None:
     save_reference(store.state_dir, ref, calibration_key(store.read("system").payload))
     # No [registration] in the cell file: both take the board the base was registered with.
     cell = Cell(CellDevices(), store, config=CellConfig())
-    for name, img, code in (("same", same, 0), ("knocked", knocked, 1)):
+    for name, img, code in (("same", same, 0), ("knocked", knocked, 4)):
         path = tmp_path / f"{name}.png"
         cv2.imwrite(str(path), img)
         service = as_json(cell.drift.check(str(path)))

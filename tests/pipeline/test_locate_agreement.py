@@ -60,7 +60,10 @@ def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
     service = cell.locate(LocateRequest(str(image_path)))
     reply = locate_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
-    # The whole answer: the cubes, their count and the blobs rejected with their reasons.
+    # The whole answer: the cubes, their count, the blobs rejected with their reasons and the
+    # verdict; each door writes its picture where it keeps them (state dir; beside the file).
+    service_pic, cli_pic = Path(service.pop("overlay_png")), Path(reply.pop("overlay_png"))
+    assert service_pic.is_file() and cli_pic.is_file() and service_pic != cli_pic
     assert json.loads(json.dumps(service)) == reply
     cli = reply["cubes"]
     # Not a vacuous agreement: every cube of the scene, where the truth has it.

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 
@@ -196,10 +197,15 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
                     core_problems.append(ran["extrinsics"])
 
             # Laser map of the scene, against the truth's laser polylines.
-            r = c.call("map", {"points": True})
+            r = c.call("map", {"points": True, "picture": True})
             if r["ok"]:
                 res = r["result"]
                 assert res["points_on_plane"] > 50 and res["segments"], res
+                assert res["verdict"]["level"] == "pass", res["verdict"]
+                # The points are drawn on the scene (a laser-off frame), not on the capture's
+                # laser light, which is black but for the stripe (its median pixel is 0).
+                scene = cv2.imread(res["overlay_png"])[:, :WIDTH]
+                assert np.median(scene) > 10, np.median(scene)
                 pts = np.asarray(res["points_S"], float)
                 truth_pts = _polyline_samples(truth["laser_polylines_S"])
                 d = np.min(np.linalg.norm(pts[:, None, :] - truth_pts[None], axis=2), axis=1)
@@ -223,6 +229,8 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
                 r_err = float(np.degrees(np.arccos(np.clip((np.trace(R_rel) - 1) / 2, -1, 1))))
                 figures.update(base_mm=t_err, base_deg=r_err)
                 ran["register_robot"] = f"base error {t_err:.1f} mm, {r_err:.2f} deg"
+                assert r["result"]["verdict"]["level"] == "pass", r["result"]["verdict"]
+                assert Path(r["result"]["overlay_png"]).is_file()
                 st = c.call("status")["result"]["calibration"]
                 assert st["robot_registered"] is True
             else:
@@ -238,6 +246,7 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
             r = c.call("locate")
             located: dict[str, np.ndarray] = {}
             if r["ok"]:
+                assert Path(r["result"]["overlay_png"]).is_file()
                 for cube in r["result"]["cubes"]:
                     located[cube["color"]] = np.asarray(cube["center_S_mm"])
                 errs = {k: float(np.linalg.norm(v - true_cubes[k])) for k, v in located.items()}
