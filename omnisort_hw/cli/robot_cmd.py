@@ -308,7 +308,8 @@ def _print_report(result: dict[str, Any], as_json: bool) -> None:
     t = result["totals"]
     print(
         f"totals: {t['cubes']} cubes, {t['sorted']} sorted, {t['skipped']} skipped, "
-        f"{t['failed']} failed; motion {t['motion_s']:.1f} s; wall {t['wall_s']:.1f} s"
+        f"{t['failed']} failed; planned motion {t['planned_motion_s']:.1f} s; "
+        f"wall {t['wall_s']:.1f} s"
         + (
             f"; verified: {t['sorted_ok']} in the right bin, {t['collisions']} collisions, "
             f"mean position error {t['mean_position_error_mm']} mm"
@@ -316,6 +317,7 @@ def _print_report(result: dict[str, Any], as_json: bool) -> None:
             else ""
         )
     )
+    print_verdict(result)
 
 
 def cmd_evaluate_sorting(args: argparse.Namespace) -> int:

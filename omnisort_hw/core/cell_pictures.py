@@ -126,7 +126,7 @@ def draw_cubes(
         draw_polyline(left, ellipse, (0, 0, 0), 2 * thick + 2)
         draw_polyline(left, ellipse, ELLIPSE, 2 * thick)
         x, y = cube.bbox[:2]
-        label = f"{i} {cube.color} {cube.sigma_mm:.1f} mm"
+        label = str(i)  # the legend gives each cube's colour, position and sigma
         put_text(
             left, label, (int(x), max(12 * thick, int(y) - 6 * thick)), (255, 255, 255), 0.5 * thick
         )

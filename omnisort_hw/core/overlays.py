@@ -105,9 +105,13 @@ def draw_polyline(
 def put_text(
     image: np.ndarray, text: str, org: tuple[int, int], colour: Colour = _WHITE, scale=0.5
 ) -> None:
-    """Text with a dark outline, readable on any background."""
+    """Text with a dark outline, readable on any background. The outline is the same text
+    stamped one pixel around: OpenCV's font widens with the stroke, so a thicker outline ran
+    past the text and read as a second copy, offset."""
     thick = max(1, round(scale * 2))
-    cv2.putText(image, text, org, _FONT, scale, (0, 0, 0), thick + 2, cv2.LINE_AA)
+    x, y = org
+    for dx, dy in ((-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)):
+        cv2.putText(image, text, (x + dx, y + dy), _FONT, scale, (0, 0, 0), thick, cv2.LINE_AA)
     cv2.putText(image, text, org, _FONT, scale, colour, thick, cv2.LINE_AA)
 
 

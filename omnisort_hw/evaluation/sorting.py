@@ -237,7 +237,7 @@ def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, A
             position_errors_B_mm=report.extra.get("errors_B_mm", []),
             registration_error_mm=reg_mm,
             registration_error_deg=reg_deg,
-            motion_s_per_pick=tot["motion_s_per_pick"],
+            motion_s_per_pick=tot["planned_motion_s_per_pick"],
             cycle=report.extra.get("cycle", {}),
             wall_s_per_pick=wall / picks,
             skipped=[

@@ -141,6 +141,6 @@ def resolve_before_sort(
     arm.gripper.open()
     journal.clear_in_flight(f"placed in bin {bin_spec.color}")
     out.status = "sorted"
-    out.motion_s = float(sum(m.traj.duration for m in moves))
+    out.planned_motion_s = float(sum(m.traj.duration for m in moves))
     sorter._go_home(planner)
     return out

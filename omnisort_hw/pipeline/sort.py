@@ -516,7 +516,7 @@ class Sorter:
             if "back" in paths:
                 self._send_path(paths["back"], plan.paths_s.get("back"))
             out.status = "sorted"
-            out.motion_s = plan.duration_s
+            out.planned_motion_s = plan.duration_s
         except Exception as exc:
             out.status, out.reason = "failed", f"{type(exc).__name__}: {exc}"
             raise

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.pipeline.verdict import Check, Verdict
+
 
 def _finite(value: float, digits: int) -> float | None:
     """A rounded number for JSON, None when it is not finite (strict JSON has no NaN)."""
@@ -28,7 +30,7 @@ class CubeOutcome:
     status: str  # "sorted" (placed), "skipped" (refused before motion), "failed"
     reason: str = ""
     bin: str | None = None
-    motion_s: float = 0.0
+    planned_motion_s: float = 0.0  # the pick's planned motion (its lower bound)
     error_mm: float | None = None  # filled by a verifier
     in_right_bin: bool | None = None  # filled by a verifier
     relocated: bool = False  # moved after the first capture; located again by a check
@@ -44,7 +46,7 @@ class CubeOutcome:
             "status": self.status,
             "reason": self.reason,
             "bin": self.bin,
-            "motion_s": round(self.motion_s, 3),
+            "planned_motion_s": round(self.planned_motion_s, 3),
         }
         if self.error_mm is not None:
             out["error_mm"] = round(self.error_mm, 3)
@@ -91,8 +93,10 @@ class SortReport:
             "sorted": len(picked),
             "skipped": sum(o.status == "skipped" for o in self.outcomes),
             "failed": sum(o.status == "failed" for o in self.outcomes),
-            "motion_s": round(sum(o.motion_s for o in self.outcomes), 3),
-            "motion_s_per_pick": round(sum(o.motion_s for o in picked) / len(picked), 3)
+            "planned_motion_s": round(sum(o.planned_motion_s for o in self.outcomes), 3),
+            "planned_motion_s_per_pick": round(
+                sum(o.planned_motion_s for o in picked) / len(picked), 3
+            )
             if picked
             else None,
             "wall_s": round(self.wall_s, 3),
@@ -104,6 +108,36 @@ class SortReport:
             out["collisions"] = self.collisions
         return out
 
+    def verdict(self) -> Verdict:
+        """Every located cube sorted passes; a skipped one (too uncertain, no bin, cancelled)
+        is a warning with its reason; a failed pick fails; with a verifier, a cube out of its
+        bin fails too."""
+        t = self.totals()
+        reasons = sorted({o.reason for o in self.outcomes if o.status != "sorted" and o.reason})
+        advice = "; ".join(reasons[:3])
+        checks = [
+            Check(
+                "failed picks",
+                "fail" if t["failed"] else "pass",
+                str(t["failed"]),
+                "0",
+                advice if t["failed"] else "",
+            ),
+            Check(
+                "skipped cubes",
+                "warn" if t["skipped"] else "pass",
+                str(t["skipped"]),
+                "0",
+                advice if t["skipped"] else "",
+            ),
+        ]
+        if self.verified:
+            wrong = t["cubes"] - t["sorted_ok"]
+            checks.append(
+                Check("cubes not in their bin", "fail" if wrong else "pass", str(wrong), "0")
+            )
+        return Verdict("sort", tuple(checks))
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "cubes": [o.to_dict() for o in self.outcomes],
@@ -111,4 +145,5 @@ class SortReport:
             "registration": self.registration,
             "rejected_blobs": self.rejected_blobs,
             **self.extra,
+            "verdict": self.verdict().to_dict(),
         }
