@@ -13,8 +13,9 @@ whole field of view, edges included, each fully visible and not too oblique, wri
 
 from __future__ import annotations
 
+import json
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -99,6 +100,53 @@ def render_config(
             rendered()
 
 
+DATASET_PARAMS = ("experiment", "n", "seed", "width", "degraded", "tone_curve")
+"""What makes a rendered dataset the one it is (its index records each; `width` since it is
+recorded: an older index's width is not compared)."""
+
+
+def dataset_index(folder: Path) -> dict[str, Any] | None:
+    """The folder's `dataset.json`, or None when it has none; InputError when unreadable."""
+    index = folder / "dataset.json"
+    if not index.is_file():
+        return None
+    try:
+        info = json.loads(index.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise InputError(f"{index}: not a readable dataset index ({exc})") from None
+    if not isinstance(info, dict):
+        raise InputError(f"{index}: not a dataset index (top level is not an object)")
+    return info
+
+
+def parameter_differences(have: Mapping[str, Any], wanted: Mapping[str, Any]) -> list[str]:
+    """`KEY HAVE (asked WANTED)` for each parameter of `wanted` the dataset `have` records
+    with another value."""
+    return [
+        f"{key} {have[key]!r} (asked {value!r})"
+        for key, value in wanted.items()
+        if key in have and have[key] != value
+    ]
+
+
+def dataset_problem(out: Path, wanted: Mapping[str, Any]) -> str | None:
+    """Why rendering the dataset `wanted` into `out` would destroy something: a dataset of
+    other parameters (each named), or files that are no dataset. None: a new or empty folder,
+    or the same dataset (rendered again, the same images)."""
+    info = dataset_index(out)
+    if info is not None:
+        differences = parameter_differences(info, wanted)
+        if differences:
+            return (
+                f"{out} holds another dataset ({', '.join(differences)}); it is not overwritten: "
+                "give another folder, or the dataset's own parameters"
+            )
+        return None
+    if out.is_dir() and any(out.iterdir()):
+        return f"{out} is not empty and holds no dataset.json; give a new or empty folder"
+    return None
+
+
 def make_dataset(
     out_dir: str | Path,
     experiment: str = "table3",
@@ -118,13 +166,20 @@ def make_dataset(
         raise InputError(f"--n must be at least 1, got {n}")
     out = Path(out_dir)
     bases = table3_bases(width, tone_curve, scenes)
-    configs = table3_configs(n, seed)
-    index: dict[str, Any] = {
+    params = {
         "experiment": experiment,
         "n": n,
         "seed": seed,
+        "width": bases[0][1].camera.width,
         "degraded": degraded,
         "tone_curve": tone_curve,
+    }
+    problem = dataset_problem(out, params)
+    if problem:
+        raise InputError(problem)
+    configs = table3_configs(n, seed)
+    index: dict[str, Any] = {
+        **params,
         "scenes": [name for name, _ in bases],
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
         "configs": [],

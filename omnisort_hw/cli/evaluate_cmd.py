@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -17,21 +16,26 @@ def register(sub: Any) -> None:
     ev = sub.add_parser("evaluate", help="reproduce the published experiments on the simulator")
     esub = ev.add_subparsers(dest="evaluate_command", required=True, metavar="EXPERIMENT")
     t3 = esub.add_parser("table3", help="camera/laser calibration: all four methods vs truth")
-    t3.add_argument("--n", type=int, default=35, help="configurations (default 35)")
-    t3.add_argument("--seed", type=int, default=0)
-    t3.add_argument("--degraded", action="store_true", help="'real camera' degradation mode")
+    # Left out, these take --data's own values (or the defaults below): a dataset is never
+    # rendered over with other parameters.
+    t3.add_argument("--n", type=int, default=None, help="configurations (default 35)")
+    t3.add_argument("--seed", type=int, default=None, help="(default 0)")
+    t3.add_argument(
+        "--degraded", action="store_true", default=None, help="'real camera' degradation mode"
+    )
     t3.add_argument("--width", type=int, default=None, help="render size (default 1920)")
     t3.add_argument(
         "--data",
         type=Path,
         default=None,
-        help="dataset folder: read it if it holds this experiment, else render into it (then "
-        "the images are kept and calibrated in this process; without it each trial renders "
-        "its configuration on its worker)",
+        help="dataset folder: read it with its own parameters when it holds a dataset (one "
+        "given that differs is refused, naming it), else render into it (then the images are "
+        "kept and calibrated in this process; without it each trial renders its "
+        "configuration on its worker)",
     )
     t3.add_argument(
         "--tone-curve",
-        default="srgb",
+        default=None,
         help="the simulated camera's tone curve when rendering: srgb (default) or linear",
     )
     t3.add_argument(
@@ -62,13 +66,42 @@ EXTENSIONS: list[Any] = [
 ]
 
 
-def _matching(data: Path, n: int, seed: int, degraded: bool, tone_curve: str) -> bool:
-    index = data / "dataset.json"
-    if not index.is_file():
-        return False
-    info = json.loads(index.read_text())
-    got = (info.get("n"), info.get("seed"), bool(info.get("degraded")))
-    return got == (n, seed, degraded) and info.get("tone_curve", "linear") == tone_curve
+TABLE3_DEFAULTS = {"n": 35, "seed": 0, "degraded": False, "tone_curve": "srgb"}
+"""What `evaluate table3` renders when a parameter is left out and no dataset gives it."""
+
+
+def _dataset_parameters(args: argparse.Namespace) -> None:
+    """Fill the parameters left out: from --data's dataset when it holds one (a given one
+    that differs is refused, naming each), else the defaults. An older index without a tone
+    curve was rendered linear."""
+    from omnisort_hw.errors import InputError
+
+    given = {
+        key: getattr(args, key)
+        for key in ("n", "seed", "degraded", "tone_curve", "width")
+        if getattr(args, key) is not None
+    }
+    info = None
+    if args.data is not None:
+        from sim_backend.dataset import dataset_index, parameter_differences
+
+        info = dataset_index(args.data)
+    if info is not None:
+        info = {"tone_curve": "linear", **info}
+        info["degraded"] = bool(info.get("degraded"))
+        differences = parameter_differences(info, given)
+        if differences:
+            raise InputError(
+                f"--data {args.data} holds another dataset ({', '.join(differences)}); it is "
+                "not rendered over: leave those options out to evaluate it, or give another "
+                "folder"
+            )
+        for key in TABLE3_DEFAULTS:
+            setattr(args, key, info.get(key, TABLE3_DEFAULTS[key]))
+        return
+    for key, value in TABLE3_DEFAULTS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
 
 
 def cmd_table3(args: argparse.Namespace) -> int:
@@ -76,6 +109,7 @@ def cmd_table3(args: argparse.Namespace) -> int:
     from omnisort_hw.errors import InputError
     from omnisort_hw.evaluation.table3 import format_table
 
+    _dataset_parameters(args)
     if args.n < 1:
         raise InputError(f"--n must be at least 1, got {args.n}")
     if args.frames > 1:
@@ -100,11 +134,12 @@ def cmd_table3(args: argparse.Namespace) -> int:
 
 
 def _evaluate_data(args: argparse.Namespace, assume: Any) -> dict[str, Any]:
-    """--data: the dataset on disk (rendered into it first when it is not this one)."""
+    """--data: the dataset on disk (rendered into it first when it holds none)."""
     from omnisort_hw.evaluation.table3 import evaluate_dataset
+    from sim_backend.dataset import dataset_index
 
     data = args.data
-    if not _matching(data, args.n, args.seed, args.degraded, args.tone_curve):
+    if dataset_index(data) is None:
         from sim_backend.dataset import make_dataset
 
         print(f"rendering {args.n} configurations into {data}", file=sys.stderr)

@@ -148,3 +148,37 @@ def test_cli_bad_scene_is_an_error_naming_the_field(
     err = capsys.readouterr().err
     assert "target.separation_mm" in err and "bad_config" in err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_a_dataset_is_never_rendered_over_with_other_parameters(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`evaluate table3 --data DIR` on a dataset made with other parameters re-rendered 35
+    configurations at 1920 px into it (10 minutes, the dataset lost). Now the dataset's own
+    parameters are used when left out, and one given that differs is refused by name."""
+    from omnisort_hw.cli import build_parser, main
+    from omnisort_hw.cli.evaluate_cmd import _dataset_parameters
+    from omnisort_hw.errors import InputError
+
+    data = tmp_path / "ds"
+    make_dataset(data, "table3", n=1, seed=7, width=240, progress=False)
+    before = {p: p.stat().st_mtime_ns for p in data.rglob("*")}
+    argv = ["evaluate", "table3", "--data", str(data), "--n", "3", "--width", "480", "--json"]
+    assert main(argv) == 2
+    error = json.loads(capsys.readouterr().out)["error"]
+    assert error["code"] == "bad_input" and str(data) in error["message"], error
+    assert "n 1 (asked 3)" in error["message"] and "width 240 (asked 480)" in error["message"]
+    assert {p: p.stat().st_mtime_ns for p in data.rglob("*")} == before
+    # Left out, the parameters are the dataset's.
+    args = build_parser().parse_args(["evaluate", "table3", "--data", str(data)])
+    _dataset_parameters(args)
+    assert (args.n, args.seed, args.degraded, args.tone_curve) == (1, 7, False, "srgb")
+    # Rendering another dataset over it, or into a folder of other files, is refused too.
+    with pytest.raises(InputError, match="holds another dataset"):
+        make_dataset(data, "table3", n=2, seed=7, width=240, progress=False)
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "readme.txt").write_text("mine")
+    with pytest.raises(InputError, match=r"holds no dataset\.json"):
+        make_dataset(other, "table3", n=1, seed=7, width=240, progress=False)
+    assert {p: p.stat().st_mtime_ns for p in data.rglob("*")} == before
