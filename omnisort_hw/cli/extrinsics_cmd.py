@@ -122,8 +122,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             out=args.out,
             tone=ToneCurve.parse(args.tone_curve),
             log=log,
-            sort_config=None,
-            registration_config=None,
         )
         result = extrinsics.run(rig, request)
     _warn(result)

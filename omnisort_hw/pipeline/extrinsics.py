@@ -28,6 +28,7 @@ from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.requests import ExtrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
+from omnisort_hw.pipeline.scale_check import ScaleCheck, check_scale
 from omnisort_hw.pipeline.verdict import Check, Verdict, graded
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -202,9 +203,21 @@ def run(
         what="calibration",
     )
     raise_if_cancelled(cancel, "calibration")
+    scale: ScaleCheck | str = "a checkerboards target has its own scale"
+    if target != "checkerboards":
+        floor_z_B = float(getattr(rig.sort_config, "floor_z_B_mm", 0.0) or 0.0)
+        scale = rig.run_logged(
+            check_scale,
+            acq.board,
+            fitted.calib,
+            rig.registration_config,
+            floor_z_B,
+            cancel=cancel,
+            what="scale check",
+        )
     saved = rig.save_system(system_payload(fitted.calib, acq.record))
     picture = write_picture(overlay_path(saved), lambda: fitted.overlay(acq.board, acq.source))
-    return calibration_result(fitted.calib, target, saved, picture, acq.record, tone)
+    return calibration_result(fitted.calib, target, saved, picture, acq.record, tone, scale)
 
 
 def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> dict[str, Any]:
@@ -222,9 +235,11 @@ def calibration_result(
     picture: dict[str, Any],
     image: dict[str, Any] | None,
     tone: ToneCurve,
+    scale: ScaleCheck | str | None = None,
 ) -> dict[str, Any]:
     """What a calibration answers, at every door (the service's reply, the CLI's `--json`):
-    where it was saved, its picture, the fit and the image it was made from."""
+    where it was saved, its picture, the fit, the image it was made from and the separation
+    against the image's own scale (or why that could not be checked)."""
     return {
         "path": str(saved),
         **picture,
@@ -235,7 +250,8 @@ def calibration_result(
         "residuals": calib.residuals,
         "image": image,
         "tone_curve": tone.name,
-        "verdict": calibration_verdict(calib).to_dict(),
+        "scale_check": scale.record() if isinstance(scale, ScaleCheck) else {"not_checked": scale},
+        "verdict": calibration_verdict(calib, scale).to_dict(),
     }
 
 
@@ -246,9 +262,11 @@ DISTANCE_STD_MM = (0.5, 1.0)
 """The laser distance's 1-sigma (mm) likewise, against its goal of 1 mm."""
 
 
-def calibration_verdict(calib: SystemCalibration) -> Verdict:
-    """The fitted parameters' sigmas against the cell's goals; a method that gives none is a
-    warning (the joint method does)."""
+def calibration_verdict(calib: SystemCalibration, scale: ScaleCheck | str | None = None) -> Verdict:
+    """The fitted parameters' sigmas against the cell's goals (a method that gives none is a
+    warning: the joint method does), and the separation against the floor board's scale when
+    it could be checked."""
+    extra = (scale.check(),) if isinstance(scale, ScaleCheck) else ()
     std = calib.std or {}
     angles = [float(v) for k, v in std.items() if k.endswith("_deg") and v is not None]
     distance = std.get("laser_distance_mm")
@@ -263,6 +281,7 @@ def calibration_verdict(calib: SystemCalibration) -> Verdict:
                     "the joint method gives them",
                     "calibrate with the joint method to know how good the result is",
                 ),
+                *extra,
             ),
         )
     advice = "retake with the whole target in view, its borders and stripe sharp"
@@ -271,6 +290,7 @@ def calibration_verdict(calib: SystemCalibration) -> Verdict:
         (
             graded("worst angle sigma", max(angles), "deg", *ANGLE_STD_DEG, advice=advice),
             graded("laser distance sigma", float(distance), "mm", *DISTANCE_STD_MM, advice=advice),
+            *extra,
         ),
     )
 

@@ -400,6 +400,7 @@ def calibrate_joint(
             "wall_left_x_mm": float(geom["left"]),
             "wall_right_x_mm": float(geom["right"]),
             "border_z_mm": float(geom["z_b"]),
+            **({"floor_z_mm": float(geom["z_f"])} if "z_f" in geom else {}),
         },
         residuals={**residuals, "floor_lines": floor_note},
         std=calib_std,
