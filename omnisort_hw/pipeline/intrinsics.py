@@ -101,6 +101,13 @@ def read_images(
     return images
 
 
+RIM_ANGLE_DEG = 80.0
+"""Where the model is judged for the extrinsics: the walls and the laser line are seen out to
+80-90 deg off the axis (one of the report's uncertainty angles)."""
+ANGLE_GOAL_DEG = 0.03
+"""The extrinsic calibration's goal for each angle (pipeline.extrinsics.ANGLE_STD_DEG's fail
+threshold): a projection sigma of a quarter of it, in pixels, passes (its 2 sigma within half
+the goal); beyond the whole goal the model fails there."""
 CORNER_RMS_PX = (0.5, 1.0)
 """Corner RMS (px) that passes, and beyond which a calibration fails: twice what the renders
 give (0.23 px, Unity's point-sampled faces; a real lens gives 0.08 px), and the pixel beyond
@@ -137,20 +144,52 @@ class IntrinsicsResult:
             "verdict": self.verdict().to_dict(),
         }
 
+    def rim_sigma(self) -> tuple[float, float] | None:
+        """(projection sigma, the extrinsic goal in pixels) at RIM_ANGLE_DEG off the axis, or
+        None when the uncertainty was not estimated there. The goal: ANGLE_GOAL_DEG of
+        direction, in the model's own pixels per degree there."""
+        unc = self.calibration.record.get("projection_uncertainty", {})
+        sigma = unc.get("median_px_at_angle_deg", {}).get(f"{RIM_ANGLE_DEG:g}")
+        if sigma is None:
+            return None
+        model = self.calibration.result.model
+        a = np.radians([RIM_ANGLE_DEG, RIM_ANGLE_DEG + 0.1])
+        rays = np.stack([np.sin(a), np.zeros(2), np.cos(a)], axis=1)
+        px = model.ray_to_pixel(rays)
+        px_per_deg = float(np.linalg.norm(px[1] - px[0])) / 0.1
+        return float(sigma), ANGLE_GOAL_DEG * px_per_deg
+
     def verdict(self) -> Verdict:
-        """The corners' RMS against what a corner detector gives (CORNER_RMS_PX), and the
-        image circle's rim covered (where the targets and the laser line are)."""
+        """The corners' RMS against what a corner detector gives (CORNER_RMS_PX), and the model
+        at the image circle's rim, where the targets and the laser line are: its projection
+        sigma against the extrinsic goal there, and the rim's coverage by corners (few corners
+        at the rim are a warning only when the sigma there is not small)."""
         figures = self.calibration.figures
         coverage = figures.outer_coverage
+        rim = self.rim_sigma()
+        checks = []
+        rim_ok = False
+        if rim is not None:
+            sigma, goal_px = rim
+            rim_check = graded(
+                f"projection sigma at {RIM_ANGLE_DEG:g} deg off axis",
+                sigma,
+                "px",
+                goal_px / 4.0,
+                goal_px,
+                advice="add views with the board near the rim of the image circle",
+            )
+            rim_ok = rim_check.level == "pass"
+            checks.append(rim_check)
         covered = Check(
             f"outer {OUTER_BAND:.0%} of the image circle covered",
-            "pass" if coverage >= LOW_COVERAGE else "warn",
+            "pass" if coverage >= LOW_COVERAGE or rim_ok else "warn",
             f"{coverage:.0%}",
-            f">= {LOW_COVERAGE:.0%}",
+            f">= {LOW_COVERAGE:.0%}, or a small sigma at the rim",
             ""
-            if coverage >= LOW_COVERAGE
-            else "add views with the board near the rim; go on only if the targets and the "
-            "laser line stay where corners were (the report's uncertainty map shows where)",
+            if coverage >= LOW_COVERAGE or rim_ok
+            else "add views with the board near the rim, where the targets and the laser "
+            "line are (the report's uncertainty map shows where the model is known)",
         )
         rms = graded(
             "corner RMS",
@@ -159,7 +198,7 @@ class IntrinsicsResult:
             *CORNER_RMS_PX,
             advice="look at the report's residuals: a blurred or moved view, a wrong board size",
         )
-        return Verdict("intrinsics", (rms, covered))
+        return Verdict("intrinsics", (rms, *checks, covered))
 
 
 def run(

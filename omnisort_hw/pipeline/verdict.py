@@ -57,9 +57,9 @@ def graded(
         level = "warn"
     else:
         level = "fail"
-    limits = f"pass <= {warn_above:g} {unit}".strip()
+    limits = f"pass <= {warn_above:.{digits}g} {unit}".strip()
     if fail_above is not None:
-        limits += f", fail > {fail_above:g} {unit}".rstrip()
+        limits += f", fail > {fail_above:.{digits}g} {unit}".rstrip()
     return Check(name, level, figure, limits, advice if level != "pass" else "")
 
 

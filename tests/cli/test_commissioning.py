@@ -69,6 +69,11 @@ def test_commissioning_steps_run_on_the_shipped_sim_cell(tmp_path: Path) -> None
         proc = _run(step, tmp_path)
         assert proc.returncode == 0, f"{step}\n{proc.stderr[-3000:]}"
         outputs.append(proc.stdout)
+    # Each measuring step of the doc's recipe passes its own verdict (docs/verdicts.md).
+    for i, what in ((1, "intrinsics"), (2, "extrinsics"), (3, "robot registration")):
+        assert f"PASS: {what}" in outputs[i], outputs[i]
+    assert "PASS: laser map" in outputs[4] and "PASS: locate" in outputs[5]
+    assert "PASS: sort" in outputs[6], outputs[6]
     system = json.loads((tmp_path / "build" / "sim-cell" / "system.json").read_text())
     assert system["robot_base"]["image"] == "capture"
     assert "4 cubes" in outputs[5]
