@@ -66,8 +66,11 @@ def test_a_bad_image_is_the_requests_error_and_the_cell_stays_ready(
         assert c.call("move", {"joints_deg": [5, 0, 0, 0, 0, 0]})["ok"]  # nothing latched
 
 
-def test_ctl_prints_the_typed_error_and_exits_1(service: Harness, tmp_path: Path) -> None:
-    path, words = make_bad("empty image", tmp_path, "empty.png")
+@pytest.mark.parametrize("kind", sorted(BAD_IMAGES))
+def test_ctl_prints_the_typed_error_and_exits_1(
+    service: Harness, tmp_path: Path, kind: str
+) -> None:
+    path, words = make_bad(kind, tmp_path, "bad.png")
     _calibrate(service)
     port = str(service.running.port)
     base = [sys.executable, "-m", "omnisort_hw.cli", "ctl", "--port", port, "--json"]
@@ -87,4 +90,5 @@ def test_the_doc_lists_every_row_the_tests_try() -> None:
     rows = doc_rows()
     for kind in BAD_IMAGES:
         assert ("service", kind) in rows, kind
-    assert ("ctl", "empty image") in rows
+    for kind in BAD_IMAGES:
+        assert ("ctl", kind) in rows, kind
