@@ -11,7 +11,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.errors import CalibrationFileError, StorageError
+from omnisort_hw.errors import CalibrationFileError, OmnisortError, StorageError
 
 HISTORY_DIRNAME = "history"
 
@@ -24,21 +24,32 @@ def os_error_text(exc: OSError) -> str:
     return f"[Errno {exc.errno}] {name}: {text}{where}" if exc.errno else f"{text}{where}"
 
 
+def read_input_bytes(
+    path: str | os.PathLike[str], noun: str, error: type[OmnisortError], missing: str
+) -> bytes:
+    """The bytes of a file the user named, or `error` naming it: a folder ("is a folder, not
+    a(n) `noun`"), missing (`missing`), unreadable, or empty (0 bytes, or blank)."""
+    p = Path(path)
+    if p.is_dir():
+        raise error(f"{p}: is a folder, not {noun}")
+    if not p.is_file():
+        raise error(f"{p}: {missing}")
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise error(f"{p}: cannot be read ({os_error_text(exc)})") from None
+    if not data.strip():
+        raise error(f"{p}: the file is empty ({len(data)} bytes); copy it again")
+    return data
+
+
 def read_calibration_json(path: str | os.PathLike[str], what: str) -> dict[str, Any]:
     """The JSON object in the calibration file `path` (`what`: "camera", "system"), or a
     CalibrationFileError naming the file: missing, a folder, empty, unreadable, not JSON (an
     image given as a calibration), or not an object."""
     p = Path(path)
-    if p.is_dir():
-        raise CalibrationFileError(f"{p}: is a folder, not a {what} calibration file")
-    if not p.is_file():
-        raise CalibrationFileError(f"{p}: {what} calibration file not found")
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise CalibrationFileError(f"{p}: cannot be read: {os_error_text(exc)}") from None
-    if not data.strip():
-        raise CalibrationFileError(f"{p}: the {what} calibration file is empty")
+    noun = f"{what} calibration file"
+    data = read_input_bytes(p, f"a {noun}", CalibrationFileError, f"{noun} not found")
     try:
         obj = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, ValueError) as exc:

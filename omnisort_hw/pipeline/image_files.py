@@ -14,6 +14,7 @@ import numpy as np
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.errors import InputError
+from omnisort_hw.fileio import read_input_bytes
 
 JPEG_SUFFIXES = frozenset({".jpg", ".jpeg", ".jpe"})
 
@@ -33,16 +34,7 @@ def truncation_problem(data: bytes) -> str | None:
 def read_image(path: str | Path) -> np.ndarray:
     """The colour image at `path` (BGR, uint8), or an InputError naming the file."""
     p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{p}: is a folder, not an image file")
-    if not p.is_file():
-        raise InputError(f"{p}: no such image file")
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise InputError(f"{p}: cannot be read ({exc.strerror or exc})") from None
-    if not data:
-        raise InputError(f"{p}: the file is empty (0 bytes); copy the image again")
+    data = read_input_bytes(p, "an image file", InputError, "no such image file")
     problem = truncation_problem(data)
     if problem:
         raise InputError(f"{p}: {problem}; copy the file again")

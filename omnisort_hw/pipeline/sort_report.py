@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from omnisort_hw.pipeline.verdict import Check, Verdict
+from omnisort_hw.pipeline.verdict import Verdict, none_of
 
 
 def _finite(value: float, digits: int) -> float | None:
@@ -116,26 +116,11 @@ class SortReport:
         reasons = sorted({o.reason for o in self.outcomes if o.status != "sorted" and o.reason})
         advice = "; ".join(reasons[:3])
         checks = [
-            Check(
-                "failed picks",
-                "fail" if t["failed"] else "pass",
-                str(t["failed"]),
-                "0",
-                advice if t["failed"] else "",
-            ),
-            Check(
-                "skipped cubes",
-                "warn" if t["skipped"] else "pass",
-                str(t["skipped"]),
-                "0",
-                advice if t["skipped"] else "",
-            ),
+            none_of("failed picks", t["failed"], "fail", advice),
+            none_of("skipped cubes", t["skipped"], "warn", advice),
         ]
         if self.verified:
-            wrong = t["cubes"] - t["sorted_ok"]
-            checks.append(
-                Check("cubes not in their bin", "fail" if wrong else "pass", str(wrong), "0")
-            )
+            checks.append(none_of("cubes not in their bin", t["cubes"] - t["sorted_ok"], "fail"))
         return Verdict("sort", tuple(checks))
 
     def to_dict(self) -> dict[str, Any]:

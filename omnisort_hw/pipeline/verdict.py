@@ -63,6 +63,11 @@ def graded(
     return Check(name, level, figure, limits, advice if level != "pass" else "")
 
 
+def none_of(name: str, count: int, level: Level, advice: str = "") -> Check:
+    """A count of things that went wrong: `level` (with `advice`) unless it is 0."""
+    return Check(name, level if count else "pass", str(count), "0", advice if count else "")
+
+
 def at_least(name: str, count: int, minimum: int, level: Level, advice: str) -> Check:
     """A count that must reach `minimum`; `level` when it does not."""
     ok = count >= minimum
