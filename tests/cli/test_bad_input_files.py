@@ -141,3 +141,39 @@ def test_a_square_no_board_can_have_is_refused_before_any_work(
     assert json.loads(files["system"].read_text()).get("robot_base") == {
         "matrix": np.eye(4).tolist()
     }
+
+
+def test_a_disk_that_fills_during_the_write_is_a_typed_error_and_leaves_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """No check before the work can see a disk fill up: the write's OSError becomes the
+    command's typed error with the path and the OS's words, the old file stays whole and no
+    temp file is left."""
+    import errno
+    import os
+
+    from omnisort_hw import fileio
+
+    files = _good_files(tmp_path)
+    out = tmp_path / "calib_results.txt"
+    out.write_text("the previous export\n")
+    real_fdopen = os.fdopen
+
+    def full_disk(fd: int, *args: object, **kwargs: object) -> object:
+        handle = real_fdopen(fd, *args, **kwargs)  # type: ignore[call-overload]
+
+        def write(data: bytes) -> int:  # the destination check's empty probe still fits
+            if data:
+                raise OSError(errno.ENOSPC, "No space left on device", str(out))
+            return 0
+
+        handle.write = write
+        return handle
+
+    monkeypatch.setattr(fileio.os, "fdopen", full_disk)
+    code = main(["intrinsics", "export", str(files["camera"]), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err
+    assert "[io_error]" in err and "ENOSPC" in err and str(out) in err, err
+    assert out.read_text() == "the previous export\n"
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []
