@@ -133,6 +133,8 @@ def dataset_problem(out: Path, wanted: Mapping[str, Any]) -> str | None:
     """Why rendering the dataset `wanted` into `out` would destroy something: a dataset of
     other parameters (each named), or files that are no dataset. None: a new or empty folder,
     or the same dataset (rendered again, the same images)."""
+    if out.exists() and not out.is_dir():
+        return f"{out} is a file, not a dataset folder"
     info = dataset_index(out)
     if info is not None:
         differences = parameter_differences(info, wanted)

@@ -140,8 +140,12 @@ def _evaluate_data(args: argparse.Namespace, assume: Any) -> dict[str, Any]:
 
     data = args.data
     if dataset_index(data) is None:
-        from sim_backend.dataset import make_dataset
+        from omnisort_hw.errors import InputError
+        from sim_backend.dataset import dataset_problem, make_dataset
 
+        problem = dataset_problem(data, {})
+        if problem:
+            raise InputError(f"--data: {problem}")
         print(f"rendering {args.n} configurations into {data}", file=sys.stderr)
         make_dataset(
             data,

@@ -181,4 +181,6 @@ def test_a_dataset_is_never_rendered_over_with_other_parameters(
     (other / "readme.txt").write_text("mine")
     with pytest.raises(InputError, match=r"holds no dataset\.json"):
         make_dataset(other, "table3", n=1, seed=7, width=240, progress=False)
+    with pytest.raises(InputError, match="is a file, not a dataset folder"):
+        make_dataset(other / "readme.txt", "table3", n=1, seed=7, width=240, progress=False)
     assert {p: p.stat().st_mtime_ns for p in data.rglob("*")} == before
