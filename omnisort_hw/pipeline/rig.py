@@ -1,7 +1,7 @@
 """The one interface every use case runs on: what it needs of a cell, and nothing more.
 
 Two implementations: the service's `cell.Cell` (its devices held under their locks, its
-calibration store, compute worker and run log) and the CLI's `pipeline.file_rig.FileRig`
+calibration store, compute worker and run log) and the CLI's `cli.file_rig.FileRig`
 (explicit files, and the cell file's devices opened for one capture). A use case is
 `pipeline.<use case>.run(rig, request)`, so a capture gives the same answer through either door.
 """
