@@ -105,7 +105,7 @@ class CellJobs:
         rotation."""
         from omnisort_hw.pipeline import extrinsics
 
-        return extrinsics.run(self, request, cancel)
+        return extrinsics.run(self, request, cancel).reply()
 
     def map_scene(
         self, request: MapRequest, cancel: threading.Event | None = None
@@ -229,7 +229,7 @@ class CellJobs:
         gated by the calibration store and the drift watchdog (`pipeline.sort_run`)."""
         from omnisort_hw.pipeline import sort_run
 
-        return sort_run.run(self, request, cancel, progress).to_dict()
+        return sort_run.run(self, request, cancel, progress).reply()
 
     # -- and a `pipeline.sort_run.SortRig` -------------------------------------------------
 

@@ -123,7 +123,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             tone=ToneCurve.parse(args.tone_curve),
             log=log,
         )
-        result = extrinsics.run(rig, request)
+        result = extrinsics.run(rig, request).reply()
     _warn(result)
     if args.json:
         print_result(result)

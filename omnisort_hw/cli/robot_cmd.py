@@ -278,7 +278,7 @@ def cmd_sort(args: argparse.Namespace) -> int:
         rig = FileRig(config=args.config, system=args.system, log=log)
         progress = None if args.json else _print_progress
         report = sort_run.run(rig, request, progress=progress)
-    _print_report(report.to_dict(), args.json)
+    _print_report(report.reply(), args.json)
     return 0
 
 

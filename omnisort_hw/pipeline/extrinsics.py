@@ -164,12 +164,12 @@ def run_extrinsics(
 
 def run(
     rig: Rig, request: ExtrinsicsRequest, cancel: threading.Event | None = None
-) -> dict[str, Any]:
+) -> ExtrinsicsResult:
     """Calibrate from the request's image, or from a measurement capture (its averaged board
     frames for the edges and markers, its on/off pairs for the stripe), with the rig's camera
     model and tone curve; the target and wall distance default to the rig's `[target]`. The
     result is saved as the rig's system.json with the picture of what was detected and fitted
-    beside it; the answer is `calibration_result`'s."""
+    beside it."""
     kind, separation_default, field = rig.target_defaults()
     layout = None
     if request.target_file is not None:
@@ -217,7 +217,7 @@ def run(
         )
     saved = rig.save_system(system_payload(fitted.calib, acq.record))
     picture = write_picture(overlay_path(saved), lambda: fitted.overlay(acq.board, acq.source))
-    return calibration_result(fitted.calib, target, saved, picture, acq.record, tone, scale)
+    return ExtrinsicsResult(fitted.calib, target, saved, picture, acq.record, tone, scale)
 
 
 def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> dict[str, Any]:
@@ -228,31 +228,40 @@ def system_payload(calib: SystemCalibration, image: dict[str, Any] | None) -> di
     return payload
 
 
-def calibration_result(
-    calib: SystemCalibration,
-    target: str,
-    saved: Path,
-    picture: dict[str, Any],
-    image: dict[str, Any] | None,
-    tone: ToneCurve,
-    scale: ScaleCheck | str | None = None,
-) -> dict[str, Any]:
-    """What a calibration answers, at every door (the service's reply, the CLI's `--json`):
-    where it was saved, its picture, the fit, the image it was made from and the separation
-    against the image's own scale (or why that could not be checked)."""
-    return {
-        "path": str(saved),
-        **picture,
-        "method": calib.method,
-        "target": target,
-        "parameters": calib.parameters(),
-        "std": calib.std,
-        "residuals": calib.residuals,
-        "image": image,
-        "tone_curve": tone.name,
-        "scale_check": scale.record() if isinstance(scale, ScaleCheck) else {"not_checked": scale},
-        "verdict": calibration_verdict(calib, scale).to_dict(),
-    }
+@dataclass
+class ExtrinsicsResult:
+    """A calibration saved: the fit, the target, where it was saved, its picture, the image's
+    record, the tone curve it was located with, and the separation against the image's own
+    scale (or why that could not be checked)."""
+
+    calib: SystemCalibration
+    target: str
+    path: Path
+    picture: dict[str, Any]
+    image: dict[str, Any] | None
+    tone: ToneCurve
+    scale: ScaleCheck | str
+
+    def verdict(self) -> Verdict:
+        return calibration_verdict(self.calib, self.scale)
+
+    def reply(self) -> dict[str, Any]:
+        """The answer at every door (the service's reply, the CLI's `--json`)."""
+        scale = self.scale
+        checked = scale.record() if isinstance(scale, ScaleCheck) else {"not_checked": scale}
+        return {
+            "path": str(self.path),
+            **self.picture,
+            "method": self.calib.method,
+            "target": self.target,
+            "parameters": self.calib.parameters(),
+            "std": self.calib.std,
+            "residuals": self.calib.residuals,
+            "image": self.image,
+            "tone_curve": self.tone.name,
+            "scale_check": checked,
+            "verdict": self.verdict().to_dict(),
+        }
 
 
 ANGLE_STD_DEG = (0.015, 0.03)

@@ -123,7 +123,8 @@ class SortReport:
             checks.append(none_of("cubes not in their bin", t["cubes"] - t["sorted_ok"], "fail"))
         return Verdict("sort", tuple(checks))
 
-    def to_dict(self) -> dict[str, Any]:
+    def reply(self) -> dict[str, Any]:
+        """The answer at every door (the service's reply, the CLI's `--json`)."""
         return {
             "cubes": [o.to_dict() for o in self.outcomes],
             "totals": self.totals(),

@@ -91,7 +91,7 @@ def _sort(change: str) -> dict[str, Any]:
         truth = verifier.true_cubes()
         T_SB = verifier.T_SB()
         return {
-            "report": report.to_dict(),
+            "report": report.reply(),
             "changed": changed,
             "bins": {t.body: verifier.bin_of(t.center_S) for t in truth},
             "colors": {t.body: t.color for t in truth},
