@@ -188,6 +188,8 @@ def run(args: argparse.Namespace) -> int:
     path: Path | None = args.file
     if path is None:
         raise InputError("review: give an .rrd file or --live HOST:PORT")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not an .rrd file")
     if not path.is_file():
         raise InputError(f"{path}: no such .rrd file")
     if args.list:

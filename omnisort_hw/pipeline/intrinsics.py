@@ -81,6 +81,8 @@ def board_record(board: BoardSpec) -> dict[str, Any]:
 def image_files(folder: str | Path) -> list[Path]:
     """The image files of `folder`, sorted by name; InputError when there are none."""
     path = Path(folder)
+    if path.is_file():
+        raise InputError(f"{path}: is a file; give the folder of the checkerboard images")
     if not path.is_dir():
         raise InputError(f"{path}: no such folder")
     files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())

@@ -92,3 +92,25 @@ def test_the_doc_lists_every_row_the_tests_try() -> None:
         assert ("service", kind) in rows, kind
     for kind in BAD_IMAGES:
         assert ("ctl", kind) in rows, kind
+
+
+@pytest.mark.parametrize(
+    ("make", "words"),
+    [
+        (lambda p: p.write_bytes(b"not a folder"), "is a file"),
+        (lambda p: None, "no such folder"),
+        (lambda p: p.mkdir(), "no images"),
+    ],
+)
+def test_a_bad_views_folder_is_the_requests_error(
+    service: Harness, tmp_path: Path, make: object, words: str
+) -> None:
+    folder = tmp_path / "views"
+    make(folder)  # type: ignore[operator]
+    with service.client(timeout_s=60) as c:
+        args = {"what": "intrinsics", "folder": str(folder), "square_mm": 30}
+        reply = c.call("calibrate", args)
+        state = c.call("status")["result"]["state"]
+    assert reply["error"]["code"] == "bad_input", reply
+    assert str(folder) in reply["error"]["message"] and words in reply["error"]["message"]
+    assert state == "idle"
