@@ -100,11 +100,6 @@ def render_config(
             rendered()
 
 
-DATASET_PARAMS = ("experiment", "n", "seed", "width", "degraded", "tone_curve")
-"""What makes a rendered dataset the one it is (its index records each; `width` since it is
-recorded: an older index's width is not compared)."""
-
-
 def dataset_index(folder: Path) -> dict[str, Any] | None:
     """The folder's `dataset.json`, or None when it has none; InputError when unreadable."""
     index = folder / "dataset.json"
@@ -121,7 +116,7 @@ def dataset_index(folder: Path) -> dict[str, Any] | None:
 
 def parameter_differences(have: Mapping[str, Any], wanted: Mapping[str, Any]) -> list[str]:
     """`KEY HAVE (asked WANTED)` for each parameter of `wanted` the dataset `have` records
-    with another value."""
+    with another value (an index older than a parameter, `width`, is not compared on it)."""
     return [
         f"{key} {have[key]!r} (asked {value!r})"
         for key, value in wanted.items()

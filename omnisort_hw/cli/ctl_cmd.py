@@ -4,9 +4,9 @@ Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0
 `max_objects=3`) and as plain strings otherwise (`folder=/data/calib`; a relative path is made
 absolute here). `status` and a job's reply print a one-screen summary (a job's: its verdict,
 figures and files; `--json`: the whole reply); other replies are printed as JSON; a job shows
-its progress on the terminal. The exit code is 0 for an ok
-reply, 1 for an error reply, 3 when the service cannot be reached or does not answer in time,
-4 when `check` found the camera turned (as `omnisort check`).
+its progress on the terminal. The exit code is 0 for an ok reply, 1 for an error reply, 3 when
+the service cannot be reached or does not answer in time, 4 when `check` found the camera
+turned (as `omnisort check`).
 """
 
 from __future__ import annotations

@@ -66,7 +66,8 @@ class TargetConfig:
     def from_mapping(cls, section: Mapping[str, Any]) -> TargetConfig:
         unknown = sorted(set(section) - TARGET_KEYS)
         if unknown:
-            raise ConfigError(f"[target].{unknown[0]}: unknown key (known: kind, separation_mm)")
+            known = ", ".join(sorted(TARGET_KEYS))
+            raise ConfigError(f"[target].{unknown[0]}: unknown key (known: {known})")
         kind = section.get("kind")
         if kind is not None and kind not in TARGETS:
             raise ConfigError(f"[target].kind: one of {', '.join(TARGETS)}, got {kind!r}")

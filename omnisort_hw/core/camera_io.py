@@ -38,14 +38,20 @@ def save_camera_json(path: str | Path, model: OcamModel, **meta: Any) -> Path:
     return atomic_write_json(path, camera_record(model, **meta))
 
 
+def camera_from_record(data: dict[str, Any], source: str) -> OcamModel:
+    """The OCam model of a camera.json record read from `source`; a malformed one is a
+    CalibrationFileError naming it."""
+    try:
+        return OcamModel.from_dict(data, source=source)
+    except InputError as exc:
+        raise CalibrationFileError(str(exc)) from exc
+
+
 def load_camera_json(path: str | Path) -> tuple[OcamModel, dict[str, Any]]:
     """Read camera.json; a missing, unreadable or malformed file is a CalibrationFileError."""
     p = Path(path)
     data = read_calibration_json(p, "camera")
-    try:
-        model = OcamModel.from_dict(data, source=str(p))
-    except InputError as exc:
-        raise CalibrationFileError(str(exc)) from exc
+    model = camera_from_record(data, str(p))
     model_only = {*MODEL_KEYS, "inv_error_px", "uncertainty"}
     meta = {k: v for k, v in data.items() if k not in model_only}
     return model, meta

@@ -5,7 +5,7 @@ arrays out.
 - `draw_registration`: the floor board's corners as found, and the robot base frame B (its
   axes, 300 mm long, projected through the calibration) where the registration put it;
 - `draw_cubes`: each located cube's outline (white on black, visible on every cube colour),
-  its label, and its 95 % position ellipse on the floor (drawn enlarged, the factor in the
+  its index, and its 95 % position ellipse on the floor (drawn enlarged, the factor in the
   legend: a millimetre is a pixel or two at the cell's distances).
 
 The verdict's lines (`pipeline.verdict.verdict_lines`) go into the legend, coloured by level.
@@ -114,8 +114,9 @@ def draw_cubes(
     lines: Sequence[str],
     enlarge: float = 10.0,
 ) -> np.ndarray:
-    """The location's picture: each cube's outline, label (index, colour, sigma) and its 95 %
-    position ellipse drawn `enlarge` times its size, with the legend `lines`."""
+    """The location's picture: each cube's outline, its index (the legend `lines` give its
+    colour, position and sigma) and its 95 % position ellipse drawn `enlarge` times its
+    size."""
     left = _bgr(image)
     thick = line_scale(left)
     for i, cube in enumerate(cubes):

@@ -18,7 +18,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from omnisort_hw.core.camera_io import load_camera_json
+from omnisort_hw.core.camera_io import camera_from_record
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import CalibrationFileError, InputError
@@ -97,8 +97,9 @@ def run(rig: AdoptRig, request: AdoptRequest) -> AdoptResult:
     store = rig.store
     camera_payload: dict[str, Any] | None = None
     if request.camera is not None:
-        model, _ = load_camera_json(request.camera)
-        camera_payload = _payload(read_calibration_json(request.camera, "camera"))
+        record = read_calibration_json(request.camera, "camera")
+        model = camera_from_record(record, str(request.camera))
+        camera_payload = _payload(record)
         camera_source = str(request.camera)
     else:
         model = store.camera_model()

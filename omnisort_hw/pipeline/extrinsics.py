@@ -275,33 +275,29 @@ def calibration_verdict(calib: SystemCalibration, scale: ScaleCheck | str | None
     """The fitted parameters' sigmas against the cell's goals (a method that gives none is a
     warning: the joint method does), and the separation against the floor board's scale when
     it could be checked."""
-    extra = (scale.check(),) if isinstance(scale, ScaleCheck) else ()
     std = calib.std or {}
     angles = [float(v) for k, v in std.items() if k.endswith("_deg") and v is not None]
     distance = std.get("laser_distance_mm")
+    checks: list[Check]
     if not angles or distance is None:
-        return Verdict(
-            "extrinsics",
-            (
-                Check(
-                    "parameter sigmas",
-                    "warn",
-                    f"not estimated by {calib.method}",
-                    "the joint method gives them",
-                    "calibrate with the joint method to know how good the result is",
-                ),
-                *extra,
-            ),
-        )
-    advice = "retake with the whole target in view, its borders and stripe sharp"
-    return Verdict(
-        "extrinsics",
-        (
+        checks = [
+            Check(
+                "parameter sigmas",
+                "warn",
+                f"not estimated by {calib.method}",
+                "the joint method gives them",
+                "calibrate with the joint method to know how good the result is",
+            )
+        ]
+    else:
+        advice = "retake with the whole target in view, its borders and stripe sharp"
+        checks = [
             graded("worst angle sigma", max(angles), "deg", *ANGLE_STD_DEG, advice=advice),
             graded("laser distance sigma", float(distance), "mm", *DISTANCE_STD_MM, advice=advice),
-            *extra,
-        ),
-    )
+        ]
+    if isinstance(scale, ScaleCheck):
+        checks.append(scale.check())
+    return Verdict("extrinsics", tuple(checks))
 
 
 def _log_calibration(log: RunLog, calib: SystemCalibration) -> None:

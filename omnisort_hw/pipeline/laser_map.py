@@ -149,9 +149,14 @@ def floor_plane_S(
     T = np.asarray(rb["matrix"], float)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         return None
-    n = T[:3, 2] / np.linalg.norm(T[:3, 2])
-    floor_z_B = float(getattr(sort_config, "floor_z_B_mm", 0.0) or 0.0)
-    return n, float(n @ T[:3, 3] + floor_z_B)
+    return floor_plane(T, float(getattr(sort_config, "floor_z_B_mm", 0.0) or 0.0))
+
+
+def floor_plane(T_SB: np.ndarray, floor_z_B_mm: float = 0.0) -> tuple[np.ndarray, float]:
+    """The floor as (unit normal up, k) of n . x = k in S, of the robot base `T_SB` (4x4, mm;
+    B's z up) with the floor at `floor_z_B_mm` in B."""
+    n = T_SB[:3, 2] / np.linalg.norm(T_SB[:3, 2])
+    return n, float(n @ T_SB[:3, 3] + floor_z_B_mm)
 
 
 @dataclass

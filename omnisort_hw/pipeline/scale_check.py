@@ -80,6 +80,7 @@ def check_scale(
     """The scale check of a wall calibration `calib` made from `image` (laser off, BGR), or
     why it cannot be made: no `[registration]`, a fit that did not use the walls' foot lines,
     no floor board found."""
+    from omnisort_hw.pipeline.laser_map import floor_plane
     from omnisort_hw.pipeline.registration import register_from_image
 
     separation = calib.target.get("separation_mm")
@@ -92,10 +93,8 @@ def check_scale(
         reg = register_from_image(image, calib, registration)
     except CalibrationError as exc:
         return f"no floor board found in the calibration image ({exc})"
-    up = reg.T_SB[:3, 2]
-    # The floor n . p = k (B's z up, the floor at floor_z_B in B), met on S's vertical axis.
-    k = float(up @ reg.T_SB[:3, 3]) + floor_z_B_mm
-    z_board = k / float(up[2])
+    up, k = floor_plane(reg.T_SB, floor_z_B_mm)
+    z_board = k / float(up[2])  # the floor met on S's vertical axis
     implied = float(separation) * z_board / float(z_target)
     log.scalar("extrinsics/scale/implied_separation_mm", implied)
     return ScaleCheck(float(separation), implied, z_board, float(z_target))

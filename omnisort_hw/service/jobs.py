@@ -197,16 +197,14 @@ class JobRunner:
                 self._end_job(job, State.IDLE, f"{req.cmd} done")
         except BaseException as exc:
             code, msg, details = error_from_exception(exc)
+            if code == proto.INTERNAL and not job.cancel.is_set():
+                log.error("%s failed", req.cmd, exc_info=exc)
             if job.cancel.is_set():
                 reply = self._stopped_reply(job, req, msg)
             elif _faults_cell(job, code, exc):
-                if code == proto.INTERNAL:
-                    log.error("%s failed", req.cmd, exc_info=exc)
                 reply = proto.error_reply(req.id, code, msg, **details)
                 self._end_job(job, State.FAULT, f"{req.cmd} failed: {msg}")
             else:
-                if code == proto.INTERNAL:
-                    log.error("%s failed", req.cmd, exc_info=exc)
                 reply = proto.error_reply(req.id, code, msg, **details)
                 self._end_job(job, resting, f"{req.cmd} refused: {code}")
         finally:
