@@ -3,11 +3,29 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 REFERENCE_DIR = PROJECT_ROOT.parent / "shared" / "reference" / "unity"
+
+
+@pytest.fixture(autouse=True)
+def _requests_match_the_schema(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each request sent through `Client.call` in any test is checked against its command's
+    JSON Schema (tests/schema_agreement.py)."""
+    from omnisort_hw.service.client import Client
+    from tests.schema_agreement import check_agreement
+
+    call = Client.call
+
+    def checked(self: Client, cmd: str, args: Any = None, *a: Any, **kw: Any) -> Any:
+        reply = call(self, cmd, args, *a, **kw)
+        check_agreement(cmd, args, reply)
+        return reply
+
+    monkeypatch.setattr(Client, "call", checked)
 
 
 @pytest.fixture(scope="session")

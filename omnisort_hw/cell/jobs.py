@@ -21,9 +21,9 @@ from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.errors import MotionRefusedError
-from omnisort_hw.pipeline.adopt import AdoptRequest
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.requests import (
+    AdoptRequest,
     ExtrinsicsRequest,
     IntrinsicsRequest,
     LocateRequest,
@@ -111,11 +111,11 @@ class CellJobs:
         self, request: MapRequest, cancel: threading.Event | None = None
     ) -> dict[str, Any]:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments;
-        `request.with_points` adds the points (S, 0.1 mm) and their pixels, `request.picture`
+        `request.points` adds the points (S, 0.1 mm) and their pixels, `request.picture`
         writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
         from omnisort_hw.pipeline import laser_map
 
-        return laser_map.run(self, request, cancel).reply(request.with_points)
+        return laser_map.run(self, request, cancel).reply(request.points)
 
     def register_robot(
         self, request: RegisterRequest, cancel: threading.Event | None = None

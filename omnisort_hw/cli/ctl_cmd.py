@@ -2,7 +2,8 @@
 
 Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0]`,
 `max_objects=3`) and as plain strings otherwise (`folder=/data/calib`; a relative path is made
-absolute here). `status` and a job's reply print a one-screen summary (a job's: its verdict,
+absolute here). `describe` lists every command and its arguments (`--json`: their JSON
+Schema). `status` and a job's reply print a one-screen summary (a job's: its verdict,
 figures and files; `--json`: the whole reply); other replies are printed as JSON; a job shows
 its progress on the terminal. The exit code is 0 for an ok reply, 1 for an error reply, 3 when
 the service cannot be reached or does not answer in time, 4 when `check` found the camera
@@ -124,6 +125,10 @@ def run(args: argparse.Namespace) -> int:
         from omnisort_hw.cli.status_summary import summarise
 
         print(summarise(reply["result"]))
+    elif args.command == "describe" and reply.get("ok") and not (args.json or args.compact):
+        from omnisort_hw.cli.reply_summary import summarise_describe
+
+        print(summarise_describe(reply["result"]))
     elif reply.get("ok") and progress.is_job and not (args.json or args.compact):
         from omnisort_hw.cli.reply_summary import summarise_reply
 

@@ -151,7 +151,7 @@ def cmd_map(args: argparse.Namespace) -> int:
 
     request = MapRequest(
         image=str(args.image) if args.image is not None else None,
-        with_points=args.points,
+        points=args.points,
         picture=True,
     )
     with RunLog(args.log) as log:

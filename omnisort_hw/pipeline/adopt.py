@@ -26,14 +26,7 @@ from omnisort_hw.fileio import read_calibration_json
 from omnisort_hw.pipeline.calibration_source import read_system_payload
 from omnisort_hw.pipeline.calibration_store import CHECKSUM_KEY, META_KEY, CalibrationStore
 from omnisort_hw.pipeline.image_files import check_image_size
-
-
-@dataclass(frozen=True)
-class AdoptRequest:
-    """Take a camera.json, a system.json or both (paths on the cell PC) as the cell's."""
-
-    camera: str | None = None
-    system: str | None = None
+from omnisort_hw.pipeline.requests import AdoptRequest
 
 
 @dataclass(frozen=True)

@@ -1,17 +1,20 @@
-"""What each use case is asked: one request record per use case, its defaults written once here.
+"""What each command is asked: one request record per command, the one declaration of its
+arguments (type, unit, bounds, choices, default, help and the rules between them, through
+`request_fields.param`).
 
-The CLI builds them from its flags, the service from a request's arguments; both hand them to
-`pipeline.<use case>.run(rig, request)`. A field left None takes the rig's (the cell file's)
-value where the rig has one, else the default below.
+The protocol's checks, its `describe` schema and the CLI's flags are made from these records;
+the doors hand them to `pipeline.<use case>.run(rig, request)`. A field left None takes the
+rig's (the cell file's) value where the rig has one, else the default below.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from omnisort_hw.errors import InputError
+from omnisort_hw.pipeline.request_fields import GIVEN, param
 
 if TYPE_CHECKING:
     from omnisort_hw.core.checkerboard import BoardSpec
@@ -20,6 +23,14 @@ DEFAULT_BOARD = "9x6"
 """Inner corners COLSxROWS of a checkerboard when none is named (the paper's boards)."""
 DEFAULT_SQUARE_MM = 97.0
 """The square of the extrinsic checkerboards target when none is given (the paper's)."""
+SQUARE_RANGE_MM = (1.0, 1000.0)
+"""A checkerboard square this project can see, from a stamp to a floor tile."""
+TARGETS = ("two-sided", "three-sided", "checkerboards")
+METHODS = ("joint", "paper", "method1", "method2")
+REFINEMENTS = ("auto", "saddle", "plane")
+
+IMAGE_HELP = "absolute path of an image on the cell PC; omitted: a fresh capture"
+COLORS_HELP = "only these colours (names of the colour table)"
 
 
 def board_spec(board: str | None, square_mm: float | None, field: str) -> BoardSpec:
@@ -34,9 +45,109 @@ def board_spec(board: str | None, square_mm: float | None, field: str) -> BoardS
         raise InputError(f"{field}: {exc}") from None
 
 
+def _image(help: str = IMAGE_HELP) -> Any:
+    """The `image` argument: a path on the cell PC, or a capture when omitted."""
+    return param(None, kind="path", help=help, flag="image")
+
+
+_INTRINSICS = (("what", ("intrinsics",)),)
+_EXTRINSICS = (("what", ("extrinsics",)),)
+
+
+@dataclass(frozen=True)
+class CalibrateRequest:
+    """Calibrate: intrinsics from a folder of checkerboard images, extrinsics (camera rotation
+    and laser plane) from one image of a target or a capture."""
+
+    what: str = param(choices=("intrinsics", "extrinsics"), help="which calibration")
+    folder: str | None = param(
+        None,
+        kind="path",
+        help="absolute path of the folder of checkerboard images",
+        only_when=_INTRINSICS,
+        required_when=_INTRINSICS,
+    )
+    board: str | None = param(
+        None,
+        max_chars=16,
+        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
+        only_when=(("target", (None, "checkerboards")),),
+    )
+    square_mm: float | None = param(
+        None,
+        unit="mm",
+        lo=SQUARE_RANGE_MM[0],
+        hi=SQUARE_RANGE_MM[1],
+        help=f"board square size (extrinsics checkerboards: default {DEFAULT_SQUARE_MM:g})",
+        only_when=(("target", (None, "checkerboards")),),
+        required_when=_INTRINSICS,
+        flag="--square",
+    )
+    degree: int | None = param(
+        None, lo=2, hi=12, help="polynomial degree (default: chosen)", only_when=_INTRINSICS
+    )
+    refinement: str | None = param(
+        None,
+        choices=REFINEMENTS,
+        help="corner refinement: saddle points, re-measured on the board plane, or per image "
+        "whichever agrees better with the first model (default auto)",
+        only_when=_INTRINSICS,
+    )
+    image: str | None = param(
+        None, kind="path", help=IMAGE_HELP, only_when=_EXTRINSICS, flag="image"
+    )
+    target: str | None = param(
+        None, choices=TARGETS, help="the calibration target", only_when=_EXTRINSICS
+    )
+    separation_mm: float | None = param(
+        None,
+        unit="mm",
+        lo=1.0,
+        hi=100000.0,
+        help="measured inner distance between the walls (default: the cell file's [target])",
+        only_when=(*_EXTRINSICS, ("target", (None, "two-sided", "three-sided"))),
+        flag="--separation",
+    )
+    method: str | None = param(
+        None,
+        choices=METHODS,
+        help="calibration method (default: the best one for the target)",
+        only_when=_EXTRINSICS,
+    )
+    target_file: str | None = param(
+        None,
+        kind="path",
+        help="target description TOML (deploy/target.example.toml): the wall target as "
+        "measured; default: the symmetric paper target",
+        only_when=_EXTRINSICS,
+    )
+
+    def intrinsics(self, images: tuple[Path, ...]) -> IntrinsicsRequest:
+        """The intrinsics request of these images (the folder's, or the CLI's list)."""
+        return IntrinsicsRequest(
+            images,
+            float(self.square_mm or 0.0),
+            board=self.board,
+            degree=self.degree,
+            refinement=self.refinement or "auto",
+            folder=self.folder,
+        )
+
+    def extrinsics(self) -> ExtrinsicsRequest:
+        return ExtrinsicsRequest(
+            image=self.image,
+            target=self.target,
+            method=self.method,
+            separation_mm=self.separation_mm,
+            board=self.board,
+            square_mm=self.square_mm,
+            target_file=self.target_file,
+        )
+
+
 @dataclass(frozen=True)
 class IntrinsicsRequest:
-    """Calibrate the fisheye intrinsics from checkerboard images."""
+    """Calibrate the fisheye intrinsics from checkerboard images (made by `CalibrateRequest`)."""
 
     images: tuple[Path, ...]
     square_mm: float
@@ -51,7 +162,8 @@ class IntrinsicsRequest:
 
 @dataclass(frozen=True)
 class ExtrinsicsRequest:
-    """Calibrate camera rotation and laser plane from one image of a target (or a capture)."""
+    """Calibrate camera rotation and laser plane from one image of a target (or a capture);
+    made by `CalibrateRequest`."""
 
     image: str | None = None
     target: str | None = None
@@ -70,38 +182,128 @@ class ExtrinsicsRequest:
 class MapRequest:
     """Map the laser line of an image (or a capture's laser light) onto the laser plane."""
 
-    image: str | None = None
-    with_points: bool = False
-    picture: bool = False
+    image: str | None = _image()
+    points: bool = param(
+        False, help="include every laser point on the plane (points_S, mm) and its pixel"
+    )
+    picture: bool = param(
+        False, help="draw the map's picture (the image with its points, and their top view)"
+    )
 
 
 @dataclass(frozen=True)
 class LocateRequest:
-    """Locate the cubes of an image (with a laser-on image, or a capture)."""
+    """Locate the cubes of an image (with a laser-on image, or a capture): colour, centre and
+    yaw in the camera and robot frames."""
 
-    image: str | None = None
-    laser_image: str | None = None
-    colors: tuple[str, ...] | None = None
+    image: str | None = _image("absolute path of a laser-off image; omitted: a fresh capture")
+    laser_image: str | None = param(
+        None, kind="path", help="absolute path of the same view with the laser on"
+    )
+    colors: tuple[str, ...] | None = param(None, help=COLORS_HELP)
 
 
 @dataclass(frozen=True)
 class RegisterRequest:
     """Register the robot base from the floor checkerboard of an image (or a capture)."""
 
-    image: str | None = None
-    save: bool = True
-    model: str | None = None  # the arm's model, kept in the record
+    image: str | None = _image("absolute path of a laser-off image; omitted: a fresh capture")
+    save: bool = param(True, help="store the robot base in the system calibration")
+    model: str | None = param(
+        None, max_chars=64, help="the arm's model, kept in the record (UR5e...)"
+    )
 
 
 @dataclass(frozen=True)
 class SortRequest:
-    """Sort the cubes: all, or `max_objects`, or those of `colors`; `register` registers the
-    robot base from the floor board of the first capture."""
+    """Locate the cubes and put each in the bin of its colour: all, or `max_objects`, or those
+    of `colors`."""
 
-    max_objects: int | None = None
-    colors: tuple[str, ...] | None = None
-    register: bool = False
+    max_objects: int | None = param(None, lo=1, hi=1000, help="pick at most this many cubes")
+    colors: tuple[str, ...] | None = param(None, help=COLORS_HELP)
+    register: bool = param(
+        False, help="register the robot base from the floor board of the first capture"
+    )
 
-    def __post_init__(self) -> None:
-        if self.max_objects is not None and self.max_objects < 1:
-            raise InputError(f"max_objects must be at least 1, got {self.max_objects}")
+
+@dataclass(frozen=True)
+class CheckRequest:
+    """Drift check: a laser-off image (or capture) against the stored calibration's reference."""
+
+    image: str | None = _image("absolute path of a laser-off image; omitted: a fresh capture")
+
+
+@dataclass(frozen=True)
+class AdoptRequest:
+    """Take calibration files made by the CLI as the cell's, each verified against the cell."""
+
+    camera: str | None = param(
+        None, kind="path", help="absolute path of a camera.json made by the CLI"
+    )
+    system: str | None = param(
+        None, kind="path", help="absolute path of a system.json made by the CLI"
+    )
+
+
+@dataclass(frozen=True)
+class CaptureRequest:
+    """Grab one image; returned as a file path or base64."""
+
+    encoding: str = param("path", choices=("path", "base64"), help="a file path, or base64")
+    format: str = param("png", choices=("png", "jpg"), help="image file format")
+    laser: bool | None = param(None, help="switch the laser to this state before grabbing")
+
+
+@dataclass(frozen=True)
+class LaserRequest:
+    """Switch or read the laser line."""
+
+    on: bool | None = param(None, help="true: on, false: off, omitted: read the state")
+
+
+@dataclass(frozen=True)
+class MoveRequest:
+    """Move the arm: a joint target in joint space, a Cartesian target in a straight TCP line."""
+
+    EXACTLY_ONE: ClassVar[tuple[str, ...]] = ("joints_deg", "pose", "matrix")
+
+    joints_deg: tuple[float, ...] | None = param(
+        None, length=6, lo=-360.0, hi=360.0, unit="deg", help="6 joint angles"
+    )
+    pose: tuple[float, ...] | None = param(
+        None,
+        length=6,
+        lo=-1e5,
+        hi=1e5,
+        help="TCP pose [x, y, z mm, rx, ry, rz deg] (rotation vector) in the base frame",
+    )
+    matrix: tuple[tuple[float, ...], ...] | None = param(
+        None, kind="matrix4", lo=-1e5, hi=1e5, unit="mm", help="TCP pose as a 4x4 matrix (rows)"
+    )
+    speed_deg_s: float | None = param(
+        None,
+        lo=0.1,
+        hi=180.0,
+        unit="deg/s",
+        help="joint speed (joint targets)",
+        only_when=(("joints_deg", GIVEN),),
+        why="is for joint targets; use speed_mm_s",
+    )
+    speed_mm_s: float | None = param(
+        None,
+        lo=0.1,
+        hi=1000.0,
+        unit="mm/s",
+        help="TCP speed (Cartesian targets)",
+        only_when=(("joints_deg", (None,)),),
+        why="is for Cartesian targets; use speed_deg_s",
+    )
+
+
+@dataclass(frozen=True)
+class ResetRequest:
+    """Leave the fault/stopped state when the arm is safe."""
+
+    gripper_empty: bool = param(
+        False, help="an operator confirms the gripper's load was removed by hand"
+    )

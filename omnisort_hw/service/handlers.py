@@ -1,8 +1,10 @@
-"""Each protocol command as a function of the cell: `handler(ctx, args) -> result dict`.
+"""Each protocol command as a function of the cell: `handler(ctx, request) -> result dict`.
 
-Handlers run in worker threads (never in the event loop) and may block on devices; the
-server bounds them with timeouts. Commands that act on the service itself (stop, estop,
-reset, shutdown) live in the server, which owns the state machine.
+`request` is the command's request record (`pipeline.requests`), built from its checked
+arguments; None for a command without arguments. Handlers run in worker threads (never in the
+event loop) and may block on devices; the server bounds them with timeouts. Commands that act
+on the service itself (stop, estop, reset, shutdown) live in the server, which owns the state
+machine.
 """
 
 from __future__ import annotations
@@ -13,20 +15,24 @@ from dataclasses import dataclass
 from typing import Any
 
 from omnisort_hw.cell.cell import Cell
-from omnisort_hw.pipeline.adopt import AdoptRequest
 from omnisort_hw.pipeline.requests import (
-    ExtrinsicsRequest,
-    IntrinsicsRequest,
+    AdoptRequest,
+    CalibrateRequest,
+    CaptureRequest,
+    CheckRequest,
+    LaserRequest,
     LocateRequest,
     MapRequest,
+    MoveRequest,
     RegisterRequest,
     SortRequest,
 )
+from omnisort_hw.service.protocol import describe_commands
 
 
 @dataclass
 class Context:
-    """What a handler gets besides its arguments."""
+    """What a handler gets besides its request."""
 
     cell: Cell
     cancel: threading.Event
@@ -34,10 +40,10 @@ class Context:
     progress: Callable[[dict[str, Any]], None] | None = None
 
 
-Handler = Callable[[Context, dict[str, Any]], dict[str, Any]]
+Handler = Callable[[Context, Any], dict[str, Any]]
 
 
-def status(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+def status(ctx: Context, _request: None) -> dict[str, Any]:
     """Service state, job, devices and calibration health."""
     result = ctx.service_status()
     result.update(ctx.cell.status())
@@ -46,85 +52,69 @@ def status(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
     return result
 
 
-def capture(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.capture(args["encoding"], args["format"], args["laser"])
+def describe(ctx: Context, _request: None) -> dict[str, Any]:
+    return describe_commands()
 
 
-def laser(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.laser(args["on"])
+def capture(ctx: Context, request: CaptureRequest) -> dict[str, Any]:
+    return ctx.cell.capture(request.encoding, request.format, request.laser)
 
 
-def calibrate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    if args["what"] == "intrinsics":
+def laser(ctx: Context, request: LaserRequest) -> dict[str, Any]:
+    return ctx.cell.laser(request.on)
+
+
+def calibrate(ctx: Context, request: CalibrateRequest) -> dict[str, Any]:
+    if request.what == "intrinsics":
         from omnisort_hw.pipeline.intrinsics import image_files
 
-        folder = args["folder"]
-        request = IntrinsicsRequest(
-            tuple(image_files(folder)),
-            args["square_mm"],
-            board=args["board"],
-            degree=args["degree"],
-            folder=str(folder),
-        )
-        return ctx.cell.calibrate_intrinsics(request, ctx.cancel)
-    return ctx.cell.calibrate_extrinsics(
-        ExtrinsicsRequest(
-            image=args["image"],
-            target=args["target"],
-            method=args["method"],
-            separation_mm=args["separation_mm"],
-            board=args["board"],
-            square_mm=args["square_mm"],
-        ),
-        ctx.cancel,
-    )
+        images = tuple(image_files(str(request.folder)))
+        return ctx.cell.calibrate_intrinsics(request.intrinsics(images), ctx.cancel)
+    return ctx.cell.calibrate_extrinsics(request.extrinsics(), ctx.cancel)
 
 
-def map_scene(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    request = MapRequest(args["image"], with_points=args["points"], picture=args["picture"])
+def map_scene(ctx: Context, request: MapRequest) -> dict[str, Any]:
     return ctx.cell.map_scene(request, ctx.cancel)
 
 
-def register_robot(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.register_robot(RegisterRequest(args["image"]), ctx.cancel)
+def register_robot(ctx: Context, request: RegisterRequest) -> dict[str, Any]:
+    return ctx.cell.register_robot(request, ctx.cancel)
 
 
-def locate(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    colors = tuple(args["colors"]) if args["colors"] is not None else None
-    return ctx.cell.locate(LocateRequest(args["image"], colors=colors), ctx.cancel)
+def locate(ctx: Context, request: LocateRequest) -> dict[str, Any]:
+    return ctx.cell.locate(request, ctx.cancel)
 
 
-def move(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+def move(ctx: Context, request: MoveRequest) -> dict[str, Any]:
     return ctx.cell.move(
-        joints_deg=args["joints_deg"],
-        pose=args["pose"],
-        matrix=args["matrix"],
-        speed_deg_s=args["speed_deg_s"],
-        speed_mm_s=args["speed_mm_s"],
+        joints_deg=request.joints_deg,
+        pose=request.pose,
+        matrix=request.matrix,
+        speed_deg_s=request.speed_deg_s,
+        speed_mm_s=request.speed_mm_s,
         cancel=ctx.cancel,
     )
 
 
-def sort(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    colors = tuple(args["colors"]) if args["colors"] is not None else None
-    request = SortRequest(args["max_objects"], colors)
+def sort(ctx: Context, request: SortRequest) -> dict[str, Any]:
     return ctx.cell.sort(request, ctx.cancel, ctx.progress)
 
 
-def check(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.drift.check(args["image"])
+def check(ctx: Context, request: CheckRequest) -> dict[str, Any]:
+    return ctx.cell.drift.check(request.image)
 
 
-def adopt(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
-    return ctx.cell.adopt(AdoptRequest(args["camera"], args["system"]))
+def adopt(ctx: Context, request: AdoptRequest) -> dict[str, Any]:
+    return ctx.cell.adopt(request)
 
 
-def acknowledge_drift(ctx: Context, args: dict[str, Any]) -> dict[str, Any]:
+def acknowledge_drift(ctx: Context, _request: None) -> dict[str, Any]:
     return ctx.cell.drift.acknowledge()
 
 
 HANDLERS: dict[str, Handler] = {
     "status": status,
+    "describe": describe,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

@@ -189,7 +189,7 @@ class JobRunner:
         journal = self.cell.journal
         journal.start(req.cmd, req.id, req.args)
         try:
-            result = self._then_refresh(lambda: HANDLERS[req.cmd](ctx, req.args))
+            result = self._then_refresh(lambda: HANDLERS[req.cmd](ctx, req.payload))
             if job.cancel.is_set():
                 reply = self._stopped_reply(job, req)
             else:

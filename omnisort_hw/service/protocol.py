@@ -5,8 +5,9 @@ Reply:    {"id": 7, "ok": true, "result": {...}}
           {"id": 7, "ok": false, "error": {"code": "...", "message": "...", ...}}
 
 `parse_request` never raises anything but `ProtocolError`, whatever the bytes are, so the server
-can answer every line with a typed error. Each command's arguments are declared once in
-`COMMANDS` (type, range, length, choices, required); unknown arguments are refused.
+can answer every line with a typed error. Each command's arguments are declared once, in its
+request record (`pipeline.requests`: type, range, length, choices, default, the rules between
+them); `COMMANDS` names the record, and unknown arguments are refused.
 """
 
 from __future__ import annotations
@@ -18,6 +19,20 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
+
+from omnisort_hw.pipeline import requests
+from omnisort_hw.pipeline.request_fields import (
+    MAX_ITEM_CHARS,
+    MAX_LIST_ITEMS,
+    SCHEMA_DIALECT,
+    Arg,
+    ArgumentError,
+    args_of,
+    build,
+    check_rules,
+    schema_of,
+    summary_line,
+)
 
 # Error codes of the protocol. Typed errors of the product and of the drivers keep their own
 # `code` inside `details` where it says more (e.g. device_timeout, bad_calibration_file).
@@ -59,7 +74,6 @@ ERROR_CODES: tuple[str, ...] = (
 )
 
 MAX_ID_CHARS = 128
-MAX_STR_CHARS = 4096
 MAX_JSON_DEPTH = 16
 MAX_ID_INT = 2**53
 
@@ -77,35 +91,58 @@ class ProtocolError(Exception):
 
 
 @dataclass(frozen=True)
-class Arg:
-    """One argument of a command: its JSON type and the checks applied to it."""
-
-    name: str
-    kind: Literal["bool", "int", "number", "str", "path", "vector", "matrix4", "str_list"]
-    required: bool = False
-    default: Any = None
-    choices: tuple[str, ...] = ()
-    length: int | None = None
-    lo: float | None = None
-    hi: float | None = None
-    max_chars: int = MAX_STR_CHARS
-    help: str = ""
-
-
-@dataclass(frozen=True)
 class Command:
     """A command: its arguments, how it runs, whether it needs the token off loopback."""
 
     name: str
     kind: CommandKind
-    args: tuple[Arg, ...] = ()
+    request: type[Any] | None = None  # the request record that declares the arguments
     needs_token: bool = True
     job_state: str | None = None
-    check: Callable[[dict[str, Any]], None] | None = None
     help: str = ""
+
+    @property
+    def args(self) -> tuple[Arg, ...]:
+        return args_of(self.request) if self.request is not None else ()
+
+    @property
+    def summary(self) -> str:
+        return self.help or (summary_line(self.request) if self.request is not None else "")
 
     def arg(self, name: str) -> Arg | None:
         return next((a for a in self.args if a.name == name), None)
+
+    def check(self, args: Mapping[str, Any]) -> None:
+        """The rules between the arguments, as ProtocolError(bad_argument) naming the field."""
+        if self.request is None:
+            return
+        try:
+            check_rules(self.request, self.name, args)
+        except ArgumentError as exc:
+            raise ProtocolError(BAD_ARGUMENT, str(exc), field=exc.field) from None
+
+    def schema(self) -> dict[str, Any]:
+        """The JSON Schema (draft 2020-12) of this command's `args` object."""
+        if self.request is not None:
+            return schema_of(self.request, self.name, self.summary)
+        return {
+            "$schema": SCHEMA_DIALECT,
+            "title": self.name,
+            "description": self.summary,
+            "type": "object",
+            "properties": {},
+            "additionalProperties": False,
+        }
+
+    def describe(self) -> dict[str, Any]:
+        """What a client needs to offer this command: how it runs, and its arguments."""
+        return {
+            "kind": self.kind,
+            "needs_token": self.needs_token,
+            "job_state": self.job_state,
+            "help": self.summary,
+            "args": self.schema(),
+        }
 
 
 @dataclass(frozen=True)
@@ -122,155 +159,32 @@ class Request:
     def command(self) -> Command:
         return COMMANDS[self.cmd]
 
+    @property
+    def payload(self) -> Any:
+        """The command's request record built from `args` (None for a command without one)."""
+        request = self.command.request
+        return build(request, self.args) if request is not None else None
 
-def _check_move(args: dict[str, Any]) -> None:
-    targets = [k for k in ("joints_deg", "pose", "matrix") if args.get(k) is not None]
-    if len(targets) != 1:
-        raise ProtocolError(
-            BAD_ARGUMENT,
-            "move needs exactly one target: joints_deg (6 numbers, deg), pose "
-            "([x, y, z mm, rx, ry, rz deg] rotation vector) or matrix (4x4, mm)",
-            field="joints_deg|pose|matrix",
-        )
-    if args.get("speed_mm_s") is not None and args.get("joints_deg") is not None:
-        raise ProtocolError(
-            BAD_ARGUMENT, "speed_mm_s is for Cartesian targets; use speed_deg_s", field="speed_mm_s"
-        )
-    if args.get("speed_deg_s") is not None and args.get("joints_deg") is None:
-        raise ProtocolError(
-            BAD_ARGUMENT, "speed_deg_s is for joint targets; use speed_mm_s", field="speed_deg_s"
-        )
-
-
-def _check_calibrate(args: dict[str, Any]) -> None:
-    def refuse(keys: tuple[str, ...], why: str) -> None:
-        for key in keys:
-            if args.get(key) is not None:
-                raise ProtocolError(BAD_ARGUMENT, f"calibrate: {key} {why}", field=key)
-
-    if args["what"] == "intrinsics":
-        for key, what in (("folder", "a folder of images"), ("square_mm", "the square size")):
-            if args.get(key) is None:
-                raise ProtocolError(
-                    BAD_ARGUMENT, f"calibrate what=intrinsics needs {key} ({what})", field=key
-                )
-        refuse(("image", "target", "separation_mm", "method"), "is for what=extrinsics")
-        return
-    refuse(("folder", "degree"), "is for what=intrinsics")
-    if args.get("target") not in (None, "checkerboards"):
-        refuse(("board", "square_mm"), "is for target=checkerboards")
-    if args.get("target") == "checkerboards":
-        refuse(("separation_mm",), "is for the wall targets")
-
-
-_IMAGE = Arg(
-    "image", "path", help="absolute path of an image on the cell PC; omitted: a fresh capture"
-)
 
 COMMANDS: dict[str, Command] = {
     c.name: c
     for c in (
         Command("status", "quick", needs_token=False, help="state, devices and calibration"),
         Command(
-            "capture",
+            "describe",
             "quick",
-            (
-                Arg("encoding", "str", choices=("path", "base64"), default="path"),
-                Arg("format", "str", choices=("png", "jpg"), default="png"),
-                Arg("laser", "bool", help="switch the laser to this state before grabbing"),
-            ),
-            help="grab one image; returned as a file path or base64",
+            help="each command's kind and the JSON Schema (draft 2020-12) of its arguments",
         ),
-        Command(
-            "laser",
-            "quick",
-            (Arg("on", "bool", help="true: on, false: off, omitted: read the state"),),
-            help="switch or read the laser line",
-        ),
-        Command(
-            "calibrate",
-            "job",
-            (
-                Arg("what", "str", required=True, choices=("intrinsics", "extrinsics")),
-                Arg("folder", "path", help="intrinsics: absolute path of the image folder"),
-                Arg("board", "str", max_chars=16, help="board inner corners COLSxROWS"),
-                Arg("square_mm", "number", lo=1.0, hi=1000.0, help="board square size, mm"),
-                Arg("degree", "int", lo=2, hi=12, help="intrinsics: polynomial degree"),
-                _IMAGE,
-                Arg("target", "str", choices=("two-sided", "three-sided", "checkerboards")),
-                Arg("separation_mm", "number", lo=1.0, hi=100000.0, help="inner wall distance"),
-                Arg("method", "str", choices=("joint", "paper", "method1", "method2")),
-            ),
-            job_state="calibrating",
-            check=_check_calibrate,
-            help="intrinsics from a folder of images; extrinsics from a capture or an image",
-        ),
-        Command(
-            "map",
-            "job",
-            (
-                _IMAGE,
-                Arg("points", "bool", default=False, help="include the points (S, mm), pixels"),
-                Arg("picture", "bool", default=False, help="write map_overlay.png (state dir)"),
-            ),
-            job_state="mapping",
-            help="laser map of the scene",
-        ),
-        Command(
-            "register_robot",
-            "job",
-            (_IMAGE,),
-            job_state="calibrating",
-            help="robot base pose from the floor checkerboard",
-        ),
-        Command(
-            "locate",
-            "job",
-            (_IMAGE, Arg("colors", "str_list", help="only these colours")),
-            job_state="mapping",
-            help="find the objects and their poses",
-        ),
-        Command(
-            "move",
-            "job",
-            (
-                Arg("joints_deg", "vector", length=6, lo=-360.0, hi=360.0),
-                Arg("pose", "vector", length=6, lo=-1e5, hi=1e5),
-                Arg("matrix", "matrix4", lo=-1e5, hi=1e5),
-                Arg("speed_deg_s", "number", lo=0.1, hi=180.0, help="joint moves"),
-                Arg("speed_mm_s", "number", lo=0.1, hi=1000.0, help="Cartesian moves"),
-            ),
-            job_state="moving",
-            check=_check_move,
-            help="joint target: move in joint space; Cartesian target: straight TCP line",
-        ),
-        Command(
-            "sort",
-            "job",
-            (
-                Arg("max_objects", "int", lo=1, hi=1000),
-                Arg("colors", "str_list", help="only these colours"),
-            ),
-            job_state="sorting",
-            help="locate, pick and place every object by colour",
-        ),
-        Command(
-            "check",
-            "job",
-            (_IMAGE,),
-            job_state="mapping",
-            help="drift check: a laser-off capture against the stored calibration",
-        ),
-        Command(
-            "adopt",
-            "job",
-            (
-                Arg("camera", "path", help="absolute path of a camera.json made by the CLI"),
-                Arg("system", "path", help="absolute path of a system.json made by the CLI"),
-            ),
-            job_state="calibrating",
-            help="take calibration files made by the CLI as the cell's, verified against it",
-        ),
+        Command("capture", "quick", requests.CaptureRequest),
+        Command("laser", "quick", requests.LaserRequest),
+        Command("calibrate", "job", requests.CalibrateRequest, job_state="calibrating"),
+        Command("map", "job", requests.MapRequest, job_state="mapping"),
+        Command("register_robot", "job", requests.RegisterRequest, job_state="calibrating"),
+        Command("locate", "job", requests.LocateRequest, job_state="mapping"),
+        Command("move", "job", requests.MoveRequest, job_state="moving"),
+        Command("sort", "job", requests.SortRequest, job_state="sorting"),
+        Command("check", "job", requests.CheckRequest, job_state="mapping"),
+        Command("adopt", "job", requests.AdoptRequest, job_state="calibrating"),
         Command(
             "acknowledge_drift",
             "quick",
@@ -283,22 +197,18 @@ COMMANDS: dict[str, Command] = {
             needs_token=False,
             help="stop everything, laser off, latch the fault state (not a safety function)",
         ),
-        Command(
-            "reset",
-            "control",
-            (
-                Arg(
-                    "gripper_empty",
-                    "bool",
-                    default=False,
-                    help="an operator confirms the gripper's load was removed by hand",
-                ),
-            ),
-            help="leave the fault/stopped state when the arm is safe",
-        ),
+        Command("reset", "control", requests.ResetRequest),
         Command("shutdown", "control", help="stop the cell and end the service (exit 0)"),
     )
 }
+
+
+def describe_commands() -> dict[str, Any]:
+    """The `describe` reply: every command, with its arguments' JSON Schema."""
+    return {
+        "schema_dialect": SCHEMA_DIALECT,
+        "commands": {name: c.describe() for name, c in COMMANDS.items()},
+    }
 
 
 def _type_name(value: Any) -> str:
@@ -343,10 +253,12 @@ def _check_arg(arg: Arg, cmd: str, value: Any) -> Any:
             raise _bad(arg, cmd, f"must be true or false, got {_type_name(value)}")
         return value
     if arg.kind == "int":
-        if not isinstance(value, int) or isinstance(value, bool):
+        # JSON has one number type: 3.0 is the integer 3 (as JSON Schema's "integer" says).
+        integral = isinstance(value, float) and math.isfinite(value) and value.is_integer()
+        if not integral and (not isinstance(value, int) or isinstance(value, bool)):
             raise _bad(arg, cmd, f"must be an integer, got {_type_name(value)}")
         _check_number(arg, cmd, value)
-        return value
+        return int(value)
     if arg.kind == "number":
         return _check_number(arg, cmd, value)
     if arg.kind == "path":
@@ -370,11 +282,11 @@ def _check_arg(arg: Arg, cmd: str, value: Any) -> Any:
             raise _bad(arg, cmd, f"must be one of {', '.join(arg.choices)}, got {value[:40]!r}")
         return value
     if arg.kind == "str_list":
-        if not isinstance(value, list) or not 1 <= len(value) <= 64:
-            raise _bad(arg, cmd, "must be an array of 1..64 strings")
+        if not isinstance(value, list) or not 1 <= len(value) <= MAX_LIST_ITEMS:
+            raise _bad(arg, cmd, f"must be an array of 1..{MAX_LIST_ITEMS} strings")
         for item in value:
-            if not isinstance(item, str) or not 1 <= len(item) <= 64:
-                raise _bad(arg, cmd, "must hold strings of 1..64 characters")
+            if not isinstance(item, str) or not 1 <= len(item) <= MAX_ITEM_CHARS:
+                raise _bad(arg, cmd, f"must hold strings of 1..{MAX_ITEM_CHARS} characters")
         return list(value)
     if arg.kind == "vector":
         if not isinstance(value, list) or len(value) != arg.length:
@@ -525,8 +437,7 @@ def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
             args[arg.name] = arg.default
             continue
         args[arg.name] = _check_arg(arg, spec.name, value)
-    if spec.check is not None:
-        spec.check(args)
+    spec.check(args)
     return args
 
 

@@ -143,7 +143,7 @@ class Service(Transport, JobRunner):
 
     def status_reply(self) -> dict[str, Any]:
         """The `status` reply, from the snapshot (no device call): for the PLC face."""
-        return HANDLERS["status"](Context(self.cell, threading.Event(), self.service_status), {})
+        return HANDLERS["status"](Context(self.cell, threading.Event(), self.service_status), None)
 
     def call_from_thread(self, cmd: str, wait_s: float) -> dict[str, Any] | None:
         """Hand `cmd` (no arguments) to the dispatcher from another thread (the PLC face's), as
@@ -307,10 +307,10 @@ class Service(Transport, JobRunner):
         if req.cmd == "shutdown":
             self.request_shutdown(f"shutdown requested (request {req.id})")
             return proto.ok_reply(req.id, {"shutting_down": True})
-        if req.cmd == "status":
+        if req.cmd in ("status", "describe"):
             # Answered in the event loop from the cell's snapshot: no device, no pool.
             ctx = Context(self.cell, threading.Event(), self.service_status)
-            return proto.ok_reply(req.id, HANDLERS["status"](ctx, req.args))
+            return proto.ok_reply(req.id, HANDLERS[req.cmd](ctx, None))
         switches_laser = req.args.get("laser" if req.cmd == "capture" else "on")
         if req.cmd in ("laser", "capture") and switches_laser is not None:
             if self._job is not None:
@@ -322,7 +322,7 @@ class Service(Transport, JobRunner):
         handler = HANDLERS[req.cmd]
         ctx = Context(self.cell, threading.Event(), self.service_status)
         return await self._in_pool(
-            self._quick, req, lambda: handler(ctx, req.args), self.config.quick_timeout_s
+            self._quick, req, lambda: handler(ctx, req.payload), self.config.quick_timeout_s
         )
 
     async def _in_pool(

@@ -105,3 +105,16 @@ def test_serve_names_a_device_that_cannot_be_opened(tmp_path, capsys) -> None:
     assert main(["serve", "--config", str(cfg), "--port", "0"]) == 2
     err = capsys.readouterr().err
     assert "/dev/video-omnisort-missing" in err
+
+
+def test_ctl_describe_lists_each_command_with_its_arguments(make_service, capsys) -> None:
+    h: Harness = make_service(token=TOKEN)
+    port = str(h.running.port)
+    assert main(["ctl", "--port", port, "--token", TOKEN, "describe"]) == 0
+    text = capsys.readouterr().out
+    assert "calibrate (job): Calibrate: intrinsics from a folder" in text
+    assert "    square_mm  number 1.0..1000.0 mm optional: board square size" in text
+    assert "    encoding  path|base64 default \"path\": a file path, or base64" in text
+    assert main(["ctl", "--port", port, "--token", TOKEN, "--json", "describe"]) == 0
+    schema = json.loads(capsys.readouterr().out)["result"]["commands"]["move"]["args"]
+    assert schema["properties"]["joints_deg"]["x-unit"] == "deg"
