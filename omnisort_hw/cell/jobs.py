@@ -115,7 +115,7 @@ class CellJobs:
         writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
         from omnisort_hw.pipeline import laser_map
 
-        return laser_map.run(self, request, cancel).reply(request.points)
+        return laser_map.run(self, request, cancel).reply()
 
     def register_robot(
         self, request: RegisterRequest, cancel: threading.Event | None = None
@@ -132,7 +132,7 @@ class CellJobs:
         """The cubes in the request's image (or laser-off and laser-on captures), in S and B."""
         from omnisort_hw.pipeline import locate
 
-        return locate.run(self, request, cancel).reply(request.colors)
+        return locate.run(self, request, cancel).reply()
 
     def adopt(self, request: AdoptRequest) -> dict[str, Any]:
         """The CLI's camera.json and system.json, verified against this cell, as its own."""

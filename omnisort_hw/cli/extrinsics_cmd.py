@@ -4,59 +4,32 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result, print_verdict
-from omnisort_hw.pipeline.requests import DEFAULT_BOARD, DEFAULT_SQUARE_MM
+from omnisort_hw.cli.request_flags import add_request_arguments, request_from
+from omnisort_hw.pipeline.requests import CalibrateRequest, MapRequest
+
+EXTRINSICS = {"what": "extrinsics"}
 
 
 def register(sub: Any) -> None:
     ext = sub.add_parser("extrinsics", help="calibrate camera rotation and laser plane")
     esub = ext.add_subparsers(dest="extrinsics_command", required=True, metavar="ACTION")
     cal = esub.add_parser("calibrate", help="from one image of a calibration target")
-    cal.add_argument("image", type=Path, nargs="?", default=None)
+    add_request_arguments(cal, CalibrateRequest, fixed=EXTRINSICS)
     cal.add_argument(
         "--config",
         type=Path,
         default=None,
         help="cell.toml: without an image, measure the target with its camera and laser (a "
-        "capture: averaged board frames for the edges, on/off pairs for the stripe)",
+        "capture: averaged board frames for the edges, on/off pairs for the stripe); its "
+        "[target] gives the defaults of --target and --separation",
     )
     cal.add_argument("--camera", type=Path, required=True, help="camera.json (intrinsics)")
-    cal.add_argument(
-        "--target", required=True, choices=("two-sided", "three-sided", "checkerboards")
-    )
-    cal.add_argument(
-        "--separation",
-        type=float,
-        default=None,
-        help="measured inner distance between the walls, mm (required for the wall targets, "
-        "or [target] separation_mm of --config)",
-    )
-    cal.add_argument(
-        "--target-file",
-        type=Path,
-        default=None,
-        help="target description TOML (deploy/target.example.toml): the wall target as "
-        "measured, separation and markers; default: the symmetric paper target",
-    )
-    cal.add_argument(
-        "--board", default=None, help=f"inner corners COLSxROWS (checkerboards; {DEFAULT_BOARD})"
-    )
-    cal.add_argument(
-        "--square",
-        type=float,
-        default=None,
-        help=f"square size mm (checkerboards; {DEFAULT_SQUARE_MM:g})",
-    )
-    cal.add_argument(
-        "--method",
-        choices=("joint", "paper", "method1", "method2"),
-        default=None,
-        help="default: the best one for the target",
-    )
     cal.add_argument(
         "--tone-curve",
         default="srgb",
@@ -74,7 +47,7 @@ def register(sub: Any) -> None:
     cal.set_defaults(func=cmd_calibrate)
 
     mp = sub.add_parser("map", help="laser pixels -> points on the laser plane (mm)")
-    mp.add_argument("image", type=Path, nargs="?", default=None)
+    add_request_arguments(mp, MapRequest, defaults={"picture": True})
     mp.add_argument("--system", type=Path, required=True, help="system.json")
     mp.add_argument(
         "--config",
@@ -84,16 +57,11 @@ def register(sub: Any) -> None:
     )
     mp.add_argument("--json", action="store_true")
     mp.add_argument(
-        "--points",
-        action="store_true",
-        help="with --json: every laser point in S (mm) and its pixel (points_S, pixels)",
-    )
-    mp.add_argument(
         "--png",
         type=output_file,
         default=None,
-        help="the map's picture (image with its laser points, and their top view in mm); "
-        "default: IMAGE-STEM_map_overlay.png beside --system (capture_map_overlay.png)",
+        help="where the map's picture goes; default: IMAGE-STEM_map_overlay.png beside "
+        "--system (capture_map_overlay.png)",
     )
     mp.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     mp.set_defaults(func=cmd_map)
@@ -103,18 +71,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.core.radiometry import ToneCurve
     from omnisort_hw.pipeline import extrinsics
-    from omnisort_hw.pipeline.requests import ExtrinsicsRequest
     from omnisort_hw.runlog import RunLog
 
-    request = ExtrinsicsRequest(
-        image=str(args.image) if args.image is not None else None,
-        target=args.target,
-        method=args.method,
-        separation_mm=args.separation,
-        board=args.board,
-        square_mm=args.square,
-        target_file=str(args.target_file) if args.target_file is not None else None,
-    )
+    calibrate = request_from(CalibrateRequest, args, "extrinsics calibrate", fixed=EXTRINSICS)
+    request = calibrate.extrinsics()
     with RunLog(args.log) as log:
         rig = FileRig(
             config=args.config,
@@ -146,20 +106,17 @@ def _warn(picture: dict[str, str | None]) -> None:
 def cmd_map(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.pipeline import laser_map
-    from omnisort_hw.pipeline.requests import MapRequest
     from omnisort_hw.runlog import RunLog
 
-    request = MapRequest(
-        image=str(args.image) if args.image is not None else None,
-        points=args.points,
-        picture=True,
-    )
+    request = request_from(MapRequest, args, "map")
+    if args.png is not None:
+        request = replace(request, picture=True)
     with RunLog(args.log) as log:
         rig = FileRig(config=args.config, system=args.system, png=args.png, log=log)
         result = laser_map.run(rig, request)
     _warn(result.picture)
     if args.json:
-        print_result(result.reply(with_points=args.points))
+        print_result(result.reply())
     else:
         segs = result.laser_map.segments
         print(f"{len(result.laser_map.pixels)} laser points, {len(segs)} segments")

@@ -10,7 +10,10 @@ from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result, print_verdict
-from omnisort_hw.pipeline.requests import DEFAULT_BOARD
+from omnisort_hw.cli.request_flags import add_request_arguments, request_from
+from omnisort_hw.pipeline.requests import CalibrateRequest
+
+INTRINSICS = {"what": "intrinsics"}
 
 
 def register(sub: Any) -> None:
@@ -19,21 +22,10 @@ def register(sub: Any) -> None:
 
     cal = isub.add_parser("calibrate", help="calibrate from checkerboard images")
     cal.add_argument("images", nargs="+", type=Path, metavar="IMAGE")
-    cal.add_argument(
-        "--board", default=None, help=f"inner corners, COLSxROWS (default {DEFAULT_BOARD})"
-    )
-    cal.add_argument("--square", type=float, required=True, help="square size in mm")
+    add_request_arguments(cal, CalibrateRequest, fixed=INTRINSICS, skip=("folder",))
     cal.add_argument("--out", type=output_file, required=True, help="camera.json to write")
-    cal.add_argument("--degree", type=int, default=None, help="polynomial degree (default: auto)")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object")
     cal.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
-    cal.add_argument(
-        "--refinement",
-        choices=("auto", "saddle", "plane"),
-        default="auto",
-        help="corner refinement: saddle points, re-measured on the board plane, or per image "
-        "whichever agrees better with the first model (default auto)",
-    )
     cal.set_defaults(func=cmd_calibrate)
 
     exp = isub.add_parser("export", help="camera.json -> OCamCalib calib_results.txt")
@@ -53,16 +45,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.core.intrinsics_report import OUTER_BAND
     from omnisort_hw.pipeline import intrinsics
-    from omnisort_hw.pipeline.requests import IntrinsicsRequest, board_spec
+    from omnisort_hw.pipeline.requests import board_spec
     from omnisort_hw.runlog import RunLog
 
-    request = IntrinsicsRequest(
-        tuple(args.images),
-        args.square,
-        board=args.board,
-        degree=args.degree,
-        refinement=args.refinement,
+    calibrate = request_from(
+        CalibrateRequest, args, "intrinsics calibrate", fixed=INTRINSICS, skip=("folder",)
     )
+    request = calibrate.intrinsics(tuple(args.images))
     board_spec(request.board, request.square_mm, "--board/--square")  # before any image
     with (
         tqdm(

@@ -24,18 +24,22 @@ from typing import Any
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.cell_file import load_cell, sorting_config
 from omnisort_hw.cli.output import print_result, print_verdict
+from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 from omnisort_hw.errors import ConfigError, InputError
-from omnisort_hw.pipeline.requests import DEFAULT_BOARD
+from omnisort_hw.pipeline.requests import (
+    DEFAULT_BOARD,
+    LocateRequest,
+    RegisterRequest,
+    SortRequest,
+)
 
 
 def register(sub: Any) -> None:
     reg = sub.add_parser(
         "register-robot", help="robot base pose T_SB from the floor checkerboard in one image"
     )
-    reg.add_argument(
-        "image", type=Path, nargs="?", help="laser-off image (default: a capture with --config)"
-    )
+    add_request_arguments(reg, RegisterRequest)
     reg.add_argument(
         "--system", type=Path, required=True, help="system.json (read, robot_base written)"
     )
@@ -61,21 +65,13 @@ def register(sub: Any) -> None:
         "camera roll/pitch 1-sigma (default)",
     )
     reg.add_argument("--camera-height", type=float, default=None, help="nominal, mm (default 1200)")
-    reg.add_argument("--model", default=None, help="robot model to note in robot_base (UR5e...)")
-    reg.add_argument("--dry-run", action="store_true", help="do not write system.json")
     reg.add_argument("--json", action="store_true", help="print the result as one JSON object")
     reg.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     reg.set_defaults(func=cmd_register)
 
     loc = sub.add_parser("locate", help="find the cubes: colour, centre and yaw in S and B")
-    loc.add_argument(
-        "image",
-        type=Path,
-        nargs="?",
-        help="colour image, laser off (default: a capture with --config: laser off and on)",
-    )
+    add_request_arguments(loc, LocateRequest)
     loc.add_argument("--system", type=Path, required=True, help="system.json with robot_base")
-    loc.add_argument("--laser-image", type=Path, default=None, help="same view, laser on")
     loc.add_argument(
         "--config",
         type=Path,
@@ -86,7 +82,7 @@ def register(sub: Any) -> None:
     loc.add_argument(
         "--cube-size", type=float, default=None, help="cube edge, mm (default 100 or --config)"
     )
-    loc.add_argument("--colors", type=Path, default=None, help="colour table (TOML or JSON)")
+    loc.add_argument("--color-table", type=Path, default=None, help="colour table (TOML or JSON)")
     loc.add_argument(
         "--region", default=None, help="xmin,xmax,ymin,ymax in S, mm (default: between walls)"
     )
@@ -102,11 +98,7 @@ def register(sub: Any) -> None:
         default=None,
         help="system.json (default: the calibration store of the config's [storage])",
     )
-    srt.add_argument(
-        "--register", action="store_true", help="register the robot from the capture first"
-    )
-    srt.add_argument("--max", type=int, default=None, help="pick at most this many cubes")
-    srt.add_argument("--colors", default=None, help="only these colours, comma separated")
+    add_request_arguments(srt, SortRequest)
     srt.add_argument("--json", action="store_true")
     srt.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     srt.set_defaults(func=cmd_sort)
@@ -180,12 +172,9 @@ def _offset(text: str) -> tuple[float, float, float, float, float, float]:
 def cmd_register(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.pipeline import registration
-    from omnisort_hw.pipeline.requests import RegisterRequest
     from omnisort_hw.runlog import RunLog
 
-    request = RegisterRequest(
-        image=str(args.image) if args.image else None, save=not args.dry_run, model=args.model
-    )
+    request = request_from(RegisterRequest, args, "register-robot")
     with RunLog(args.log) as log:
         rig = FileRig(
             config=args.config,
@@ -200,7 +189,7 @@ def cmd_register(args: argparse.Namespace) -> int:
         print_result(reply)
         return 0
     print("\n".join(result.lines(with_verdict=False)))
-    print(f"written to {result.path}" if result.path else "not written (--dry-run)")
+    print(f"written to {result.path}" if result.path else "not written (--no-save)")
     print_verdict(reply)
     return 0
 
@@ -223,8 +212,8 @@ def _locate_config(args: argparse.Namespace) -> Any:
         if args.cube_size <= 0:
             raise InputError(f"--cube-size must be positive, got {args.cube_size}")
         changes["cube_size_mm"] = args.cube_size
-    if args.colors is not None:
-        changes["colors"] = ColorTable.load(args.colors)
+    if args.color_table is not None:
+        changes["colors"] = ColorTable.load(args.color_table)
     if args.region is not None:
         changes["region_S_mm"] = _numbers(args.region, 4, "--region")
     return replace(cfg, **changes)
@@ -233,13 +222,9 @@ def _locate_config(args: argparse.Namespace) -> Any:
 def cmd_locate(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.pipeline import locate
-    from omnisort_hw.pipeline.requests import LocateRequest
     from omnisort_hw.runlog import RunLog
 
-    request = LocateRequest(
-        image=str(args.image) if args.image is not None else None,
-        laser_image=str(args.laser_image) if args.laser_image is not None else None,
-    )
+    request = request_from(LocateRequest, args, "locate")
     with RunLog(args.log) as log:
         rig = FileRig(
             config=args.config,
@@ -253,7 +238,7 @@ def cmd_locate(args: argparse.Namespace) -> int:
     if args.json:
         print_result(reply)
         return 0
-    cubes = result.cubes
+    cubes = result.asked()
     print(f"{len(cubes)} cubes")
     for i, c in enumerate(cubes):
         s, b = c.center_S, c.center_B
@@ -269,11 +254,9 @@ def cmd_locate(args: argparse.Namespace) -> int:
 def cmd_sort(args: argparse.Namespace) -> int:
     from omnisort_hw.cli.file_rig import FileRig
     from omnisort_hw.pipeline import sort_run
-    from omnisort_hw.pipeline.requests import SortRequest
     from omnisort_hw.runlog import RunLog
 
-    colors = tuple(c.strip() for c in args.colors.split(",")) if args.colors else None
-    request = SortRequest(args.max, colors, register=args.register)
+    request = request_from(SortRequest, args, "sort")
     with RunLog(args.log) as log:
         rig = FileRig(config=args.config, system=args.system, log=log)
         progress = None if args.json else _print_progress

@@ -166,12 +166,13 @@ class MapResult:
     laser_map: LaserMap
     image: dict[str, Any]
     picture: dict[str, Any] = field(default_factory=dict)
+    with_points: bool = False  # the request's `points`: the reply carries every point
 
-    def reply(self, with_points: bool = False) -> dict[str, Any]:
+    def reply(self) -> dict[str, Any]:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         return {
             "image": self.image,
-            **self.laser_map.summary(with_points),
+            **self.laser_map.summary(self.with_points),
             **self.picture,
             "verdict": self.verdict().to_dict(),
         }
@@ -199,7 +200,7 @@ def run(rig: Rig, request: MapRequest, cancel: threading.Event | None = None) ->
     floor = floor_plane_S(calib, rig.sort_config)
     light = acq.stripe_px is not None  # a capture's laser light: red-channel centres
     laser_map = map_laser(stripe, calib, acq.source, rig.runlog, floor, light_only=light)
-    result = MapResult(laser_map, acq.record)
+    result = MapResult(laser_map, acq.record, with_points=request.points)
     if request.picture:
         result.picture = write_picture(
             rig.picture_path("map", request.image),

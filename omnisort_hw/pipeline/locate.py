@@ -56,6 +56,7 @@ class LocateResult:
     diagnostics: dict[str, Any] = field(repr=False)
     max_sigma_mm: float = SortConfig.max_sigma_mm
     picture: dict[str, Any] = field(default_factory=dict)
+    colors: tuple[str, ...] | None = None  # the request's: the reply gives only these
 
     def lines(self) -> list[str]:
         """The location in a few lines for people (the picture's legend, the CLI)."""
@@ -68,10 +69,14 @@ class LocateResult:
             )
         return [*out, *verdict_lines(self.verdict().to_dict())]
 
-    def verdict(self, colors: Sequence[str] | None = None) -> Verdict:
+    def asked(self) -> list[Cube]:
+        """The cubes of the request's colours (all when it named none)."""
+        return [c for c in self.cubes if self.colors is None or c.color in self.colors]
+
+    def verdict(self) -> Verdict:
         """A cube located worse than `[sorting] max_sigma_mm` is skipped by a sort (its
         outline fit's own sigma, as the sort judges it); no cube is worth a look."""
-        cubes = [c for c in self.cubes if colors is None or c.color in colors]
+        cubes = self.asked()
         found = at_least(
             "cubes", len(cubes), 1, "warn", "no cube found: look at the picture (light, colours)"
         )
@@ -87,10 +92,10 @@ class LocateResult:
         )
         return Verdict("locate", (found, sigma) if cubes else (found,))
 
-    def reply(self, colors: Sequence[str] | None = None) -> dict[str, Any]:
-        """The answer at every door: the cubes (of `colors` when given), their count, and the
-        blobs rejected inside the search region with the reason."""
-        found = [c.summary() for c in self.cubes if colors is None or c.color in colors]
+    def reply(self) -> dict[str, Any]:
+        """The answer at every door: the cubes (of the request's colours), their count, and
+        the blobs rejected inside the search region with the reason."""
+        found = [c.summary() for c in self.asked()]
         rejected = [
             r
             for r in self.diagnostics.get("rejected", [])
@@ -101,7 +106,7 @@ class LocateResult:
             "count": len(found),
             "rejected": rejected,
             **self.picture,
-            "verdict": self.verdict(colors).to_dict(),
+            "verdict": self.verdict().to_dict(),
         }
 
 
@@ -141,7 +146,7 @@ def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None)
         cancel=cancel,
         what="location",
     )
-    result = LocateResult(cubes, diag, cfg.max_sigma_mm)
+    result = LocateResult(cubes, diag, cfg.max_sigma_mm, colors=request.colors)
     result.picture = write_picture(
         rig.picture_path("locate", request.image),
         lambda: draw_cubes(colour, calib, T_SB, cubes, result.lines()),

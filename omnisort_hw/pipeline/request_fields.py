@@ -16,9 +16,11 @@ A value of None (or an absent key) always means "not given": the field's default
 from __future__ import annotations
 
 import dataclasses
+import math
+import os
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Literal, Protocol, TypeAlias
@@ -166,6 +168,114 @@ def args_of(cls: type[RequestClass]) -> tuple[Arg, ...]:
     return tuple(out)
 
 
+def type_name(value: Any) -> str:
+    """A value's JSON type name, for messages."""
+    return {
+        bool: "boolean",
+        int: "integer",
+        float: "number",
+        str: "string",
+        list: "array",
+        tuple: "array",
+        dict: "object",
+    }.get(type(value), "null" if value is None else type(value).__name__)
+
+
+def _bad(arg: Arg, command: str, what: str, label: str | None) -> ArgumentError:
+    return ArgumentError(arg.name, f"{command}: argument {label or repr(arg.name)} {what}")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _range_text(arg: Arg) -> str:
+    """`within 1..1000 mm`, `>= 1`: the bounds a number must keep, in words."""
+    unit = f" {arg.unit}" if arg.unit else ""
+    if arg.lo is not None and arg.hi is not None:
+        return f"within {arg.lo:g}..{arg.hi:g}{unit}"
+    if arg.lo is not None:
+        return f">= {arg.lo:g}{unit}"
+    return f"<= {arg.hi:g}{unit}" if arg.hi is not None else ""
+
+
+def _number(arg: Arg, command: str, value: Any, label: str | None, where: str = "") -> float:
+    if not _is_number(value):
+        raise _bad(arg, command, f"{where}must be a number, got {type_name(value)}", label)
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    outside = (arg.lo is not None and not number >= arg.lo) or (
+        arg.hi is not None and not number <= arg.hi
+    )
+    if not math.isfinite(number) or outside:
+        what = " ".join(w for w in ("a finite number", _range_text(arg)) if w)
+        raise _bad(arg, command, f"{where}must be {what}, got {number:g}", label)
+    return number
+
+
+def check_value(
+    arg: Arg, command: str, value: Any, *, label: str | None = None, cell_paths: bool = True
+) -> Any:
+    """The checked value of one given (not None) argument, or ArgumentError naming it (as
+    `label`, default its name). `cell_paths`: a path must be absolute (a path on the cell PC,
+    sent over the network); the CLI reads its own relative paths."""
+    if arg.kind == "bool":
+        if not isinstance(value, bool):
+            raise _bad(arg, command, f"must be true or false, got {type_name(value)}", label)
+        return value
+    if arg.kind == "int":
+        # JSON has one number type: 3.0 is the integer 3 (as JSON Schema's "integer" says).
+        integral = isinstance(value, float) and math.isfinite(value) and value.is_integer()
+        if not integral and (not isinstance(value, int) or isinstance(value, bool)):
+            raise _bad(arg, command, f"must be an integer, got {type_name(value)}", label)
+        _number(arg, command, value, label)
+        return int(value)
+    if arg.kind == "number":
+        return _number(arg, command, value, label)
+    if arg.kind in ("str", "path"):
+        if not isinstance(value, str):
+            raise _bad(arg, command, f"must be a string, got {type_name(value)}", label)
+        if not value or len(value) > arg.max_chars:
+            raise _bad(arg, command, f"must be 1..{arg.max_chars} characters", label)
+        if "\x00" in value:
+            raise _bad(arg, command, "must not contain NUL characters", label)
+        if arg.choices and value not in arg.choices:
+            choices = ", ".join(arg.choices)
+            raise _bad(arg, command, f"must be one of {choices}, got {value[:40]!r}", label)
+        if arg.kind == "path" and cell_paths and not os.path.isabs(value):
+            raise _bad(
+                arg,
+                command,
+                f"must be an absolute path on the cell PC, got {value[:200]!r}: the service "
+                f"does not guess a base folder (its working directory is {os.getcwd()})",
+                label,
+            )
+        return value
+    if arg.kind == "str_list":
+        if not isinstance(value, list | tuple) or not 1 <= len(value) <= MAX_LIST_ITEMS:
+            raise _bad(arg, command, f"must be an array of 1..{MAX_LIST_ITEMS} strings", label)
+        for item in value:
+            if not isinstance(item, str) or not 1 <= len(item) <= MAX_ITEM_CHARS:
+                what = f"must hold strings of 1..{MAX_ITEM_CHARS} characters"
+                raise _bad(arg, command, what, label)
+        return list(value)
+    if arg.kind == "vector":
+        if not isinstance(value, list | tuple) or len(value) != arg.length:
+            raise _bad(arg, command, f"must be an array of {arg.length} numbers", label)
+        return [_number(arg, command, v, label, f"element {i} ") for i, v in enumerate(value)]
+    rows_text = "must be a 4x4 array of numbers (rows)"
+    if not isinstance(value, list | tuple) or len(value) != 4:
+        raise _bad(arg, command, rows_text, label)
+    rows = []
+    for r, row in enumerate(value):
+        if not isinstance(row, list | tuple) or len(row) != 4:
+            raise _bad(arg, command, rows_text, label)
+        rows.append([_number(arg, command, v, label, f"[{r}][{c}] ") for c, v in enumerate(row)])
+    return rows
+
+
 def _holds(condition: Condition, args: Mapping[str, Any]) -> bool:
     other, values = condition
     value = args.get(other)
@@ -185,23 +295,33 @@ def condition_text(condition: Condition) -> str:
     return f"{other}={' or '.join(given)}"
 
 
-def check_rules(cls: type[RequestClass], command: str, args: Mapping[str, Any]) -> None:
+def check_rules(
+    cls: type[RequestClass],
+    command: str,
+    args: Mapping[str, Any],
+    labels: Mapping[str, str] | None = None,
+    supplied: Collection[str] = (),
+) -> None:
     """The rules between the arguments of `args` (each checked alone already): a field given
     outside its `only_when`, missing under its `required_when`, or not exactly one of
-    `EXACTLY_ONE`, as ArgumentError naming the field."""
+    `EXACTLY_ONE`, as ArgumentError naming the field (in messages as `labels[name]`, the CLI's
+    flag, when given). `supplied` names arguments a door gives in its own way (the CLI's list
+    of images for the intrinsics' `folder`): never missing."""
     declared = args_of(cls)
+    shown = {a.name: (labels or {}).get(a.name, a.name) for a in declared}
     for arg in declared:
         needed = arg.required_when and all(_holds(c, args) for c in arg.required_when)
-        if needed and args.get(arg.name) is None:
+        if needed and args.get(arg.name) is None and arg.name not in supplied:
             when = " and ".join(condition_text(c) for c in arg.required_when)
-            raise ArgumentError(arg.name, f"{command} {when} needs {arg.name} ({arg.help})")
+            text = f"{command} {when} needs {shown[arg.name]} ({arg.help})"
+            raise ArgumentError(arg.name, text)
     for arg in declared:
         if args.get(arg.name) is None:
             continue
         failed = next((c for c in arg.only_when if not _holds(c, args)), None)
         if failed is not None:
             reason = arg.why or f"is for {condition_text(failed)}"
-            raise ArgumentError(arg.name, f"{command}: {arg.name} {reason}")
+            raise ArgumentError(arg.name, f"{command}: {shown[arg.name]} {reason}")
     group: tuple[str, ...] = getattr(cls, "EXACTLY_ONE", ())
     if group and sum(args.get(k) is not None for k in group) != 1:
         by_name = {a.name: a for a in declared}

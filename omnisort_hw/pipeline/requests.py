@@ -29,7 +29,8 @@ TARGETS = ("two-sided", "three-sided", "checkerboards")
 METHODS = ("joint", "paper", "method1", "method2")
 REFINEMENTS = ("auto", "saddle", "plane")
 
-IMAGE_HELP = "absolute path of an image on the cell PC; omitted: a fresh capture"
+IMAGE_HELP = "image file (over the protocol: an absolute path on the cell PC); omitted: a capture"
+LASER_OFF_HELP = "laser-off image file (over the protocol: an absolute path); omitted: a capture"
 COLORS_HELP = "only these colours (names of the colour table)"
 
 
@@ -196,9 +197,9 @@ class LocateRequest:
     """Locate the cubes of an image (with a laser-on image, or a capture): colour, centre and
     yaw in the camera and robot frames."""
 
-    image: str | None = _image("absolute path of a laser-off image; omitted: a fresh capture")
+    image: str | None = _image(LASER_OFF_HELP)
     laser_image: str | None = param(
-        None, kind="path", help="absolute path of the same view with the laser on"
+        None, kind="path", help="image file of the same view with the laser on"
     )
     colors: tuple[str, ...] | None = param(None, help=COLORS_HELP)
 
@@ -207,7 +208,7 @@ class LocateRequest:
 class RegisterRequest:
     """Register the robot base from the floor checkerboard of an image (or a capture)."""
 
-    image: str | None = _image("absolute path of a laser-off image; omitted: a fresh capture")
+    image: str | None = _image(LASER_OFF_HELP)
     save: bool = param(True, help="store the robot base in the system calibration")
     model: str | None = param(
         None, max_chars=64, help="the arm's model, kept in the record (UR5e...)"
@@ -219,7 +220,9 @@ class SortRequest:
     """Locate the cubes and put each in the bin of its colour: all, or `max_objects`, or those
     of `colors`."""
 
-    max_objects: int | None = param(None, lo=1, hi=1000, help="pick at most this many cubes")
+    max_objects: int | None = param(
+        None, lo=1, hi=1000, help="pick at most this many cubes", flag="--max"
+    )
     colors: tuple[str, ...] | None = param(None, help=COLORS_HELP)
     register: bool = param(
         False, help="register the robot base from the floor board of the first capture"
@@ -230,7 +233,7 @@ class SortRequest:
 class CheckRequest:
     """Drift check: a laser-off image (or capture) against the stored calibration's reference."""
 
-    image: str | None = _image("absolute path of a laser-off image; omitted: a fresh capture")
+    image: str | None = _image(LASER_OFF_HELP)
 
 
 @dataclass(frozen=True)

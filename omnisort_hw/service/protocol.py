@@ -12,26 +12,24 @@ them); `COMMANDS` names the record, and unknown arguments are refused.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from omnisort_hw.pipeline import requests
 from omnisort_hw.pipeline.request_fields import (
-    MAX_ITEM_CHARS,
-    MAX_LIST_ITEMS,
     SCHEMA_DIALECT,
     Arg,
     ArgumentError,
     args_of,
     build,
     check_rules,
+    check_value,
     schema_of,
     summary_line,
+    type_name,
 )
 
 # Error codes of the protocol. Typed errors of the product and of the drivers keep their own
@@ -211,99 +209,6 @@ def describe_commands() -> dict[str, Any]:
     }
 
 
-def _type_name(value: Any) -> str:
-    return {
-        bool: "boolean",
-        int: "integer",
-        float: "number",
-        str: "string",
-        list: "array",
-        dict: "object",
-    }.get(type(value), "null" if value is None else type(value).__name__)
-
-
-def _bad(arg: Arg, cmd: str, what: str) -> ProtocolError:
-    return ProtocolError(BAD_ARGUMENT, f"{cmd}: argument {arg.name!r} {what}", field=arg.name)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _check_number(arg: Arg, cmd: str, value: Any, where: str = "") -> float:
-    if not _is_number(value):
-        raise _bad(arg, cmd, f"{where}must be a number, got {_type_name(value)}")
-    try:
-        number = float(value)
-    except OverflowError:
-        raise _bad(arg, cmd, f"{where}is out of range") from None
-    if not math.isfinite(number):
-        raise _bad(arg, cmd, f"{where}must be finite")
-    if arg.lo is not None and number < arg.lo:
-        raise _bad(arg, cmd, f"{where}must be >= {arg.lo:g}, got {number:g}")
-    if arg.hi is not None and number > arg.hi:
-        raise _bad(arg, cmd, f"{where}must be <= {arg.hi:g}, got {number:g}")
-    return number
-
-
-def _check_arg(arg: Arg, cmd: str, value: Any) -> Any:
-    """Return the validated value of one argument or raise ProtocolError(bad_argument)."""
-    if arg.kind == "bool":
-        if not isinstance(value, bool):
-            raise _bad(arg, cmd, f"must be true or false, got {_type_name(value)}")
-        return value
-    if arg.kind == "int":
-        # JSON has one number type: 3.0 is the integer 3 (as JSON Schema's "integer" says).
-        integral = isinstance(value, float) and math.isfinite(value) and value.is_integer()
-        if not integral and (not isinstance(value, int) or isinstance(value, bool)):
-            raise _bad(arg, cmd, f"must be an integer, got {_type_name(value)}")
-        _check_number(arg, cmd, value)
-        return int(value)
-    if arg.kind == "number":
-        return _check_number(arg, cmd, value)
-    if arg.kind == "path":
-        text = _check_arg(dataclasses.replace(arg, kind="str"), cmd, value)
-        if not os.path.isabs(text):
-            raise _bad(
-                arg,
-                cmd,
-                f"must be an absolute path on the cell PC, got {text[:200]!r}: the service "
-                f"does not guess a base folder (its working directory is {os.getcwd()})",
-            )
-        return text
-    if arg.kind == "str":
-        if not isinstance(value, str):
-            raise _bad(arg, cmd, f"must be a string, got {_type_name(value)}")
-        if not value or len(value) > arg.max_chars:
-            raise _bad(arg, cmd, f"must be 1..{arg.max_chars} characters")
-        if "\x00" in value:
-            raise _bad(arg, cmd, "must not contain NUL characters")
-        if arg.choices and value not in arg.choices:
-            raise _bad(arg, cmd, f"must be one of {', '.join(arg.choices)}, got {value[:40]!r}")
-        return value
-    if arg.kind == "str_list":
-        if not isinstance(value, list) or not 1 <= len(value) <= MAX_LIST_ITEMS:
-            raise _bad(arg, cmd, f"must be an array of 1..{MAX_LIST_ITEMS} strings")
-        for item in value:
-            if not isinstance(item, str) or not 1 <= len(item) <= MAX_ITEM_CHARS:
-                raise _bad(arg, cmd, f"must hold strings of 1..{MAX_ITEM_CHARS} characters")
-        return list(value)
-    if arg.kind == "vector":
-        if not isinstance(value, list) or len(value) != arg.length:
-            raise _bad(arg, cmd, f"must be an array of {arg.length} numbers")
-        return [_check_number(arg, cmd, v, f"element {i} ") for i, v in enumerate(value)]
-    if arg.kind == "matrix4":
-        if not isinstance(value, list) or len(value) != 4:
-            raise _bad(arg, cmd, "must be a 4x4 array of numbers (rows)")
-        rows = []
-        for r, row in enumerate(value):
-            if not isinstance(row, list) or len(row) != 4:
-                raise _bad(arg, cmd, "must be a 4x4 array of numbers (rows)")
-            rows.append([_check_number(arg, cmd, v, f"[{r}][{c}] ") for c, v in enumerate(row)])
-        return rows
-    raise AssertionError(f"unhandled argument kind {arg.kind}")
-
-
 def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not valid JSON")
 
@@ -369,7 +274,7 @@ def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
     are looked at, so a client without the token learns nothing about them.
     """
     if not isinstance(obj, dict):
-        raise ProtocolError(BAD_REQUEST, f"request must be a JSON object, got {_type_name(obj)}")
+        raise ProtocolError(BAD_REQUEST, f"request must be a JSON object, got {type_name(obj)}")
     unknown = sorted(set(obj) - {"id", "cmd", "args", "token", "progress"})
     if unknown:
         shown = ", ".join(repr(k[:32]) for k in unknown[:5])
@@ -392,7 +297,7 @@ def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
         raise ProtocolError(BAD_REQUEST, "missing field 'cmd'", field="cmd")
     if not isinstance(cmd, str):
         raise ProtocolError(
-            BAD_REQUEST, f"'cmd' must be a string, got {_type_name(cmd)}", field="cmd"
+            BAD_REQUEST, f"'cmd' must be a string, got {type_name(cmd)}", field="cmd"
         )
     spec = COMMANDS.get(cmd)
     if spec is None:
@@ -411,7 +316,7 @@ def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
         raw_args = {}
     if not isinstance(raw_args, dict):
         raise ProtocolError(
-            BAD_REQUEST, f"'args' must be an object, got {_type_name(raw_args)}", field="args"
+            BAD_REQUEST, f"'args' must be an object, got {type_name(raw_args)}", field="args"
         )
     args = validate_args(spec, raw_args)
     return Request(id=rid, cmd=cmd, args=args, token=token, progress=progress)
@@ -433,10 +338,15 @@ def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
         value = raw.get(arg.name)
         if value is None:
             if arg.required:
-                raise _bad(arg, spec.name, "is required")
+                raise ProtocolError(
+                    BAD_ARGUMENT, f"{spec.name}: argument {arg.name!r} is required", field=arg.name
+                )
             args[arg.name] = arg.default
             continue
-        args[arg.name] = _check_arg(arg, spec.name, value)
+        try:
+            args[arg.name] = check_value(arg, spec.name, value)
+        except ArgumentError as exc:
+            raise ProtocolError(BAD_ARGUMENT, str(exc), field=exc.field) from None
     spec.check(args)
     return args
 

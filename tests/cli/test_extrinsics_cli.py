@@ -111,7 +111,7 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
         # The wall distance sets the laser plane's scale: never a default, never metres.
         ("on.png", ["--separation", "1.0845"], "looks like metres"),
         ("on.png", ["--separation", "52000"], "outside the plausible"),
-        ("on.png", ["--separation", "nan"], "expected a number of millimetres"),
+        ("on.png", ["--separation", "nan"], "--separation must be a finite number within"),
     ],
 )
 def test_bad_input_fails_clearly_and_writes_nothing(

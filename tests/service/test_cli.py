@@ -114,7 +114,7 @@ def test_ctl_describe_lists_each_command_with_its_arguments(make_service, capsys
     text = capsys.readouterr().out
     assert "calibrate (job): Calibrate: intrinsics from a folder" in text
     assert "    square_mm  number 1.0..1000.0 mm optional: board square size" in text
-    assert "    encoding  path|base64 default \"path\": a file path, or base64" in text
+    assert '    encoding  path|base64 default "path": a file path, or base64' in text
     assert main(["ctl", "--port", port, "--token", TOKEN, "--json", "describe"]) == 0
     schema = json.loads(capsys.readouterr().out)["result"]["commands"]["move"]["args"]
     assert schema["properties"]["joints_deg"]["x-unit"] == "deg"
