@@ -25,17 +25,18 @@ from omnisort_hw import fileio
 from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.config.watchdog import WatchdogConfig
 from omnisort_hw.errors import CalibrationDriftError, FeatureNotFoundError, InputError
+from omnisort_hw.pipeline import drift_check
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import (
     DRIFT_STATE_NAME,
     calibration_key,
-    check_drift,
     drift_refusal,
     load_drift_state,
     load_reference,
-    registration_for,
     save_reference,
 )
+from omnisort_hw.pipeline.image_files import read_image
+from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.runlog import RunLog
 
 log = logging.getLogger(__name__)
@@ -50,6 +51,32 @@ class WatchdogPorts:
     capture_dark: Callable[[], np.ndarray]
     registration: Callable[[], RegistrationConfig | None]
     runlog: Callable[[], RunLog]
+
+
+@dataclass(frozen=True)
+class _PortsRig:
+    """The watchdog's ports as the drift check's rig (`drift_check.CheckRig`)."""
+
+    ports: WatchdogPorts
+    watchdog_config: WatchdogConfig
+
+    @property
+    def runlog(self) -> RunLog:
+        return self.ports.runlog()
+
+    @property
+    def registration_config(self) -> RegistrationConfig | None:
+        return self.ports.registration()
+
+    def system_record(self) -> tuple[dict[str, Any], str]:
+        record = self.ports.store.read("system")
+        return record.payload, str(record.path)
+
+    def frame(self, image: str | None, laser: bool) -> np.ndarray:
+        return read_image(image) if image is not None else self.ports.capture_dark()
+
+    def drift_reference(self, key: str) -> np.ndarray | None:
+        return load_reference(self.ports.store.state_dir, key)
 
 
 class DriftWatchdog:
@@ -140,31 +167,16 @@ class DriftWatchdog:
             log.error("drift watchdog: cannot save the reference image: %s", exc)
 
     def check(self, image: str | None = None) -> dict[str, Any]:
-        """Capture (laser off) or read `image`, compare with the calibration, record the result."""
-        from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-        from omnisort_hw.pipeline.image_files import read_image
-
-        rec = self.store.read("system")
-        payload = rec.payload
-        calib = SystemCalibration.from_json(payload, source=str(rec.path))
-        key = calibration_key(payload)
-        img = read_image(image) if image is not None else self.ports.capture_dark()
-        reference = load_reference(self.store.state_dir, key)
-        result = check_drift(
-            img,
-            calib,
-            payload,
-            registration_for(payload, self.ports.registration()),
-            reference,
-            self.config,
-            image or "capture",
-            self.ports.runlog(),
-        )
-        summary = result.summary()
-        if reference is None and not result.drift and image is None:
-            # No reference for this calibration yet (registered elsewhere): the board found
-            # no drift, so this capture becomes the reference of the finer image check.
-            save_reference(self.store.state_dir, img, key)
+        """The drift check use case on `image` (or a laser-off capture); its result recorded."""
+        rig = _PortsRig(self.ports, self.config)
+        result = drift_check.run(rig, CheckRequest(image))
+        summary = result.reply()
+        if result.decision.source == "board" and not result.drift and image is None:
+            # No reference for this calibration yet (registered elsewhere), so the board alone
+            # measured: it found no drift, so this capture becomes the reference of the finer
+            # image check.
+            assert result.frame is not None
+            save_reference(self.store.state_dir, result.frame, result.key)
             summary["reference_adopted"] = True
         with self._lock:
             self._state["last"] = summary

@@ -1,4 +1,5 @@
-"""`omnisort check IMAGE` (the drift check on an image) and `omnisort evaluate drift`."""
+"""`omnisort check [IMAGE]` (the drift check, on an image or a capture) and `omnisort evaluate
+drift`."""
 
 from __future__ import annotations
 
@@ -8,17 +9,19 @@ from typing import TYPE_CHECKING, Any
 
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import EXIT_DRIFT, print_result, print_verdict
+from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
+from omnisort_hw.pipeline.requests import CheckRequest
 
 if TYPE_CHECKING:
-    import numpy as np
+    pass
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "check", help="drift check: an image against the stored calibration and robot base"
     )
-    p.add_argument("image", type=Path, help="a laser-off image of the cell")
+    add_request_arguments(p, CheckRequest)
     p.add_argument("--system", type=Path, required=True, help="system.json with robot_base")
     p.add_argument(
         "--reference",
@@ -28,7 +31,10 @@ def register(sub: Any) -> None:
         "system.json when it belongs to it; otherwise the board alone)",
     )
     p.add_argument(
-        "--config", type=Path, default=None, help="cell file: [registration], [watchdog]"
+        "--config",
+        type=Path,
+        default=None,
+        help="cell file: [registration], [watchdog]; without an image, capture with its camera",
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd")
@@ -49,42 +55,20 @@ def add_drift_evaluation(esub: Any) -> None:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-
-    from omnisort_hw.config.cell import load_cell_config
-    from omnisort_hw.config.watchdog import WatchdogConfig
-    from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-    from omnisort_hw.pipeline.calibration_source import read_system_payload
-    from omnisort_hw.pipeline.drift_check import (
-        calibration_key,
-        check_drift,
-        load_reference,
-        registration_for,
-    )
-    from omnisort_hw.pipeline.image_files import read_image
+    from omnisort_hw.cli.file_rig import FileRig
+    from omnisort_hw.pipeline import drift_check
     from omnisort_hw.runlog import RunLog
 
-    payload, _ = read_system_payload(args.system)  # a store file's checksum is verified
-    calib = SystemCalibration.from_json(payload, source=str(args.system))
-    cfg = load_cell_config(args.config) if args.config else None
-    registration = registration_for(payload, cfg.registration if cfg is not None else None)
-    reference: np.ndarray | None
-    if args.reference is not None:
-        reference = read_image(args.reference)
-    else:
-        reference = load_reference(args.system.parent, calibration_key(payload))
-    image = read_image(args.image)
+    request = request_from(CheckRequest, args, "check")
     with RunLog(args.log) as log:
-        res = check_drift(
-            image,
-            calib,
-            payload,
-            registration,
-            reference,
-            cfg.watchdog if cfg is not None else WatchdogConfig(),
-            str(args.image),
-            log,
+        rig = FileRig(
+            config=args.config,
+            system=args.system,
+            reference=args.reference,
+            log=log,
         )
-    s = res.summary()
+        res = drift_check.run(rig, request)
+    s = res.reply()
     if args.json:
         print_result(s)
     else:

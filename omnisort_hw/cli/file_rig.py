@@ -24,6 +24,7 @@ from omnisort_hw import fileio
 from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.config.cell import CellConfig, load_cell_config
 from omnisort_hw.config.sorting import RegistrationConfig
+from omnisort_hw.config.watchdog import WatchdogConfig
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
@@ -56,6 +57,7 @@ class FileRig:
     camera: Path | None = None
     out: Path | None = None
     png: Path | None = None
+    reference: Path | None = None  # the drift check's reference image (else the one kept)
     tone: ToneCurve = SRGB
     log: RunLog = NullLog
     sort_config: SortConfig | None = UNSET
@@ -105,11 +107,28 @@ class FileRig:
             raise InputError("--system: the system.json to use is needed")
         return self.system
 
-    def system_calibration(self) -> SystemCalibration:
+    def system_record(self) -> tuple[dict[str, Any], str]:
+        """--system's payload (a store file's checksum verified) and its path."""
         from omnisort_hw.pipeline.calibration_source import read_system_payload
 
         payload, _ = read_system_payload(self.system_path)
-        return SystemCalibration.from_json(payload, source=str(self.system_path))
+        return payload, str(self.system_path)
+
+    def system_calibration(self) -> SystemCalibration:
+        payload, where = self.system_record()
+        return SystemCalibration.from_json(payload, source=where)
+
+    def drift_reference(self, key: str) -> np.ndarray | None:
+        """`--reference`, else the reference kept beside system.json for this calibration."""
+        from omnisort_hw.pipeline.drift_check import load_reference
+
+        if self.reference is not None:
+            return read_image(self.reference)
+        return load_reference(self.system_path.parent, key)
+
+    @property
+    def watchdog_config(self) -> WatchdogConfig:
+        return self._cell.watchdog if self._cell is not None else WatchdogConfig()
 
     def camera_model(self) -> OcamModel:
         from omnisort_hw.core.camera_io import load_camera_json

@@ -1,6 +1,7 @@
-"""The drift check: one fresh capture against the stored calibration (use case).
+"""The drift check: one fresh capture against the stored calibration (use case,
+`run(rig, CheckRequest)`).
 
-Shared by `omnisort check IMAGE`, the service's `check` command, its periodic watchdog and
+Shared by `omnisort check [IMAGE]`, the service's `check` command, its periodic watchdog and
 the check before each `sort`. The reference image is the laser-off capture the robot was
 registered with (saved beside system.json as `drift_reference.png` with the key of the
 calibration it belongs to); without it (e.g. a system.json registered elsewhere) the board's
@@ -15,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import cv2
 import numpy as np
@@ -34,6 +35,7 @@ from omnisort_hw.core.drift import (
 )
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
+from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.pipeline.verdict import Check, Verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
@@ -113,6 +115,11 @@ class DriftResult:
     source: str
     checked_at: str = field(default_factory=lambda: datetime.now(UTC).isoformat(timespec="seconds"))
     board_problem: str | None = None
+    frame: np.ndarray | None = field(default=None, repr=False)  # the image checked
+
+    def reply(self) -> dict[str, Any]:
+        """The answer at every door (the service's reply, the CLI's `--json`)."""
+        return self.summary()
 
     @property
     def drift(self) -> bool:
@@ -170,6 +177,51 @@ def registration_for(
     except (KeyError, TypeError, ValueError):
         return None
     return RegistrationConfig(spec, pose)  # type: ignore[arg-type]
+
+
+class CheckRig(Protocol):
+    """What the drift check needs of a rig: the system calibration with where it came from, a
+    laser-off frame, the reference image of a calibration, the `[registration]` and
+    `[watchdog]` settings, and the run log."""
+
+    @property
+    def runlog(self) -> RunLog: ...
+
+    @property
+    def registration_config(self) -> RegistrationConfig | None: ...
+
+    @property
+    def watchdog_config(self) -> WatchdogConfig: ...
+
+    def system_record(self) -> tuple[dict[str, Any], str]:
+        """system.json's payload (its checksum verified) and its path."""
+        ...
+
+    def frame(self, image: str | None, laser: bool) -> np.ndarray: ...
+
+    def drift_reference(self, key: str) -> np.ndarray | None:
+        """The laser-off image the calibration `key` was registered with, if kept."""
+        ...
+
+
+def run(rig: CheckRig, request: CheckRequest) -> DriftResult:
+    """The request's image (or a laser-off capture) against the rig's calibration, its
+    reference image and its floor board."""
+    payload, where = rig.system_record()
+    calib = SystemCalibration.from_json(payload, source=where)
+    image = rig.frame(request.image, laser=False)
+    result = check_drift(
+        image,
+        calib,
+        payload,
+        registration_for(payload, rig.registration_config),
+        rig.drift_reference(calibration_key(payload)),
+        rig.watchdog_config,
+        request.image or "capture",
+        rig.runlog,
+    )
+    result.frame = image
+    return result
 
 
 def check_drift(
