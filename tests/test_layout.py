@@ -265,3 +265,18 @@ def test_a_module_over_the_soft_limit_says_why() -> None:
             if "Over 600 lines:" not in doc:
                 unexplained.append(name)
     assert unexplained == [], unexplained
+
+
+def test_the_use_cases_are_the_pipeline_modules_with_run() -> None:
+    """A pipeline module with a top-level `run(rig, request)` is a use case and is named in
+    `pipeline.USE_CASES`; every other pipeline module supports them (docs/architecture.md)."""
+    from omnisort_hw.pipeline import USE_CASES
+
+    with_run = set()
+    for path in (ROOT / "omnisort_hw" / "pipeline").glob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef) and node.name == "run":
+                assert [a.arg for a in node.args.args[:2]] == ["rig", "request"], path.name
+                with_run.add(path.stem)
+    assert with_run == set(USE_CASES)

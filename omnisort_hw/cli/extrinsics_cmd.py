@@ -32,9 +32,9 @@ def register(sub: Any) -> None:
     cal.add_argument("--camera", type=Path, required=True, help="camera.json (intrinsics)")
     cal.add_argument(
         "--tone-curve",
-        default="srgb",
-        help="the camera's tone curve: srgb (default, 8-bit cameras), linear, gamma:G, or a "
-        "JSON table of 256 light values (measured)",
+        default=None,
+        help="the camera's tone curve: srgb, linear, gamma:G, or a JSON table of 256 light "
+        "values (measured); default: the --config camera's, else srgb (8-bit cameras)",
     )
     cal.add_argument(
         "--out",
@@ -80,7 +80,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             config=args.config,
             camera=args.camera,
             out=args.out,
-            tone=ToneCurve.parse(args.tone_curve),
+            tone=ToneCurve.parse(args.tone_curve) if args.tone_curve else None,
             log=log,
         )
         result = extrinsics.run(rig, request).reply()

@@ -58,7 +58,7 @@ class FileRig:
     out: Path | None = None
     png: Path | None = None
     reference: Path | None = None  # the drift check's reference image (else the one kept)
-    tone: ToneCurve = SRGB
+    tone: ToneCurve | None = None  # None: the cell file camera's curve, else sRGB
     log: RunLog = NullLog
     sort_config: SortConfig | None = UNSET
     registration_config: RegistrationConfig | None = UNSET
@@ -139,7 +139,12 @@ class FileRig:
         return model
 
     def tone_curve(self) -> ToneCurve:
-        return self.tone
+        """The curve given, else the cell file camera's (as the service reads its camera's),
+        else sRGB, what 8-bit image files hold."""
+        if self.tone is not None:
+            return self.tone
+        camera = self._opened().camera if self._cell is not None else None
+        return ToneCurve.parse(camera.tone_curve) if camera is not None else SRGB
 
     def target_defaults(self) -> tuple[str | None, float | None, str]:
         if self._cell is None:
@@ -197,7 +202,10 @@ class FileRig:
     @property
     def capture_dir(self) -> Path:
         """`captures/` beside the system.json the command writes or reads, as the service
-        keeps its captures beside its own (the cell's state folder may not be the user's)."""
+        keeps its captures beside its own (the cell's state folder may not be the user's); the
+        state folder's when the command uses the cell's store."""
+        if self.out is None and self.system is None:  # a sort on the cell's own store
+            return Path(self._need_cell("capture").storage.state_dir) / "captures"
         anchor = self.out if self.out is not None else self.system_path
         return anchor.parent / "captures"
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -51,7 +52,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     calibrate = request_from(
         CalibrateRequest, args, "intrinsics calibrate", fixed=INTRINSICS, skip=("folder",)
     )
-    request = calibrate.intrinsics(tuple(args.images))
+    folders = {p.resolve().parent for p in args.images}  # kept in camera.json, as the service
+    request = replace(calibrate, folder=str(folders.pop()) if len(folders) == 1 else None)
+    request = request.intrinsics(tuple(args.images))
     board_spec(request.board, request.square_mm, "--board/--square")  # before any image
     with (
         tqdm(
@@ -66,7 +69,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         rig = FileRig(out=args.out, log=log, sort_config=None, registration_config=None)
         done = intrinsics.run(rig, request, on_detected=lambda _n: bar.update(1))
     result, figures, report_path = done.calibration.result, done.calibration.figures, done.report
-    summary = {"out": str(args.out), **done.reply()}
+    summary = done.reply()
     if args.json:
         print_result(summary)
     else:

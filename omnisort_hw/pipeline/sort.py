@@ -33,7 +33,7 @@ from omnisort_hw.pipeline.locate import Located, locate_in_images, locate_settin
 from omnisort_hw.pipeline.pick_cycle import Compute, CycleTimes, InCaller, PickQueue
 from omnisort_hw.pipeline.registration import register_from_image
 from omnisort_hw.pipeline.scene_check import ChangeWatch, SceneCheck
-from omnisort_hw.pipeline.sort_report import CubeOutcome, SortReport
+from omnisort_hw.pipeline.sort_report import MAX_REACHED, CubeOutcome, SortReport
 from omnisort_hw.runlog import NullLog, RunLog
 
 if TYPE_CHECKING:
@@ -323,7 +323,7 @@ class Sorter:
             out.reason = (
                 "cancelled"
                 if self.cancel.is_set()
-                else "max_objects reached"
+                else MAX_REACHED
                 if max_objects is not None and done >= max_objects
                 else reason
             )
