@@ -113,7 +113,7 @@ class Cell(CellJobs):
         self.drift = DriftWatchdog(
             WatchdogPorts(
                 store,
-                lambda: self.frame(None, laser=False),
+                lambda: self.grab_frame(laser=False),
                 lambda: self.registration_config,
                 lambda: self.runlog,
             ),

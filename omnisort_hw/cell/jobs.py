@@ -174,12 +174,8 @@ class CellJobs:
     def has_laser(self) -> bool:
         return self.devices.laser is not None
 
-    def frame(self, image: str | None, laser: bool) -> np.ndarray:
-        """The file `image`, or a capture with the laser switched to `laser` (off after)."""
-        from omnisort_hw.pipeline.image_files import read_image
-
-        if image is not None:
-            return read_image(image)
+    def grab_frame(self, laser: bool) -> np.ndarray:
+        """A frame of the cell's camera with the laser switched to `laser` (off after)."""
         if self.devices.laser is not None:
             self.set_laser(laser)
         try:

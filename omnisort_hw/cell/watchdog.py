@@ -35,7 +35,6 @@ from omnisort_hw.pipeline.drift_check import (
     load_reference,
     save_reference,
 )
-from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.runlog import RunLog
 
@@ -72,8 +71,8 @@ class _PortsRig:
         record = self.ports.store.read("system")
         return record.payload, str(record.path)
 
-    def frame(self, image: str | None, laser: bool) -> np.ndarray:
-        return read_image(image) if image is not None else self.ports.capture_dark()
+    def grab_frame(self, laser: bool) -> np.ndarray:
+        return self.ports.capture_dark()
 
     def drift_reference(self, key: str) -> np.ndarray | None:
         return load_reference(self.ports.store.state_dir, key)

@@ -2,7 +2,8 @@
 
 Values are read as JSON when they parse (`on=true`, `joints_deg=[0,-90,90,0,90,0]`,
 `max_objects=3`) and as plain strings otherwise (`folder=/data/calib`; a relative path is made
-absolute here). `describe` lists every command and its arguments (`--json`: their JSON
+absolute here); a list also as `colors=red,blue`. `omnisort ctl describe` lists each command's
+arguments. `describe` lists every command and its arguments (`--json`: their JSON
 Schema). `status` and a job's reply print a one-screen summary (a job's: its verdict,
 figures and files; `--json`: the whole reply); other replies are printed as JSON; a job shows
 its progress on the terminal. The exit code is 0 for an ok reply, 1 for an error reply, 3 when
@@ -66,21 +67,26 @@ def parse_kv(items: list[str]) -> dict[str, Any]:
     return out
 
 
-def absolute_paths(command: str, args: dict[str, Any], host: str) -> dict[str, Any]:
-    """The command's path arguments made absolute against this shell's folder when the
-    service runs on this machine (loopback): a service under systemd runs in `/`, so a
-    relative `folder=views` would name a different folder there."""
+def typed_args(command: str, args: dict[str, Any], host: str) -> dict[str, Any]:
+    """The command's arguments read by their declared kinds: a list as `red,blue` as well as
+    JSON, and a path made absolute against this shell's folder when the service runs on this
+    machine (loopback): a service under systemd runs in `/`, so a relative `folder=views` would
+    name a different folder there. Anything else goes as typed, for the service to check."""
     from omnisort_hw.config.service import is_loopback
     from omnisort_hw.service.protocol import COMMANDS
 
     spec = COMMANDS.get(command)
-    if spec is None or not is_loopback(host):
+    if spec is None:
         return args
     out = dict(args)
     for arg in spec.args:
         value = out.get(arg.name)
-        if arg.kind == "path" and isinstance(value, str) and value:
+        if not isinstance(value, str) or not value:
+            continue
+        if arg.kind == "path" and is_loopback(host):
             out[arg.name] = os.path.abspath(os.path.expanduser(value))
+        elif arg.kind == "str_list":
+            out[arg.name] = [item.strip() for item in value.split(",") if item.strip()]
     return out
 
 
@@ -106,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     host = args.host or host
     port = args.port if args.port is not None else port
     token = args.token or os.environ.get("OMNISORT_TOKEN") or token
-    cmd_args = absolute_paths(args.command, parse_kv(args.args), host)
+    cmd_args = typed_args(args.command, parse_kv(args.args), host)
     timeout = args.timeout if args.timeout is not None else default_timeout(args.command)
     try:
         with (

@@ -229,11 +229,8 @@ class FileRig:
     def prune_captures(self) -> None:
         """The service prunes its capture folder; a command leaves it as it is."""
 
-    def frame(self, image: str | None, laser: bool) -> np.ndarray:
-        """The file `image`, or one frame of the cell file's camera with its laser at `laser`
-        (off after)."""
-        if image is not None:
-            return read_image(image)
+    def grab_frame(self, laser: bool) -> np.ndarray:
+        """One frame of the cell file's camera with its laser at `laser` (off after)."""
         devices = self._opened()
         if devices.camera is None:
             raise InputError(f"{self.config}: a capture needs the [camera] section")
@@ -294,7 +291,7 @@ class FileRig:
         if self.system is None:
             ports = WatchdogPorts(
                 self._store(),
-                lambda: self.frame(None, laser=False),
+                lambda: self.grab_frame(laser=False),
                 lambda: self.registration_config,
                 lambda: self.log,
             )

@@ -2,8 +2,8 @@
 
 Per scene: the sorting cell with the camera turned by up to +-10 deg about each axis, 3 to 6
 cubes of random colours, positions and yaws, one bin per colour. The robot is registered from
-the image, the cubes located, picked and placed through the device interfaces by the
-pipeline's `Sorter`, and the result verified from the simulator's state
+the image, the cubes located, picked and placed through the device interfaces by the sort use
+case (`pipeline.sort_run`, on the scene's rig), and the result verified from the simulator's state
 (`sim_backend.sort_harness.SimVerifier`).
 """
 
@@ -19,8 +19,8 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.core.registration import pose_error
 from omnisort_hw.errors import InputError
+from omnisort_hw.evaluation.scene_rig import sort_on_scene
 from omnisort_hw.pipeline.calibration_source import MemoryCalibration
-from omnisort_hw.pipeline.sort import Sorter
 from omnisort_hw.runlog import NullLog, RunLog
 from omnisort_hw.sweeps.trial import Trial, TrialOutput, merge_paths, split_paths
 from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
@@ -210,21 +210,17 @@ def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, A
         if "calibration_errors" in config:
             calib = perturbed(calib, config["calibration_errors"])
         verifier = SimVerifier(arm)
-        verifier.start()
-        sorter = Sorter(
-            cam,
-            arm,
-            laser,
+        t0 = time.perf_counter()
+        report = sort_on_scene(
+            (cam, laser, arm),
             MemoryCalibration(calib),
             cfg,
             reg_cfg,
+            verifier,
             log,
             clock=lambda: cell.world.sim_time,  # the arm's time, not the PC's
         )
-        t0 = time.perf_counter()
-        report = sorter.run(register=True, on_located=verifier.on_located, on_done=verifier.on_done)
         wall = time.perf_counter() - t0
-        verifier.stop()
         assert report.registration is not None
         T_est = np.asarray(report.registration["matrix"], float)
         reg_mm, reg_deg = pose_error(T_est, verifier.T_SB())

@@ -194,8 +194,8 @@ def gated_sort(width: int = 960, seed: int = 3) -> dict[str, Any]:
     refused with its reason, never approached; the others are sorted (checked against the
     simulator's truth)."""
     from omnisort_hw.core.extrinsics.covariance import ExtrinsicCovariance
+    from omnisort_hw.evaluation.scene_rig import sort_on_scene
     from omnisort_hw.pipeline.calibration_source import MemoryCalibration
-    from omnisort_hw.pipeline.sort import Sorter
     from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
     from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
     from sim_backend.sort_harness import SimVerifier, sim_registration_config, sim_sort_config
@@ -221,12 +221,13 @@ def gated_sort(width: int = 960, seed: int = 3) -> dict[str, Any]:
         calib.covariance = ExtrinsicCovariance(noise).to_json()
         cfg = sim_sort_config(scene)
         verifier = SimVerifier(arm)
-        verifier.start()
-        sorter = Sorter(
-            cam, arm, laser, MemoryCalibration(calib), cfg, sim_registration_config(scene)
+        report = sort_on_scene(
+            (cam, laser, arm),
+            MemoryCalibration(calib),
+            cfg,
+            sim_registration_config(scene),
+            verifier,
         )
-        report = sorter.run(register=True, on_located=verifier.on_located, on_done=verifier.on_done)
-        verifier.stop()
     finally:
         for d in (arm, laser, cam):
             d.close()

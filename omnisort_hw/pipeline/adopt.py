@@ -61,7 +61,7 @@ class AdoptRig(Protocol):
 
     store: CalibrationStore
 
-    def frame(self, image: str | None, laser: bool) -> np.ndarray: ...
+    def grab_frame(self, laser: bool) -> np.ndarray: ...
 
     def save_drift_reference(self, image: np.ndarray) -> None: ...
 
@@ -111,7 +111,7 @@ def run(rig: AdoptRig, request: AdoptRequest) -> AdoptResult:
                 f"{model.center_uv[0]:.2f}, {model.center_uv[1]:.2f}); adopt the camera.json "
                 "it was calibrated with, or recalibrate"
             )
-    image = rig.frame(None, laser=False)
+    image = rig.grab_frame(laser=False)
     check_image_size(image, model, f"{camera_source} (the cell's camera now)")
     files = []
     for kind, payload, source in (

@@ -2,6 +2,7 @@
 (`measurement_capture`) with the cell's camera and laser, its images saved under the cell's
 capture folder so the calibration and the log can name them.
 
+`frame` is the same for one frame (register, check, locate without the laser).
 `calibrate` (extrinsics) uses the board image (laser off, averaged) for the target's edges and
 markers and the capture's stripe points; `map` the laser-light image; `locate` the board image
 for colours and the laser-light image for heights. A given file serves as both, as before.
@@ -73,6 +74,19 @@ def _save(folder: Path, name: str, image: np.ndarray) -> dict[str, Any]:
     path = folder / f"capture-{stamp}-{name}.png"
     fileio.atomic_write_bytes(path, data, keep_history=False)
     return {"path": str(path), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+class FrameRig(Protocol):
+    """A rig that gives one frame of its camera (`rig.Rig.grab_frame`)."""
+
+    def grab_frame(self, laser: bool) -> np.ndarray: ...
+
+
+def frame(rig: FrameRig, image: str | None, laser: bool) -> np.ndarray:
+    """The one way a request's "an image file, or omitted: a capture" becomes one frame: the
+    file `image`, else a frame of the rig's camera with its laser at `laser`. (`acquire` is
+    the same for a measurement: averaged board frames and the laser's on/off difference.)"""
+    return read_image(image) if image is not None else rig.grab_frame(laser)
 
 
 def acquire(rig: CaptureRig, image: str | None, board: bool = True) -> Acquired:

@@ -35,6 +35,7 @@ from omnisort_hw.core.drift import (
 )
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
+from omnisort_hw.pipeline.cell_acquisition import frame
 from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.pipeline.verdict import Check, Verdict
 from omnisort_hw.runlog import NullLog, RunLog
@@ -197,7 +198,7 @@ class CheckRig(Protocol):
         """system.json's payload (its checksum verified) and its path."""
         ...
 
-    def frame(self, image: str | None, laser: bool) -> np.ndarray: ...
+    def grab_frame(self, laser: bool) -> np.ndarray: ...
 
     def drift_reference(self, key: str) -> np.ndarray | None:
         """The laser-off image the calibration `key` was registered with, if kept."""
@@ -209,7 +210,7 @@ def run(rig: CheckRig, request: CheckRequest) -> DriftResult:
     reference image and its floor board."""
     payload, where = rig.system_record()
     calib = SystemCalibration.from_json(payload, source=where)
-    image = rig.frame(request.image, laser=False)
+    image = frame(rig, request.image, laser=False)
     result = check_drift(
         image,
         calib,

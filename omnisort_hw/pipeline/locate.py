@@ -131,7 +131,7 @@ def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None)
         acq = acquire(rig, None, board=True)
         colour, laser_image = acq.board, acq.stripe
     else:
-        colour = rig.frame(None, laser=False)
+        colour = rig.grab_frame(laser=False)
     raise_if_cancelled(cancel, "location")
     rig.runlog.image("locate/image", colour)
     cubes, diag = rig.run_logged(

@@ -23,6 +23,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.overlays import write_picture
 from omnisort_hw.core.registration import Registration, register_robot
 from omnisort_hw.errors import CalibrationError, CalibrationFileError, NotAvailableError
+from omnisort_hw.pipeline.cell_acquisition import frame
 from omnisort_hw.pipeline.intrinsics import board_record
 from omnisort_hw.pipeline.requests import RegisterRequest
 from omnisort_hw.pipeline.rig import Rig
@@ -106,7 +107,7 @@ def run(
             "(board, square_mm, offset = [X, Y, Z, RX, RY, RZ] of the board in B)"
         )
     calib = rig.system_calibration()
-    image = rig.frame(request.image, laser=False)
+    image = frame(rig, request.image, laser=False)
     rig.runlog.image("registration/image", image)
     reg = rig.run_logged(register_from_image, image, calib, rc, cancel=cancel, what="registration")
     distance = float(np.linalg.norm(reg.T_SB[:3, 3]))

@@ -344,6 +344,25 @@ def build(cls: type[Any], args: Mapping[str, Any]) -> Any:
     return cls(**values)
 
 
+def wire_args(request: Any) -> dict[str, Any]:
+    """The protocol's `args` of a request record: each argument given (not None), tuples as
+    JSON arrays; `build(type(request), wire_args(request))` gives the record back. None: no
+    arguments (every default)."""
+    out: dict[str, Any] = {}
+    if request is None:
+        return out
+    for arg in args_of(type(request)):
+        value = getattr(request, arg.name)
+        if value is None:
+            continue
+        if arg.kind == "matrix4":
+            value = [list(row) for row in value]
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[arg.name] = value
+    return out
+
+
 def _value_schema(arg: Arg) -> dict[str, Any]:
     """The schema of one argument's non-null value."""
     bounds = {k: v for k, v in (("minimum", arg.lo), ("maximum", arg.hi)) if v is not None}

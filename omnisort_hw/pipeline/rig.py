@@ -56,8 +56,9 @@ class Rig(CaptureRig, Protocol):
 
     def has_laser(self) -> bool: ...
 
-    def frame(self, image: str | None, laser: bool) -> np.ndarray:
-        """The file `image`, or one frame with the laser switched to `laser` (off after)."""
+    def grab_frame(self, laser: bool) -> np.ndarray:
+        """One frame of the cell's camera with its laser switched to `laser` (off after);
+        `cell_acquisition.frame` gives a request's image or this."""
         ...
 
     def run_logged(

@@ -17,14 +17,16 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from omnisort_hw.config.sorting import RegistrationConfig
+from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.errors import NotAvailableError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
 from omnisort_hw.pipeline.gripper_load import InFlightJournal, resolve_before_sort
 from omnisort_hw.pipeline.pick_cycle import Compute
 from omnisort_hw.pipeline.requests import SortRequest
-from omnisort_hw.pipeline.rig import Rig
 from omnisort_hw.pipeline.sort import Sorter, SortVerifier
 from omnisort_hw.pipeline.sort_report import SortReport
+from omnisort_hw.runlog import RunLog
 
 if TYPE_CHECKING:
     from drivers.base import Arm, Camera, LaserSwitch
@@ -47,10 +49,34 @@ class SortSession:
     compute: Compute | None = None  # the service's compute worker; None: in this process
     acquire: Callable[[], tuple[np.ndarray, np.ndarray | None, dict[str, Any]]] | None = None
     verifier: SortVerifier | None = None  # the simulated cell's truth, where there is one
+    clock: Callable[[], float] | None = None  # the arm's time where it is not the PC's
 
 
-class SortRig(Rig, Protocol):
-    """A rig that can sort: its calibration as a motion gate, its drift record, its devices."""
+class NoJournal:
+    """A journal that keeps nothing: a run whose cell ends with it (an evaluation's scene)."""
+
+    def pick_phase(self, phase: str, cube: int, color: str, bin_: str | None) -> None:
+        return None
+
+    def in_flight(self) -> dict[str, Any] | None:
+        return None
+
+    def clear_in_flight(self, why: str) -> None:
+        return None
+
+
+class SortRig(Protocol):
+    """A rig that can sort: its `[sorting]` and `[registration]`, its run log, its calibration
+    as a motion gate, its drift record, its devices."""
+
+    @property
+    def sort_config(self) -> SortConfig | None: ...
+
+    @property
+    def registration_config(self) -> RegistrationConfig | None: ...
+
+    @property
+    def runlog(self) -> RunLog: ...
 
     def calibration_source(self) -> CalibrationSource: ...
 
@@ -94,6 +120,7 @@ def run(
             on_pick=lambda phase, o: journal.pick_phase(phase, o.index, o.color, o.bin),
             compute=session.compute,
             acquire=session.acquire,
+            clock=session.clock,
         )
         system = calibration.system()
         held = None

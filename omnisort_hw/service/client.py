@@ -1,6 +1,10 @@
-"""A small blocking client of the control protocol (used by `omnisort ctl`, tests, benchmarks).
+"""A small blocking client of the control protocol (used by `omnisort ctl`, the demo, tests,
+benchmarks and the operator interface).
 
-Every call has a timeout: connecting, sending and waiting for the reply.
+`call()` returns a reply as it came (`omnisort ctl` prints it); `execute()` returns its result
+or raises `CommandError`, and the typed methods (`status()`, `map(MapRequest(...))`, ...) of
+`commands.CellCommands` are built on it. Every call has a timeout: connecting, sending and
+waiting for the reply.
 """
 
 from __future__ import annotations
@@ -13,8 +17,10 @@ from collections.abc import Callable
 from typing import Any
 
 from omnisort_hw.config.service import DEFAULT_PORT
+from omnisort_hw.service.commands import CellCommands, CommandError
 
 MAX_REPLY_BYTES = 256 * 1024 * 1024
+__all__ = ["Client", "ClientError", "CommandError"]
 
 
 class ClientError(Exception):
@@ -23,8 +29,9 @@ class ClientError(Exception):
     code = "client_error"
 
 
-class Client:
-    """One TCP connection; `call()` sends a request and returns its reply as a dict."""
+class Client(CellCommands):
+    """One TCP connection; `call()` sends a request and returns its reply as a dict,
+    `execute()` its result, and one method per command its result too."""
 
     def __init__(
         self,
@@ -117,6 +124,19 @@ class Client:
                     on_event(reply.get("progress", {}))
                 continue
             return reply
+
+    def execute(
+        self,
+        cmd: str,
+        args: dict[str, Any] | None = None,
+        on_event: Callable[[dict[str, Any]], None] | None = None,
+        timeout_s: float | None = None,
+    ) -> dict[str, Any]:
+        """The command's result; CommandError when the service answers with an error."""
+        reply = self.call(cmd, args or None, timeout_s, on_event)
+        if not reply.get("ok"):
+            raise CommandError(cmd, dict(reply.get("error") or {}))
+        return dict(reply.get("result") or {})
 
     def close(self) -> None:
         self._sock.close()

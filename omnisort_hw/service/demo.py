@@ -15,8 +15,12 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from omnisort_hw.service.client import Client
 
 SCENE = "sorting"
 
@@ -69,11 +73,7 @@ def calibrate_from_truth(config: Path) -> None:
         cell.close()
 
 
-def _brief(cmd: str, reply: dict[str, Any]) -> str:
-    if not reply.get("ok"):
-        err = reply["error"]
-        return f"error {err['code']}: {err['message']}"
-    res = reply["result"]
+def _brief(cmd: str, res: dict[str, Any]) -> str:
     if cmd == "calibrate intrinsics":
         return f"rms {res['rms_px']:.3f} px from {res['images_used']} images -> {res['path']}"
     if cmd == "calibrate extrinsics":
@@ -99,7 +99,8 @@ def _brief(cmd: str, reply: dict[str, Any]) -> str:
 def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None) -> dict[str, Any]:
     """Run the demo into `out`; returns the summary (steps, replies, .rrd path, exit code).
     `config` is a cell file to serve instead of the simulated cell's (the virtual cell's)."""
-    from omnisort_hw.service.client import Client
+    from omnisort_hw.pipeline.requests import CalibrateRequest
+    from omnisort_hw.service.client import Client, CommandError
     from omnisort_hw.service.launch import start_service
     from sim_backend.dataset import checkerboard_views
 
@@ -110,30 +111,37 @@ def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None
     config = config or write_config(out, width)
     print(f"starting omnisort serve --config {config}", flush=True)
     svc = start_service(config, out)
-    steps: list[tuple[str, str, dict[str, Any]]] = [
+    folder = str(views_dir.resolve())
+    steps: list[tuple[str, Callable[[Client], dict[str, Any]]]] = [
         (
             "calibrate intrinsics",
-            "calibrate",
-            {"what": "intrinsics", "folder": str(views_dir.resolve()), "square_mm": 116.0},
+            lambda c: c.calibrate(
+                CalibrateRequest(what="intrinsics", folder=folder, square_mm=116.0)
+            ),
         ),
-        ("calibrate extrinsics", "calibrate", {"what": "extrinsics", "target": "two-sided"}),
-        ("register_robot", "register_robot", {}),
-        ("map", "map", {}),
-        ("sort", "sort", {}),
+        (
+            "calibrate extrinsics",
+            lambda c: c.calibrate(CalibrateRequest(what="extrinsics", target="two-sided")),
+        ),
+        ("register_robot", lambda c: c.register_robot()),
+        ("map", lambda c: c.map()),
+        ("sort", lambda c: c.sort()),
     ]
     summary: dict[str, Any] = {"port": svc.port, "steps": []}
     try:
         with Client(svc.host, svc.port, timeout_s=900) as c:
-            for title, cmd, args in steps:
+            for title, step in steps:
                 t0 = time.monotonic()
-                reply = c.call(cmd, args or None)
+                try:
+                    ok, line = True, _brief(title, step(c))
+                except CommandError as exc:
+                    ok, line = False, f"error {exc.code}: {exc.message}"
                 dt = time.monotonic() - t0
-                line = _brief(title, reply)
                 print(f"  {title:<22} {dt:6.1f} s  {line}", flush=True)
                 summary["steps"].append(
-                    {"step": title, "ok": reply["ok"], "seconds": round(dt, 2), "summary": line}
+                    {"step": title, "ok": ok, "seconds": round(dt, 2), "summary": line}
                 )
-            status = c.call("status")["result"]
+            status = c.status()
             summary["state"] = status["state"]
             summary["rrd"] = status["rrd"]
             summary["calibration"] = {

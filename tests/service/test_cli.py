@@ -64,6 +64,14 @@ def test_ctl_sends_paths_made_absolute_where_it_was_typed(
     assert "folder" in r["error"]["message"] and str(Path.cwd()) in r["error"]["message"]
 
 
+def test_ctl_reads_a_list_argument_as_comma_separated(monkeypatch) -> None:
+    from omnisort_hw.cli.ctl_cmd import parse_kv, typed_args
+
+    args = typed_args("sort", parse_kv(["colors=red, blue", "max_objects=2"]), "127.0.0.1")
+    assert args == {"colors": ["red", "blue"], "max_objects": 2}
+    assert typed_args("locate", parse_kv(['colors=["red"]']), "127.0.0.1") == {"colors": ["red"]}
+
+
 def test_ctl_unreachable(capsys) -> None:
     assert main(["ctl", "--port", "1", "--connect-timeout", "1", "status"]) == 3
     assert "cannot connect" in capsys.readouterr().err

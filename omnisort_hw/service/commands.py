@@ -1,0 +1,105 @@
+"""The typed face of the client: one method per protocol command, each written once over one
+`execute()` (as pymodbus's client mixin writes each request once).
+
+A method takes the command's request record (`pipeline.requests`, the one declaration of its
+arguments) and returns the service's `result`; an error reply raises `CommandError` with its
+typed code, message and field. A job's progress events reach `on_event` as they arrive.
+`tests/service/test_typed_client.py` checks that every command of the protocol has its method.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from omnisort_hw.pipeline.request_fields import wire_args
+from omnisort_hw.pipeline.requests import (
+    AdoptRequest,
+    CalibrateRequest,
+    CaptureRequest,
+    CheckRequest,
+    LaserRequest,
+    LocateRequest,
+    MapRequest,
+    MoveRequest,
+    RegisterRequest,
+    ResetRequest,
+    SortRequest,
+)
+
+Result = dict[str, Any]
+OnEvent = Callable[[dict[str, Any]], None] | None
+
+
+class CommandError(Exception):
+    """The service answered a command with an error: its `code` (protocol.ERROR_CODES), its
+    message, and the details it gave (`field` for a bad argument)."""
+
+    def __init__(self, command: str, error: dict[str, Any]) -> None:
+        self.command = command
+        self.code = str(error.get("code", "internal"))
+        self.message = str(error.get("message", ""))
+        self.details = {k: v for k, v in error.items() if k not in ("code", "message")}
+        super().__init__(f"{command}: {self.code}: {self.message}")
+
+
+class CellCommands:
+    """Mixed into a client that provides `execute(cmd, args, on_event=None) -> result`."""
+
+    def execute(
+        self, cmd: str, args: dict[str, Any] | None = None, on_event: OnEvent = None
+    ) -> Result:
+        raise NotImplementedError
+
+    def status(self) -> Result:
+        return self.execute("status")
+
+    def describe(self) -> Result:
+        return self.execute("describe")
+
+    def capture(self, request: CaptureRequest | None = None) -> Result:
+        return self.execute("capture", wire_args(request))
+
+    def laser(self, request: LaserRequest | None = None) -> Result:
+        return self.execute("laser", wire_args(request))
+
+    def calibrate(self, request: CalibrateRequest, on_event: OnEvent = None) -> Result:
+        return self.execute("calibrate", wire_args(request), on_event)
+
+    def map(self, request: MapRequest | None = None, on_event: OnEvent = None) -> Result:
+        return self.execute("map", wire_args(request), on_event)
+
+    def register_robot(
+        self, request: RegisterRequest | None = None, on_event: OnEvent = None
+    ) -> Result:
+        return self.execute("register_robot", wire_args(request), on_event)
+
+    def locate(self, request: LocateRequest | None = None, on_event: OnEvent = None) -> Result:
+        return self.execute("locate", wire_args(request), on_event)
+
+    def move(self, request: MoveRequest, on_event: OnEvent = None) -> Result:
+        return self.execute("move", wire_args(request), on_event)
+
+    def sort(self, request: SortRequest | None = None, on_event: OnEvent = None) -> Result:
+        return self.execute("sort", wire_args(request), on_event)
+
+    def check(self, request: CheckRequest | None = None, on_event: OnEvent = None) -> Result:
+        return self.execute("check", wire_args(request), on_event)
+
+    def adopt(self, request: AdoptRequest, on_event: OnEvent = None) -> Result:
+        return self.execute("adopt", wire_args(request), on_event)
+
+    def acknowledge_drift(self) -> Result:
+        return self.execute("acknowledge_drift")
+
+    def stop(self) -> Result:
+        return self.execute("stop")
+
+    def estop(self) -> Result:
+        return self.execute("estop")
+
+    def reset(self, request: ResetRequest | None = None) -> Result:
+        return self.execute("reset", wire_args(request))
+
+    def shutdown(self) -> Result:
+        return self.execute("shutdown")

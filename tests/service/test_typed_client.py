@@ -1,0 +1,58 @@
+"""The typed client: one method per protocol command over one `execute()`; a method takes the
+command's request record and returns the result, an error reply is a `CommandError` with its
+code and field, and a job's progress events reach the caller."""
+
+from __future__ import annotations
+
+import inspect
+
+import pytest
+
+from omnisort_hw.pipeline.request_fields import build, wire_args
+from omnisort_hw.pipeline.requests import LaserRequest, MoveRequest, SortRequest
+from omnisort_hw.service.client import Client, CommandError
+from omnisort_hw.service.protocol import COMMANDS
+from tests.service.conftest import TOKEN, Harness
+
+pytestmark = pytest.mark.timeout(60)
+
+
+def test_every_command_has_its_method_taking_its_request_record() -> None:
+    for name, spec in COMMANDS.items():
+        method = getattr(Client, name, None)
+        assert callable(method), f"Client has no method for {name}"
+        params = inspect.signature(method).parameters
+        if spec.request is not None:
+            assert spec.request.__name__ in str(params["request"].annotation), name
+        else:
+            assert "request" not in params, name
+
+
+def test_wire_args_give_the_record_back() -> None:
+    requests = [
+        MoveRequest(joints_deg=(1.0, 2.0, 3.0, 4.0, 5.0, 6.0), speed_deg_s=10.0),
+        MoveRequest(matrix=tuple(tuple(float(i == j) for j in range(4)) for i in range(4))),
+        SortRequest(max_objects=2, colors=("red",), register=True),
+    ]
+    for request in requests:
+        assert build(type(request), wire_args(request)) == request
+    assert wire_args(None) == {}
+
+
+def test_typed_calls_against_the_service(make_service) -> None:
+    h: Harness = make_service(token=TOKEN, move_seconds=1.2)
+    with h.client(token=TOKEN, timeout_s=30) as c:
+        assert c.status()["state"] == "idle"
+        assert c.laser(LaserRequest(on=True)) == {"on": True}
+        assert c.laser() == {"on": True}  # omitted: read back
+        events: list[dict] = []
+        c.move(MoveRequest(joints_deg=(10.0, 0, 0, 0, 0, 0)), on_event=events.append)
+        assert events[0] == {"stage": "started", "cmd": "move"}, events
+        with pytest.raises(CommandError) as refused:
+            c.move(MoveRequest(joints_deg=(1.0, 2.0)))
+        assert refused.value.code == "bad_argument"
+        assert refused.value.details["field"] == "joints_deg"
+        assert "calibrate" in c.describe()["commands"]
+    with h.client(token="wrong-token-xxxxxxxx") as c, pytest.raises(CommandError) as denied:
+        c.laser(LaserRequest(on=False))
+    assert denied.value.code == "unauthorized"
