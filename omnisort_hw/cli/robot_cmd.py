@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli.arg_types import output_file
-from omnisort_hw.cli.cell_file import load_cell, sorting_config
+from omnisort_hw.cli.cell_file import load_cell
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
@@ -194,19 +194,17 @@ def cmd_register(args: argparse.Namespace) -> int:
     return 0
 
 
-def _locate_config(args: argparse.Namespace) -> Any:
-    """The `[sorting]` record of `--config` (what the service locates with), else the defaults;
-    `--cube-size`, `--colors` and `--region` override it."""
+def _locate_config(resolved: Any, args: argparse.Namespace) -> Any:
+    """The `[sorting]` record of `--config` as the rig resolved it (what the service locates
+    with), else the defaults; `--cube-size`, `--color-table` and `--region` override it."""
     from dataclasses import replace
 
     from omnisort_hw.core.cube_location import ColorTable
     from omnisort_hw.core.pick_planning import SortConfig
 
-    cfg = SortConfig()
-    if args.config is not None:
-        cfg = sorting_config(args.config)
-        if cfg is None:
-            raise ConfigError(f"{args.config}: no [sorting] section")
+    if args.config is not None and resolved is None:
+        raise ConfigError(f"{args.config}: no [sorting] section")
+    cfg = resolved if resolved is not None else SortConfig()
     changes: dict[str, Any] = {}
     if args.cube_size is not None:
         if args.cube_size <= 0:
@@ -226,13 +224,8 @@ def cmd_locate(args: argparse.Namespace) -> int:
 
     request = request_from(LocateRequest, args, "locate")
     with RunLog(args.log) as log:
-        rig = FileRig(
-            config=args.config,
-            system=args.system,
-            log=log,
-            sort_config=_locate_config(args),
-            registration_config=None,
-        )
+        rig = FileRig(config=args.config, system=args.system, log=log, registration_config=None)
+        rig.sort_config = _locate_config(rig.sort_config, args)
         result = locate.run(rig, request)
     reply = result.reply()
     if args.json:
