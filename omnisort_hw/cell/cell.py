@@ -69,8 +69,8 @@ def _iso(wall: float) -> str:
     return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
 
 
-class Cell(CellJobs):
-    """Devices + calibration store + run log + core functions, for one robot cell."""
+class Cell:
+    """Devices + calibration store + run log, for one robot cell; its use cases are `jobs`."""
 
     def __init__(
         self,
@@ -110,10 +110,11 @@ class Cell(CellJobs):
         self.actuation_guard: Callable[[], None] | None = None
         self.journal = JobJournal(store.state_dir)
         self.compute = ComputeWorker()  # CPU-bound jobs run here, not in the service's process
+        self.jobs = CellJobs(self)
         self.drift = DriftWatchdog(
             WatchdogPorts(
                 store,
-                lambda: self.grab_frame(laser=False),
+                lambda: self.jobs.grab_frame(laser=False),
                 lambda: self.registration_config,
                 lambda: self.runlog,
             ),

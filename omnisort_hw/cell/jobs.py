@@ -2,9 +2,10 @@
 and sort, each a call into the use-case layer (`omnisort_hw.pipeline`) with the cell's
 devices, calibration store, run log, compute worker and the cell file's typed record.
 
-`CellJobs` is a part of `cell.Cell` (its base class), kept apart because these are the use
-cases and the rest of the cell is devices, status and motion; it names the attributes of the
-cell it uses. A command whose section is missing raises `NotAvailableError` naming it.
+`CellJobs` is the cell's `jobs` (`cell.jobs.map_scene(...)`), kept apart because these are the
+use cases and the rest of the cell is devices, status and motion; it sees the cell only through
+`CellHost`, the members it needs. A command whose section is missing raises
+`NotAvailableError` naming it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import threading
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -51,8 +52,10 @@ if TYPE_CHECKING:
 T = TypeVar("T")
 
 
-class CellJobs:
-    """The use cases of `cell.Cell` (see the module doc)."""
+class CellHost(Protocol):
+    """What the use cases need of their cell (`cell.Cell`): its devices, store, cell file,
+    compute worker, job journal, drift watchdog and resolved sections, its run log, its camera
+    and laser under their locks, and its measurement capture."""
 
     devices: Devices
     store: CalibrationStore
@@ -62,25 +65,61 @@ class CellJobs:
     drift: DriftWatchdog
     sort_config: SortConfig | None
     registration_config: RegistrationConfig | None
+    capture_dir: Path
 
-    if TYPE_CHECKING:  # defined by `Cell`
+    @property
+    def runlog(self) -> RunLog: ...
 
-        @property
-        def runlog(self) -> RunLog: ...
+    @property
+    def capture_settings(self) -> CaptureSettings: ...
 
-        def grab(self, timeout_s: float | None = None) -> Any: ...
+    def grab(self, timeout_s: float | None = None) -> Any: ...
 
-        def set_laser(self, on: bool) -> bool: ...
+    def set_laser(self, on: bool) -> bool: ...
 
-        # and what makes it a `pipeline.cell_acquisition.CaptureRig`
-        capture_dir: Path
+    def measuring(self) -> AbstractContextManager[tuple[Any, Any]]: ...
 
-        @property
-        def capture_settings(self) -> CaptureSettings: ...
+    def prune_captures(self) -> None: ...
 
-        def measuring(self) -> AbstractContextManager[tuple[Any, Any]]: ...
 
-        def prune_captures(self) -> None: ...
+class CellJobs:
+    """The use cases of a cell (see the module doc): the cell's rig (`pipeline.rig.Rig`,
+    `sort_run.SortRig`, `adopt.AdoptRig`) over the narrow `CellHost`."""
+
+    def __init__(self, cell: CellHost) -> None:
+        self.cell = cell
+
+    # -- what the use cases read of the cell (and a `cell_acquisition.CaptureRig`) ---------
+
+    @property
+    def store(self) -> CalibrationStore:
+        return self.cell.store
+
+    @property
+    def sort_config(self) -> SortConfig | None:
+        return self.cell.sort_config
+
+    @property
+    def registration_config(self) -> RegistrationConfig | None:
+        return self.cell.registration_config
+
+    @property
+    def runlog(self) -> RunLog:
+        return self.cell.runlog
+
+    @property
+    def capture_dir(self) -> Path:
+        return self.cell.capture_dir
+
+    @property
+    def capture_settings(self) -> CaptureSettings:
+        return self.cell.capture_settings
+
+    def measuring(self) -> AbstractContextManager[tuple[Any, Any]]:
+        return self.cell.measuring()
+
+    def prune_captures(self) -> None:
+        self.cell.prune_captures()
 
     # -- pipeline (use cases) --------------------------------------------------------------
 
@@ -141,7 +180,7 @@ class CellJobs:
         return adopt.run(self, request).reply()
 
     def save_drift_reference(self, image: np.ndarray) -> None:
-        self.drift.save_reference(image)
+        self.cell.drift.save_reference(image)
 
     # -- what makes the cell a `pipeline.rig.Rig` ------------------------------------------
 
@@ -163,26 +202,26 @@ class CellJobs:
         image files hold."""
         from omnisort_hw.core.radiometry import ToneCurve
 
-        camera = self.devices.camera
+        camera = self.cell.devices.camera
         return ToneCurve.parse(camera.tone_curve if camera is not None else None)
 
     def target_defaults(self) -> tuple[str | None, float | None, str]:
-        t = self.config.target
+        t = self.cell.config.target
         field = "separation_mm (or [target] separation_mm in the cell file)"
         return t.kind, t.separation_mm, field
 
     def has_laser(self) -> bool:
-        return self.devices.laser is not None
+        return self.cell.devices.laser is not None
 
     def grab_frame(self, laser: bool) -> np.ndarray:
         """A frame of the cell's camera with the laser switched to `laser` (off after)."""
-        if self.devices.laser is not None:
-            self.set_laser(laser)
+        if self.cell.devices.laser is not None:
+            self.cell.set_laser(laser)
         try:
-            return np.asarray(self.grab().image)
+            return np.asarray(self.cell.grab().image)
         finally:
-            if laser and self.devices.laser is not None:
-                self.set_laser(False)
+            if laser and self.cell.devices.laser is not None:
+                self.cell.set_laser(False)
 
     def run_logged(
         self,
@@ -193,7 +232,9 @@ class CellJobs:
         **kwargs: Any,
     ) -> T:
         """In the compute worker, its run-log calls replayed on the cell's run log."""
-        return self.compute.call_logged(fn, self.runlog, *args, cancel=cancel, what=what, **kwargs)
+        return self.cell.compute.call_logged(
+            fn, self.runlog, *args, cancel=cancel, what=what, **kwargs
+        )
 
     def save_camera(self, model: OcamModel, record: Mapping[str, Any]) -> Path:
         from omnisort_hw.core.camera_io import camera_record
@@ -208,7 +249,7 @@ class CellJobs:
         payload = dict(self.store.load_system())
         payload["robot_base"] = dict(record)
         path = self.store.save_system(payload)
-        self.drift.save_reference(image)
+        self.cell.drift.save_reference(image)
         return path
 
     def picture_path(self, kind: str, image: str | None) -> Path:
@@ -231,7 +272,7 @@ class CellJobs:
 
     def laser_off(self) -> None:
         """Switch the laser off (how a sort's capture ends)."""
-        self.set_laser(False)
+        self.cell.set_laser(False)
 
     def calibration_source(self) -> CalibrationSource:
         from omnisort_hw.pipeline.calibration_source import StoreCalibration
@@ -239,7 +280,7 @@ class CellJobs:
         return StoreCalibration(self.store)
 
     def check_drift(self) -> None:
-        self.drift.before_sort()
+        self.cell.drift.before_sort()
 
     @contextmanager
     def sorting(self, request: SortRequest) -> Iterator[SortSession]:
@@ -248,16 +289,16 @@ class CellJobs:
         from omnisort_hw.pipeline.sort_capture import sort_capture_for
         from omnisort_hw.pipeline.sort_run import SortSession
 
-        arm = self.devices.arm
-        if self.devices.camera is None or arm is None:
+        arm = self.cell.devices.arm
+        if self.cell.devices.camera is None or arm is None:
             raise MotionRefusedError("sort: the cell needs a camera and an arm")
-        laser = _CellLaser(self) if self.devices.laser is not None else None
+        laser = _CellLaser(self.cell) if self.cell.devices.laser is not None else None
         yield SortSession(
-            _CellCamera(self),  # type: ignore[arg-type]
+            _CellCamera(self.cell),  # type: ignore[arg-type]
             laser,  # type: ignore[arg-type]
             arm,
-            self.journal,
-            compute=self.compute,
+            self.cell.journal,
+            compute=self.cell.compute,
             acquire=sort_capture_for(self, self.laser_off if laser is not None else None),
         )
 
@@ -265,7 +306,7 @@ class CellJobs:
 class _CellCamera:
     """The cell's camera through the cell (its lock and its run log)."""
 
-    def __init__(self, cell: CellJobs) -> None:
+    def __init__(self, cell: CellHost) -> None:
         self.cell = cell
 
     def grab(self, timeout_s: float | None = None) -> Any:
@@ -275,7 +316,7 @@ class _CellCamera:
 class _CellLaser:
     """The cell's laser switch through the cell (its lock and its status cache)."""
 
-    def __init__(self, cell: CellJobs) -> None:
+    def __init__(self, cell: CellHost) -> None:
         self.cell = cell
 
     def on(self) -> None:

@@ -59,7 +59,8 @@ class AdoptResult:
 class AdoptRig(Protocol):
     """What adopting needs of a cell: its store, a laser-off frame, the drift reference."""
 
-    store: CalibrationStore
+    @property
+    def store(self) -> CalibrationStore: ...
 
     def grab_frame(self, laser: bool) -> np.ndarray: ...
 

@@ -29,8 +29,11 @@ T = TypeVar("T")
 class Rig(CaptureRig, Protocol):
     """A cell as the use cases see it (see the module doc)."""
 
-    sort_config: SortConfig | None
-    registration_config: RegistrationConfig | None
+    @property
+    def sort_config(self) -> SortConfig | None: ...
+
+    @property
+    def registration_config(self) -> RegistrationConfig | None: ...
 
     @property
     def system_path(self) -> Path:

@@ -69,20 +69,20 @@ def calibrate(ctx: Context, request: CalibrateRequest) -> dict[str, Any]:
         from omnisort_hw.pipeline.intrinsics import image_files
 
         images = tuple(image_files(str(request.folder)))
-        return ctx.cell.calibrate_intrinsics(request.intrinsics(images), ctx.cancel)
-    return ctx.cell.calibrate_extrinsics(request.extrinsics(), ctx.cancel)
+        return ctx.cell.jobs.calibrate_intrinsics(request.intrinsics(images), ctx.cancel)
+    return ctx.cell.jobs.calibrate_extrinsics(request.extrinsics(), ctx.cancel)
 
 
 def map_scene(ctx: Context, request: MapRequest) -> dict[str, Any]:
-    return ctx.cell.map_scene(request, ctx.cancel)
+    return ctx.cell.jobs.map_scene(request, ctx.cancel)
 
 
 def register_robot(ctx: Context, request: RegisterRequest) -> dict[str, Any]:
-    return ctx.cell.register_robot(request, ctx.cancel)
+    return ctx.cell.jobs.register_robot(request, ctx.cancel)
 
 
 def locate(ctx: Context, request: LocateRequest) -> dict[str, Any]:
-    return ctx.cell.locate(request, ctx.cancel)
+    return ctx.cell.jobs.locate(request, ctx.cancel)
 
 
 def move(ctx: Context, request: MoveRequest) -> dict[str, Any]:
@@ -97,7 +97,7 @@ def move(ctx: Context, request: MoveRequest) -> dict[str, Any]:
 
 
 def sort(ctx: Context, request: SortRequest) -> dict[str, Any]:
-    return ctx.cell.sort(request, ctx.cancel, ctx.progress)
+    return ctx.cell.jobs.sort(request, ctx.cancel, ctx.progress)
 
 
 def check(ctx: Context, request: CheckRequest) -> dict[str, Any]:
@@ -105,7 +105,7 @@ def check(ctx: Context, request: CheckRequest) -> dict[str, Any]:
 
 
 def adopt(ctx: Context, request: AdoptRequest) -> dict[str, Any]:
-    return ctx.cell.adopt(request)
+    return ctx.cell.jobs.adopt(request)
 
 
 def acknowledge_drift(ctx: Context, _request: None) -> dict[str, Any]:

@@ -59,7 +59,7 @@ def service_refusal(cfg: Path) -> dict[str, str]:
     cell = Cell.from_settings(load_cell_config(cfg))
     cell.connect()
     try:
-        cell.sort(SortRequest(), threading.Event())
+        cell.jobs.sort(SortRequest(), threading.Event())
     except OmnisortError as exc:
         return {"code": exc.code, "message": str(exc)}
     finally:

@@ -28,12 +28,12 @@ def test_the_simulated_cell_calibrates_with_its_cameras_own_curve(tmp_path: Path
         # The simulated camera reports what its frames are written with (the shipped scenes
         # render linear), and the cell takes the curve from its camera.
         assert camera.tone_curve == truth["render"]["tone_curve"] == "linear"
-        assert cell.tone_curve().name == "linear"
+        assert cell.jobs.tone_curve().name == "linear"
         image = tmp_path / "target.png"
         assert cv2.imwrite(str(image), frame.image)
         want = truth_parameters(truth)
 
-        result = cell.calibrate_extrinsics(
+        result = cell.jobs.calibrate_extrinsics(
             ExtrinsicsRequest(
                 image=str(image),
                 target="two-sided",

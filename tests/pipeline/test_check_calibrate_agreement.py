@@ -100,7 +100,7 @@ def test_cli_calibrate_is_the_services_calibrate(tmp_path: Path) -> None:
         f'[target]\nkind = "two-sided"\nseparation_mm = {separation}\n'
     )
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = as_json(cell.calibrate_extrinsics(ExtrinsicsRequest(str(image_path))))
+    service = as_json(cell.jobs.calibrate_extrinsics(ExtrinsicsRequest(str(image_path))))
     out = tmp_path / "cli" / "system.json"
     command = cli(
         "extrinsics",

@@ -58,7 +58,7 @@ def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = cell.locate(LocateRequest(str(image_path)))
+    service = cell.jobs.locate(LocateRequest(str(image_path)))
     reply = locate_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
     # The whole answer: the cubes, their count, the blobs rejected with their reasons and the
     # verdict; each door writes its picture where it keeps them (state dir; beside the file).

@@ -41,7 +41,7 @@ def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = json.loads(json.dumps(cell.map_scene(MapRequest(str(image_path), points=True))))
+    service = json.loads(json.dumps(cell.jobs.map_scene(MapRequest(str(image_path), points=True))))
     cli = map_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
     assert cli["points_S"] == service["points_S"] and cli["pixels"] == service["pixels"]
     assert cli["segments"] == service["segments"]

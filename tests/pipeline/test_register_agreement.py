@@ -43,7 +43,7 @@ def test_cli_and_service_register_the_same_base(tmp_path: Path) -> None:
     )
     cell = Cell(CellDevices(), rs.store, config=load_cell_config(cell_file))
     image = str(rs.image_path)
-    service = json.loads(json.dumps(cell.register_robot(RegisterRequest(image, save=False))))
+    service = json.loads(json.dumps(cell.jobs.register_robot(RegisterRequest(image, save=False))))
     cmd = [sys.executable, "-m", "omnisort_hw.cli", "register-robot", image]
     cmd += ["--system", str(rs.system), "--config", str(cell_file), "--no-save", "--json"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)

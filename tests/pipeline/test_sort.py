@@ -215,16 +215,16 @@ def test_service_commands_through_the_cell(tmp_path: Path) -> None:
     cell.connect()
     try:
         cancel = threading.Event()
-        reg = cell.register_robot(RegisterRequest(), cancel)
+        reg = cell.jobs.register_robot(RegisterRequest(), cancel)
         rb = store.load_system()["robot_base"]
         assert rb == json.loads(json.dumps(reg["robot_base"]))
         np.testing.assert_allclose(rb["xyz_mm"], truth["robot_base"]["xyz_mm"], atol=3.0)
-        located = cell.locate(LocateRequest(), cancel)
+        located = cell.jobs.locate(LocateRequest(), cancel)
         assert located["count"] == 1 and located["cubes"][0]["color"] == "blue"
         np.testing.assert_allclose(
             located["cubes"][0]["center_B_mm"], truth["cubes"][0]["center_B_mm"], atol=3.0
         )
-        result = cell.sort(SortRequest(), cancel)
+        result = cell.jobs.sort(SortRequest(), cancel)
         assert result["totals"]["sorted"] == 1, result
         verifier = SimVerifier(devices.arm)
         final = verifier.true_cubes()[0]

@@ -19,7 +19,7 @@ from tests.service.sim_cell import calibrated_sim_cell
 def test_the_cells_sort_locates_from_a_capture_and_records_it(tmp_path: Path) -> None:
     cell = calibrated_sim_cell(tmp_path)
     try:
-        acquire = sort_capture_for(cell, cell.laser_off)
+        acquire = sort_capture_for(cell.jobs, cell.jobs.laser_off)
         assert acquire is not None
         devs = cell.devices
         sorter = Sorter(
@@ -57,6 +57,6 @@ def test_the_cells_sort_locates_from_a_capture_and_records_it(tmp_path: Path) ->
         from dataclasses import replace
 
         cell.config = replace(cell.config, capture=replace(cell.config.capture, differencing=False))
-        assert sort_capture_for(cell, cell.laser_off) is None
+        assert sort_capture_for(cell.jobs, cell.jobs.laser_off) is None
     finally:
         cell.close()

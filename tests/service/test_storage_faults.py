@@ -108,7 +108,9 @@ def test_failed_save_is_storage_error_and_not_fault(make_service, monkeypatch) -
 
     monkeypatch.setattr(fileio, "write_temp", full)
     # register_robot's own work needs the simulated cell; here it is only the save.
-    h.cell.register_robot = lambda image, cancel: {"path": str(store.save_system(system_payload()))}
+    h.cell.jobs.register_robot = lambda image, cancel: {
+        "path": str(store.save_system(system_payload()))
+    }
     with h.client() as c:
         r = c.call("register_robot")
         st = c.call("status")["result"]
