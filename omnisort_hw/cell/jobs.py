@@ -23,6 +23,14 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.errors import MotionRefusedError
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
+from omnisort_hw.pipeline.replies import (
+    AdoptReply,
+    ExtrinsicsReply,
+    LocateReply,
+    MapReply,
+    RegisterReply,
+    SortReply,
+)
 from omnisort_hw.pipeline.requests import (
     AdoptRequest,
     ExtrinsicsRequest,
@@ -137,7 +145,7 @@ class CellJobs:
 
     def calibrate_extrinsics(
         self, request: ExtrinsicsRequest, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
+    ) -> ExtrinsicsReply:
         """Camera rotation and laser plane from one image of the calibration target (a fresh
         capture with the laser on, or the request's image), saved as system.json. The previous
         robot base pose is not carried over: it was registered with the previous camera
@@ -146,9 +154,7 @@ class CellJobs:
 
         return extrinsics.run(self, request, cancel).reply()
 
-    def map_scene(
-        self, request: MapRequest, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
+    def map_scene(self, request: MapRequest, cancel: threading.Event | None = None) -> MapReply:
         """Laser map: the stripe's pixels -> points on the laser plane (S, mm) -> segments;
         `request.points` adds the points (S, 0.1 mm) and their pixels, `request.picture`
         writes the map's picture as map_overlay.png beside system.json (one, overwritten)."""
@@ -158,22 +164,20 @@ class CellJobs:
 
     def register_robot(
         self, request: RegisterRequest, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
+    ) -> RegisterReply:
         """Robot base pose T_SB from the floor checkerboard in the request's image (or a
         laser-off capture), saved as `robot_base` in the store's system.json."""
         from omnisort_hw.pipeline import registration
 
         return registration.run(self, request, cancel).reply()
 
-    def locate(
-        self, request: LocateRequest, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
+    def locate(self, request: LocateRequest, cancel: threading.Event | None = None) -> LocateReply:
         """The cubes in the request's image (or laser-off and laser-on captures), in S and B."""
         from omnisort_hw.pipeline import locate
 
         return locate.run(self, request, cancel).reply()
 
-    def adopt(self, request: AdoptRequest) -> dict[str, Any]:
+    def adopt(self, request: AdoptRequest) -> AdoptReply:
         """The CLI's camera.json and system.json, verified against this cell, as its own."""
         from omnisort_hw.pipeline import adopt
 
@@ -261,7 +265,7 @@ class CellJobs:
         request: SortRequest,
         cancel: threading.Event,
         progress: Callable[[dict[str, Any]], None] | None = None,
-    ) -> dict[str, Any]:
+    ) -> SortReply:
         """Locate, pick and place every object by colour until done, `max_objects` or cancel;
         gated by the calibration store and the drift watchdog (`pipeline.sort_run`)."""
         from omnisort_hw.pipeline import sort_run

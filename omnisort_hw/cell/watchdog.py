@@ -35,6 +35,7 @@ from omnisort_hw.pipeline.drift_check import (
     load_reference,
     save_reference,
 )
+from omnisort_hw.pipeline.replies import DriftReply
 from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.runlog import RunLog
 
@@ -165,7 +166,7 @@ class DriftWatchdog:
         except Exception as exc:
             log.error("drift watchdog: cannot save the reference image: %s", exc)
 
-    def check(self, image: str | None = None) -> dict[str, Any]:
+    def check(self, image: str | None = None) -> DriftReply:
         """The drift check use case on `image` (or a laser-off capture); its result recorded."""
         rig = _PortsRig(self.ports, self.config)
         result = drift_check.run(rig, CheckRequest(image))

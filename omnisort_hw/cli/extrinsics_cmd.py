@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -97,7 +98,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _warn(picture: dict[str, str | None]) -> None:
+def _warn(picture: Mapping[str, Any]) -> None:
     """A picture that could not be written: said on stderr, the command still succeeds."""
     if picture.get("overlay_problem"):
         print(f"omnisort: warning: {picture['overlay_problem']}", file=sys.stderr)

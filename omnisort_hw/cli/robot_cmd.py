@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -266,7 +267,7 @@ def _print_progress(event: dict[str, Any]) -> None:
     print(f"  cube {event['cube']} ({event['color']}): {event['status']}", file=sys.stderr)
 
 
-def _print_report(result: dict[str, Any], as_json: bool) -> None:
+def _print_report(result: Mapping[str, Any], as_json: bool) -> None:
     if as_json:
         print_result(result)
         return

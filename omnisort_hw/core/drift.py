@@ -28,7 +28,7 @@ Conventions: the camera now is R_SC_now = Rot(rotvec_S) . R_SC (rotation vector 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 import cv2
 import numpy as np
@@ -318,6 +318,19 @@ class BoardCheck:
         }
 
 
+class DecisionSummary(TypedDict):
+    """A drift decision as replies carry it: the turn measured, its threshold, its statistics."""
+
+    drift: bool
+    angle_deg: float
+    rotvec_deg: list[float]
+    std_deg: list[float]
+    threshold_deg: float
+    t2: float
+    p_value: float
+    source: str
+
+
 def _r(v: float, n: int) -> float | None:
     return round(float(v), n) if np.isfinite(v) else None
 
@@ -443,7 +456,7 @@ class DriftDecision:
     p_value: float
     source: str
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> DecisionSummary:
         return {
             "drift": self.drift,
             "angle_deg": round(self.angle_deg, 4),

@@ -21,7 +21,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import cv2
 import numpy as np
@@ -157,7 +157,15 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
         raise StorageError(f"{path}: could not write the picture: {os_error_text(exc)}") from None
 
 
-def write_picture(path: str | Path, draw: Callable[[], np.ndarray]) -> dict[str, str | None]:
+class PictureReply(TypedDict, total=False):
+    """The picture of what a command found: where it was written (None when it was not), and
+    why not."""
+
+    overlay_png: str | None
+    overlay_problem: str
+
+
+def write_picture(path: str | Path, draw: Callable[[], np.ndarray]) -> PictureReply:
     """Draw and write a command's picture, a by-product of its result: `{"overlay_png":
     path}`, or `{"overlay_png": None, "overlay_problem": why}` when drawing or writing failed,
     so a measurement already saved is still reported as done (a full disk or a read-only

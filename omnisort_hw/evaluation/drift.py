@@ -165,7 +165,7 @@ def drift_trial(config: Mapping[str, Any], seed: int) -> TrialOutput:
             err = float(np.degrees(np.linalg.norm(est - true_rotvec)))
             b = res.board
             occluded = b is not None and b.n_visible < b.visible.size
-            summary = res.summary()
+            summary: dict[str, Any] = dict(res.summary())
             checked_at.append(summary.pop("checked_at", None))
             return {
                 "drift": res.drift,

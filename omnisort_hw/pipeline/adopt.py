@@ -26,6 +26,7 @@ from omnisort_hw.fileio import read_calibration_json
 from omnisort_hw.pipeline.calibration_source import read_system_payload
 from omnisort_hw.pipeline.calibration_store import CHECKSUM_KEY, META_KEY, CalibrationStore
 from omnisort_hw.pipeline.image_files import check_image_size
+from omnisort_hw.pipeline.replies import AdoptReply
 from omnisort_hw.pipeline.requests import AdoptRequest
 
 
@@ -46,7 +47,7 @@ class AdoptResult:
     files: tuple[Adopted, ...]
     drift_reference: bool
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> AdoptReply:
         return {
             "adopted": {
                 f.kind: {"from": f.source, "path": f.path, "checksum": f.checksum}

@@ -36,6 +36,7 @@ from omnisort_hw.core.drift import (
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
 from omnisort_hw.pipeline.cell_acquisition import frame
+from omnisort_hw.pipeline.replies import DriftReply
 from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.pipeline.verdict import Check, Verdict
 from omnisort_hw.runlog import NullLog, RunLog
@@ -118,7 +119,7 @@ class DriftResult:
     board_problem: str | None = None
     frame: np.ndarray | None = field(default=None, repr=False)  # the image checked
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> DriftReply:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         return self.summary()
 
@@ -126,17 +127,17 @@ class DriftResult:
     def drift(self) -> bool:
         return self.decision.drift
 
-    def summary(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
+    def summary(self) -> DriftReply:
+        out: DriftReply = {
             **self.decision.summary(),
             "checked_at": self.checked_at,
             "image": self.source,
             "calibration_key": self.key,
             "board": self.board.summary() if self.board is not None else None,
+            "verdict": self.verdict().to_dict(),
         }
         if self.board_problem:
             out["board_problem"] = self.board_problem
-        out["verdict"] = self.verdict().to_dict()
         return out
 
     def verdict(self) -> Verdict:

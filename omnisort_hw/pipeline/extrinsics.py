@@ -20,12 +20,13 @@ from omnisort_hw.config.target import METHODS_FOR, TARGETS, separation_problem
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
-from omnisort_hw.core.overlays import draw_extrinsics, overlay_path, write_picture
+from omnisort_hw.core.overlays import PictureReply, draw_extrinsics, overlay_path, write_picture
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.core.target_layout import TargetLayout
 from omnisort_hw.errors import InputError
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
+from omnisort_hw.pipeline.replies import ExtrinsicsReply
 from omnisort_hw.pipeline.requests import ExtrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.scale_check import ScaleCheck, check_scale
@@ -237,7 +238,7 @@ class ExtrinsicsResult:
     calib: SystemCalibration
     target: str
     path: Path
-    picture: dict[str, Any]
+    picture: PictureReply
     image: dict[str, Any] | None
     tone: ToneCurve
     scale: ScaleCheck | str
@@ -245,7 +246,7 @@ class ExtrinsicsResult:
     def verdict(self) -> Verdict:
         return calibration_verdict(self.calib, self.scale)
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> ExtrinsicsReply:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         scale = self.scale
         checked = scale.record() if isinstance(scale, ScaleCheck) else {"not_checked": scale}

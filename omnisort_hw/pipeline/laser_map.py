@@ -22,9 +22,10 @@ from omnisort_hw.core.map_uncertainty import (
     stripe_pixel_sigma,
 )
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
-from omnisort_hw.core.overlays import draw_map, write_picture
+from omnisort_hw.core.overlays import PictureReply, draw_map, write_picture
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
+from omnisort_hw.pipeline.replies import MapReply, MapSummary
 from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.verdict import Verdict, at_least
@@ -47,12 +48,12 @@ class LaserMap:
     def finite_points_S(self) -> np.ndarray:
         return self.points_S[np.all(np.isfinite(self.points_S), axis=1)]
 
-    def summary(self, with_points: bool = False) -> dict[str, Any]:
+    def summary(self, with_points: bool = False) -> MapSummary:
         """Counts and segments; `with_points` adds every point on the plane (S, 0.1 mm) and,
         in the same order, its pixel (0.01 px) and its standard deviations (0.01 mm) along
         the surface normal, along the line and off the laser plane."""
         finite = np.all(np.isfinite(self.points_S), axis=1)
-        out: dict[str, Any] = {
+        out: MapSummary = {
             "points": len(self.pixels),
             "points_on_plane": int(finite.sum()),
             "echoes_dropped": self.echoes,
@@ -165,10 +166,10 @@ class MapResult:
 
     laser_map: LaserMap
     image: dict[str, Any]
-    picture: dict[str, Any] = field(default_factory=dict)
+    picture: PictureReply = field(default_factory=lambda: PictureReply())
     with_points: bool = False  # the request's `points`: the reply carries every point
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> MapReply:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         return {
             "image": self.image,

@@ -23,13 +23,14 @@ from omnisort_hw.core.cube_uncertainty import add_calibration_part, rotation_cov
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
-from omnisort_hw.core.overlays import write_picture
+from omnisort_hw.core.overlays import PictureReply, write_picture
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.core.registration import Registration
 from omnisort_hw.errors import NotAvailableError
 from omnisort_hw.pipeline.calibration_source import robot_base_T
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import read_image
+from omnisort_hw.pipeline.replies import LocateReply
 from omnisort_hw.pipeline.requests import LocateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.verdict import Verdict, at_least, graded, verdict_lines
@@ -55,7 +56,7 @@ class LocateResult:
     cubes: list[Cube]
     diagnostics: dict[str, Any] = field(repr=False)
     max_sigma_mm: float = SortConfig.max_sigma_mm
-    picture: dict[str, Any] = field(default_factory=dict)
+    picture: PictureReply = field(default_factory=lambda: PictureReply())
     colors: tuple[str, ...] | None = None  # the request's: the reply gives only these
 
     def lines(self) -> list[str]:
@@ -92,7 +93,7 @@ class LocateResult:
         )
         return Verdict("locate", (found, sigma) if cubes else (found,))
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> LocateReply:
         """The answer at every door: the cubes (of the request's colours), their count, and
         the blobs rejected inside the search region with the reason."""
         found = [c.summary() for c in self.asked()]

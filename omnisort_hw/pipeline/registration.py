@@ -20,11 +20,12 @@ import numpy as np
 from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.core.cell_pictures import draw_registration
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.core.overlays import write_picture
+from omnisort_hw.core.overlays import PictureReply, write_picture
 from omnisort_hw.core.registration import Registration, register_robot
 from omnisort_hw.errors import CalibrationError, CalibrationFileError, NotAvailableError
 from omnisort_hw.pipeline.cell_acquisition import frame
 from omnisort_hw.pipeline.intrinsics import board_record
+from omnisort_hw.pipeline.replies import RegisterReply
 from omnisort_hw.pipeline.requests import RegisterRequest
 from omnisort_hw.pipeline.rig import Rig
 from omnisort_hw.pipeline.verdict import Verdict, graded, verdict_lines
@@ -46,7 +47,7 @@ class RegisterResult:
     registration: Registration
     record: dict[str, Any]
     path: Path | None
-    picture: dict[str, Any] = field(default_factory=dict)
+    picture: PictureReply = field(default_factory=lambda: PictureReply())
 
     def verdict(self) -> Verdict:
         """The board corners' RMS as the intrinsics' are judged, and the base's sigma."""
@@ -70,7 +71,7 @@ class RegisterResult:
         )
         return Verdict("robot registration", (rms, sigma))
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> RegisterReply:
         """The answer at every door: the `robot_base` record, where it was saved, the picture
         and the verdict."""
         return {

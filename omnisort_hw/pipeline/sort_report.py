@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.pipeline.replies import SortExtras, SortReply
 from omnisort_hw.pipeline.verdict import Verdict, none_of
 
 
@@ -71,7 +72,7 @@ class SortReport:
     wall_s: float = 0.0
     verified: bool = False
     collisions: int | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: SortExtras = field(default_factory=lambda: SortExtras())
 
     def add_missed(self, color: str, center_S_mm: list[float], in_right_bin: bool) -> None:
         """A cube a verifier knows of that the run never located (status "missed")."""
@@ -131,7 +132,7 @@ class SortReport:
             checks.append(none_of("cubes not in their bin", out_of_bin, "fail"))
         return Verdict("sort", tuple(checks))
 
-    def reply(self) -> dict[str, Any]:
+    def reply(self) -> SortReply:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         return {
             "cubes": [o.to_dict() for o in self.outcomes],

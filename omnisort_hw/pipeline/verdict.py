@@ -11,9 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
-Level = Literal["pass", "warn", "fail"]
+from omnisort_hw.pipeline.replies import CheckReply, Level, VerdictReply
+
 _RANK: dict[str, int] = {"pass": 0, "warn": 1, "fail": 2}
 
 
@@ -27,8 +28,8 @@ class Check:
     threshold: str
     advice: str = ""
 
-    def to_dict(self) -> dict[str, str]:
-        out = {
+    def to_dict(self) -> CheckReply:
+        out: CheckReply = {
             "name": self.name,
             "level": self.level,
             "figure": self.figure,
@@ -85,7 +86,7 @@ class Verdict:
     def level(self) -> Level:
         return worst([c.level for c in self.checks])
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> VerdictReply:
         return {
             "level": self.level,
             "what": self.what,

@@ -2,7 +2,8 @@
 `execute()` (as pymodbus's client mixin writes each request once).
 
 A method takes the command's request record (`pipeline.requests`, the one declaration of its
-arguments) and returns the service's `result`; an error reply raises `CommandError` with its
+arguments) and returns the service's `result`, typed as the use case's reply
+(`pipeline.replies`) where the command is one; an error reply raises `CommandError` with its
 typed code, message and field. A job's progress events reach `on_event` as they arrive.
 `tests/service/test_typed_client.py` checks that every command of the protocol has its method.
 """
@@ -10,8 +11,16 @@ typed code, message and field. A job's progress events reach `on_event` as they 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
+from omnisort_hw.pipeline.replies import (
+    AdoptReply,
+    DriftReply,
+    LocateReply,
+    MapReply,
+    RegisterReply,
+    SortReply,
+)
 from omnisort_hw.pipeline.request_fields import wire_args
 from omnisort_hw.pipeline.requests import (
     AdoptRequest,
@@ -66,28 +75,28 @@ class CellCommands:
     def calibrate(self, request: CalibrateRequest, on_event: OnEvent = None) -> Result:
         return self.execute("calibrate", wire_args(request), on_event)
 
-    def map(self, request: MapRequest | None = None, on_event: OnEvent = None) -> Result:
-        return self.execute("map", wire_args(request), on_event)
+    def map(self, request: MapRequest | None = None, on_event: OnEvent = None) -> MapReply:
+        return cast(MapReply, self.execute("map", wire_args(request), on_event))
 
     def register_robot(
         self, request: RegisterRequest | None = None, on_event: OnEvent = None
-    ) -> Result:
-        return self.execute("register_robot", wire_args(request), on_event)
+    ) -> RegisterReply:
+        return cast(RegisterReply, self.execute("register_robot", wire_args(request), on_event))
 
-    def locate(self, request: LocateRequest | None = None, on_event: OnEvent = None) -> Result:
-        return self.execute("locate", wire_args(request), on_event)
+    def locate(self, request: LocateRequest | None = None, on_event: OnEvent = None) -> LocateReply:
+        return cast(LocateReply, self.execute("locate", wire_args(request), on_event))
 
     def move(self, request: MoveRequest, on_event: OnEvent = None) -> Result:
         return self.execute("move", wire_args(request), on_event)
 
-    def sort(self, request: SortRequest | None = None, on_event: OnEvent = None) -> Result:
-        return self.execute("sort", wire_args(request), on_event)
+    def sort(self, request: SortRequest | None = None, on_event: OnEvent = None) -> SortReply:
+        return cast(SortReply, self.execute("sort", wire_args(request), on_event))
 
-    def check(self, request: CheckRequest | None = None, on_event: OnEvent = None) -> Result:
-        return self.execute("check", wire_args(request), on_event)
+    def check(self, request: CheckRequest | None = None, on_event: OnEvent = None) -> DriftReply:
+        return cast(DriftReply, self.execute("check", wire_args(request), on_event))
 
-    def adopt(self, request: AdoptRequest, on_event: OnEvent = None) -> Result:
-        return self.execute("adopt", wire_args(request), on_event)
+    def adopt(self, request: AdoptRequest, on_event: OnEvent = None) -> AdoptReply:
+        return cast(AdoptReply, self.execute("adopt", wire_args(request), on_event))
 
     def acknowledge_drift(self) -> Result:
         return self.execute("acknowledge_drift")

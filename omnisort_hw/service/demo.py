@@ -15,7 +15,7 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -73,7 +73,7 @@ def calibrate_from_truth(config: Path) -> None:
         cell.close()
 
 
-def _brief(cmd: str, res: dict[str, Any]) -> str:
+def _brief(cmd: str, res: Mapping[str, Any]) -> str:
     if cmd == "calibrate intrinsics":
         return f"rms {res['rms_px']:.3f} px from {res['images_used']} images -> {res['path']}"
     if cmd == "calibrate extrinsics":
@@ -112,7 +112,7 @@ def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None
     print(f"starting omnisort serve --config {config}", flush=True)
     svc = start_service(config, out)
     folder = str(views_dir.resolve())
-    steps: list[tuple[str, Callable[[Client], dict[str, Any]]]] = [
+    steps: list[tuple[str, Callable[[Client], Mapping[str, Any]]]] = [
         (
             "calibrate intrinsics",
             lambda c: c.calibrate(

@@ -10,7 +10,7 @@ machine.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,10 +40,12 @@ class Context:
     progress: Callable[[dict[str, Any]], None] | None = None
 
 
-Handler = Callable[[Context, Any], dict[str, Any]]
+Reply = Mapping[str, Any]
+"""A command's result: a use case's typed reply (`pipeline.replies`) or the cell's answer."""
+Handler = Callable[[Context, Any], Reply]
 
 
-def status(ctx: Context, _request: None) -> dict[str, Any]:
+def status(ctx: Context, _request: None) -> Reply:
     """Service state, job, devices and calibration health."""
     result = ctx.service_status()
     result.update(ctx.cell.status())
@@ -52,19 +54,19 @@ def status(ctx: Context, _request: None) -> dict[str, Any]:
     return result
 
 
-def describe(ctx: Context, _request: None) -> dict[str, Any]:
+def describe(ctx: Context, _request: None) -> Reply:
     return describe_commands()
 
 
-def capture(ctx: Context, request: CaptureRequest) -> dict[str, Any]:
+def capture(ctx: Context, request: CaptureRequest) -> Reply:
     return ctx.cell.capture(request.encoding, request.format, request.laser)
 
 
-def laser(ctx: Context, request: LaserRequest) -> dict[str, Any]:
+def laser(ctx: Context, request: LaserRequest) -> Reply:
     return ctx.cell.laser(request.on)
 
 
-def calibrate(ctx: Context, request: CalibrateRequest) -> dict[str, Any]:
+def calibrate(ctx: Context, request: CalibrateRequest) -> Reply:
     if request.what == "intrinsics":
         from omnisort_hw.pipeline.intrinsics import image_files
 
@@ -73,19 +75,19 @@ def calibrate(ctx: Context, request: CalibrateRequest) -> dict[str, Any]:
     return ctx.cell.jobs.calibrate_extrinsics(request.extrinsics(), ctx.cancel)
 
 
-def map_scene(ctx: Context, request: MapRequest) -> dict[str, Any]:
+def map_scene(ctx: Context, request: MapRequest) -> Reply:
     return ctx.cell.jobs.map_scene(request, ctx.cancel)
 
 
-def register_robot(ctx: Context, request: RegisterRequest) -> dict[str, Any]:
+def register_robot(ctx: Context, request: RegisterRequest) -> Reply:
     return ctx.cell.jobs.register_robot(request, ctx.cancel)
 
 
-def locate(ctx: Context, request: LocateRequest) -> dict[str, Any]:
+def locate(ctx: Context, request: LocateRequest) -> Reply:
     return ctx.cell.jobs.locate(request, ctx.cancel)
 
 
-def move(ctx: Context, request: MoveRequest) -> dict[str, Any]:
+def move(ctx: Context, request: MoveRequest) -> Reply:
     return ctx.cell.move(
         joints_deg=request.joints_deg,
         pose=request.pose,
@@ -96,19 +98,19 @@ def move(ctx: Context, request: MoveRequest) -> dict[str, Any]:
     )
 
 
-def sort(ctx: Context, request: SortRequest) -> dict[str, Any]:
+def sort(ctx: Context, request: SortRequest) -> Reply:
     return ctx.cell.jobs.sort(request, ctx.cancel, ctx.progress)
 
 
-def check(ctx: Context, request: CheckRequest) -> dict[str, Any]:
+def check(ctx: Context, request: CheckRequest) -> Reply:
     return ctx.cell.drift.check(request.image)
 
 
-def adopt(ctx: Context, request: AdoptRequest) -> dict[str, Any]:
+def adopt(ctx: Context, request: AdoptRequest) -> Reply:
     return ctx.cell.jobs.adopt(request)
 
 
-def acknowledge_drift(ctx: Context, _request: None) -> dict[str, Any]:
+def acknowledge_drift(ctx: Context, _request: None) -> Reply:
     return ctx.cell.drift.acknowledge()
 
 

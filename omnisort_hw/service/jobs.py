@@ -16,13 +16,15 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.error_replies import error_from_exception
 from omnisort_hw.service.handlers import HANDLERS, Context
 from omnisort_hw.service.protocol import Emit
 from omnisort_hw.service.states import Job, State, StateMachine
+
+R = TypeVar("R")
 
 if TYPE_CHECKING:
     from omnisort_hw.cell.cell import Cell
@@ -46,7 +48,7 @@ class JobRunner:
 
         def service_status(self) -> dict[str, Any]: ...
 
-        def _then_refresh(self, fn: Callable[[], dict[str, Any]]) -> dict[str, Any]: ...
+        def _then_refresh(self, fn: Callable[[], R]) -> R: ...
 
     def _stop(self) -> dict[str, Any]:
         job = self._job

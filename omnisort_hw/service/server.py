@@ -27,7 +27,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from omnisort_hw import __version__
 from omnisort_hw.cell.cell import Cell
@@ -39,7 +39,7 @@ from omnisort_hw.service.connection import (
     Admission,
 )
 from omnisort_hw.service.error_replies import error_from_exception
-from omnisort_hw.service.handlers import HANDLERS, Context
+from omnisort_hw.service.handlers import HANDLERS, Context, Reply
 from omnisort_hw.service.jobs import JobRunner
 from omnisort_hw.service.listener import check_exposure
 from omnisort_hw.service.pool import DaemonPool
@@ -48,6 +48,7 @@ from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.systemd import Notifier
 from omnisort_hw.service.transport import Transport
 
+R = TypeVar("R")
 log = logging.getLogger("omnisort.service")
 
 SWITCH_INTERVAL_S = 0.001
@@ -143,7 +144,8 @@ class Service(Transport, JobRunner):
 
     def status_reply(self) -> dict[str, Any]:
         """The `status` reply, from the snapshot (no device call): for the PLC face."""
-        return HANDLERS["status"](Context(self.cell, threading.Event(), self.service_status), None)
+        ctx = Context(self.cell, threading.Event(), self.service_status)
+        return dict(HANDLERS["status"](ctx, None))
 
     def call_from_thread(self, cmd: str, wait_s: float) -> dict[str, Any] | None:
         """Hand `cmd` (no arguments) to the dispatcher from another thread (the PLC face's), as
@@ -326,11 +328,11 @@ class Service(Transport, JobRunner):
         )
 
     async def _in_pool(
-        self, pool: DaemonPool, req: proto.Request, fn: Callable[[], dict[str, Any]], timeout: float
+        self, pool: DaemonPool, req: proto.Request, fn: Callable[[], Reply], timeout: float
     ) -> dict[str, Any]:
         if pool is self._safety:
             # The reply to stop/estop never waits for the status refresh's device reads.
-            def then_queue_refresh() -> dict[str, Any]:
+            def then_queue_refresh() -> Reply:
                 try:
                     return fn()
                 finally:
@@ -353,7 +355,7 @@ class Service(Transport, JobRunner):
             return proto.error_reply(req.id, code, msg, **details)
         return proto.ok_reply(req.id, result)
 
-    def _then_refresh(self, fn: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    def _then_refresh(self, fn: Callable[[], R]) -> R:
         """Run `fn`, then refresh the status snapshot so that the next `status` shows its effect
         (a new calibration, the laser state) whether it succeeded or failed."""
         try:

@@ -27,6 +27,7 @@ pytest.importorskip("pybullet", reason="the cell is the simulated one")
 from omnisort_hw.cell.cell import Cell
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.config.service import ServiceConfig
+from omnisort_hw.pipeline import replies
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.demo import calibrate_from_truth, write_config
 from omnisort_hw.service.protocol import COMMANDS
@@ -246,6 +247,17 @@ CASES: dict[str, tuple[str, Case]] = {
 }
 
 
+REPLY_TYPES: dict[str, Any] = {
+    "map": replies.MapReply,
+    "locate": replies.LocateReply,
+    "register_robot": replies.RegisterReply,
+    "check": replies.DriftReply,
+    "sort": replies.SortReply,
+    "calibrate extrinsics": replies.ExtrinsicsReply,
+}
+"""The declared reply of each use case (`pipeline.replies`), held against the real one."""
+
+
 def test_every_command_has_a_door_pair_or_a_reason() -> None:
     paired = {cmd for cmd, _ in CASES.values()}
     assert paired.isdisjoint(SERVICE_ONLY)
@@ -264,5 +276,9 @@ def test_the_cli_and_the_service_give_one_reply(doors: Doors, case: str) -> None
     if "path" in service and service["path"] is not None:  # each door's file, the same name
         assert Path(service.pop("path")).name == Path(cli.pop("path")).name
     assert _normalised(cli) == _normalised(service)
+    declared = REPLY_TYPES.get(case)
+    if declared is not None:  # the reply has the keys its TypedDict declares, and no others
+        required, optional = declared.__required_keys__, declared.__optional_keys__
+        assert required <= set(reply["result"]) <= required | optional, case
     # Not a vacuous agreement: each door measured something it judged usable.
     assert service["verdict"]["level"] != "fail", service["verdict"]

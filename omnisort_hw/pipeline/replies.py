@@ -1,0 +1,121 @@
+"""The replies of the use cases, typed: what every door shows unchanged (the service's
+`result`, the CLI's `--json`, the typed client's return value), declared once here.
+
+Each is a `TypedDict` (the core's own: a picture's `PictureReply`, a drift decision's
+`DecisionSummary`), so a reply stays plain JSON on the wire while its keys and their types
+are checked where it is built and where it is read. A record the reply carries as it was
+stored or measured (an image record, a calibration file's `robot_base`, a capture's record)
+stays a `Record`: its own module declares it. (No postponed annotations here: a TypedDict
+reads `NotRequired` when its class is made, and `tests/service/test_door_agreement.py` holds
+each real reply against its declared keys.)
+"""
+
+
+from typing import Any, Literal, NotRequired, TypedDict
+
+from omnisort_hw.core.drift import DecisionSummary
+from omnisort_hw.core.overlays import PictureReply
+
+Level = Literal["pass", "warn", "fail"]
+Record = dict[str, Any]
+"""A record carried as its own module wrote it (an image's path and sha256, a capture)."""
+
+
+class CheckReply(TypedDict):
+    """One criterion of a verdict: its figure against its threshold, and what to do."""
+
+    name: str
+    level: Level
+    figure: str
+    threshold: str
+    advice: NotRequired[str]
+
+
+class VerdictReply(TypedDict):
+    """A result's verdict: the worst level of its checks."""
+
+    level: Level
+    what: str
+    checks: list[CheckReply]
+
+
+class MapSummary(TypedDict):
+    """A laser map's counts and segments; with `points`, every point and its sigmas."""
+
+    points: int
+    points_on_plane: int
+    echoes_dropped: int
+    stripe_ends_dropped: int
+    segments: list[Record]
+    sigma: NotRequired[Record]
+    points_S: NotRequired[list[list[float]]]
+    pixels: NotRequired[list[list[float]]]
+    sigma_normal_mm: NotRequired[list[float]]
+    sigma_along_mm: NotRequired[list[float]]
+    sigma_off_plane_mm: NotRequired[list[float]]
+
+
+class MapReply(MapSummary, PictureReply):
+    image: Record
+    verdict: VerdictReply
+
+
+class LocateReply(PictureReply):
+    cubes: list[Record]
+    count: int
+    rejected: list[Record]
+    verdict: VerdictReply
+
+
+class RegisterReply(PictureReply):
+    robot_base: Record
+    path: str | None
+    verdict: VerdictReply
+
+
+class ExtrinsicsReply(PictureReply):
+    path: str
+    method: str
+    target: str
+    parameters: dict[str, float]
+    std: dict[str, float]
+    residuals: dict[str, Any]
+    image: Record | None
+    tone_curve: str
+    scale_check: Record
+    verdict: VerdictReply
+
+
+class DriftReply(DecisionSummary):
+    checked_at: str
+    image: str
+    calibration_key: str
+    board: Record | None
+    board_problem: NotRequired[str]
+    reference_adopted: NotRequired[bool]
+    verdict: VerdictReply
+
+
+class SortExtras(TypedDict, total=False):
+    """What a sorting run adds to its report: timings, the cycle, the scene checks, the
+    capture, and a verifier's truth (on the simulated cell)."""
+
+    timings_s: dict[str, float]
+    cycle: Record
+    checks: list[Record]
+    capture: Record
+    errors_B_mm: list[float]
+    collision_events: list[Record]
+
+
+class SortReply(SortExtras):
+    cubes: list[Record]
+    totals: Record
+    registration: Record | None
+    rejected_blobs: int
+    verdict: VerdictReply
+
+
+class AdoptReply(TypedDict):
+    adopted: dict[str, Record]
+    drift_reference: bool
