@@ -6,8 +6,6 @@ other settings (another board, another reference, no checksum check) would diffe
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -23,19 +21,13 @@ from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import calibration_key, save_reference
 from omnisort_hw.pipeline.requests import ExtrinsicsRequest
+from tests.cli_json import cli_result
 
 pytestmark = pytest.mark.timeout(600)
 
 
 def cli(*args: str, ok_codes: tuple[int, ...] = (0,)) -> dict[str, Any]:
-    proc = subprocess.run(
-        [sys.executable, "-m", "omnisort_hw.cli", *args, "--json"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode in ok_codes, proc.stderr
-    return json.loads(proc.stdout)["result"]
+    return dict(cli_result(*args, ok_codes=ok_codes))
 
 
 def as_json(obj: Any) -> Any:

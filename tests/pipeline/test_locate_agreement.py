@@ -4,8 +4,6 @@ file they give the same cubes (both read `[sorting]`, its floor height included)
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,18 +15,12 @@ from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.pipeline.requests import LocateRequest
+from tests.cli_json import cli_result
 from tests.pipeline.registered_scene import registered_scene
 
 
 def locate_cli(*args: str) -> dict:
-    proc = subprocess.run(
-        [sys.executable, "-m", "omnisort_hw.cli", "locate", *args, "--json"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout)["result"]
+    return cli_result("locate", *args)
 
 
 def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:

@@ -7,8 +7,6 @@ floor filter's own effect (that is `tests/core/test_laser_echoes.py`)."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -18,18 +16,12 @@ pytest.importorskip("pybullet", reason="the image is rendered by the simulated c
 from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.pipeline.requests import MapRequest
+from tests.cli_json import cli_result
 from tests.pipeline.registered_scene import registered_scene
 
 
 def map_cli(*args: str) -> dict:
-    proc = subprocess.run(
-        [sys.executable, "-m", "omnisort_hw.cli", "map", *args, "--json", "--points"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(proc.stdout)["result"]
+    return cli_result("map", *args, "--points")
 
 
 def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:

@@ -12,8 +12,6 @@ doors get are the service's own captures. The commands that write a calibration 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +30,7 @@ from omnisort_hw.service.client import Client
 from omnisort_hw.service.demo import calibrate_from_truth, write_config
 from omnisort_hw.service.protocol import COMMANDS
 from omnisort_hw.service.server import RunningService, Service, start_in_thread
+from tests.cli_json import cli_result
 
 pytestmark = pytest.mark.timeout(900)
 
@@ -140,19 +139,6 @@ def _normalised(obj: Any) -> Any:
     if isinstance(obj, list):
         return [_normalised(v) for v in obj]
     return obj
-
-
-def _cli(*args: str, ok_codes: tuple[int, ...] = (0,)) -> dict[str, Any]:
-    proc = subprocess.run(
-        [sys.executable, "-m", "omnisort_hw.cli", *args, "--json"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode in ok_codes, proc.stderr + proc.stdout
-    reply = json.loads(proc.stdout)
-    assert reply["ok"], reply
-    return dict(reply["result"])
 
 
 Case = Callable[[Doors], tuple[dict[str, Any], list[str], tuple[int, ...]]]
@@ -269,7 +255,7 @@ def test_the_cli_and_the_service_give_one_reply(doors: Doors, case: str) -> None
     cmd, make = CASES[case]
     args, cli_args, ok_codes = make(doors)
     (doors.tmp / "cli").mkdir(exist_ok=True)
-    cli = _cli(*cli_args, ok_codes=ok_codes)
+    cli = dict(cli_result(*cli_args, ok_codes=ok_codes))
     reply = doors.client.call(cmd, args)
     assert reply["ok"], reply
     service = json.loads(json.dumps(reply["result"]))
