@@ -32,6 +32,7 @@ from omnisort_hw.cell.devices import Devices, open_devices
 from omnisort_hw.cell.jobs import CellJobs
 from omnisort_hw.cell.journal import JobJournal
 from omnisort_hw.cell.status import Cached, Caches, arm_summary, camera_summary, error_text
+from omnisort_hw.cell.status_reply import CellStatus
 from omnisort_hw.cell.watchdog import DriftWatchdog, WatchdogPorts
 from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.config.cell import CellConfig
@@ -101,7 +102,7 @@ class Cell:
         self._caches = Caches()
         self._connected = False
         self._mover = ArmMover()
-        self._snapshot: dict[str, Any] | None = None
+        self._snapshot: CellStatus | None = None
         self._snapshot_at = 0.0
         self._poller_stop = threading.Event()
         self._poller: threading.Thread | None = None
@@ -346,7 +347,7 @@ class Cell:
     def _camera_status(self) -> dict[str, Any]:
         return camera_summary(self.devices.camera)
 
-    def read_status(self) -> dict[str, Any]:
+    def read_status(self) -> CellStatus:
         """Devices and calibration read now (device calls; the poller thread calls this)."""
         return {
             "devices": {
@@ -361,7 +362,7 @@ class Cell:
             "drift": self.drift.status(),
         }
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> CellStatus:
         """The latest status snapshot, never waiting for a device: the poller thread refreshes
         it every STATUS_POLL_S; `status_age_s` says how old it is. Without a poller (not
         connected) it is read now."""
@@ -369,7 +370,7 @@ class Cell:
             snap, at = self._snapshot, self._snapshot_at
         if snap is None:
             return self.read_status()
-        out = dict(snap)
+        out = snap.copy()
         out["status_age_s"] = round(time.monotonic() - at, 3)
         return out
 

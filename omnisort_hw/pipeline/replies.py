@@ -10,7 +10,6 @@ reads `NotRequired` when its class is made, and `tests/service/test_door_agreeme
 each real reply against its declared keys.)
 """
 
-
 from typing import Any, Literal, NotRequired, TypedDict
 
 from omnisort_hw.core.drift import DecisionSummary

@@ -35,6 +35,7 @@ from omnisort_hw.pipeline.requests import (
     ResetRequest,
     SortRequest,
 )
+from omnisort_hw.service.status_reply import StatusReply
 
 Result = dict[str, Any]
 OnEvent = Callable[[dict[str, Any]], None] | None
@@ -60,8 +61,8 @@ class CellCommands:
     ) -> Result:
         raise NotImplementedError
 
-    def status(self) -> Result:
-        return self.execute("status")
+    def status(self) -> StatusReply:
+        return cast(StatusReply, self.execute("status"))
 
     def describe(self) -> Result:
         return self.execute("describe")

@@ -28,6 +28,7 @@ from omnisort_hw.pipeline.requests import (
     SortRequest,
 )
 from omnisort_hw.service.protocol import describe_commands
+from omnisort_hw.service.status_reply import ServiceStatus, StatusReply
 
 
 @dataclass
@@ -36,7 +37,7 @@ class Context:
 
     cell: Cell
     cancel: threading.Event
-    service_status: Callable[[], dict[str, Any]]
+    service_status: Callable[[], ServiceStatus]
     progress: Callable[[dict[str, Any]], None] | None = None
 
 
@@ -45,13 +46,11 @@ Reply = Mapping[str, Any]
 Handler = Callable[[Context, Any], Reply]
 
 
-def status(ctx: Context, _request: None) -> Reply:
+def status(ctx: Context, _request: None) -> StatusReply:
     """Service state, job, devices and calibration health."""
-    result = ctx.service_status()
-    result.update(ctx.cell.status())
-    cal = result["calibration"]
-    result["motion_allowed"] = bool(cal["motion_allowed"]) and result["state"] != "fault"
-    return result
+    service, cell = ctx.service_status(), ctx.cell.status()
+    allowed = bool(cell["calibration"]["motion_allowed"]) and service["state"] != "fault"
+    return {**service, **cell, "motion_allowed": allowed}
 
 
 def describe(ctx: Context, _request: None) -> Reply:

@@ -29,6 +29,7 @@ R = TypeVar("R")
 if TYPE_CHECKING:
     from omnisort_hw.cell.cell import Cell
     from omnisort_hw.config.service import ServiceConfig
+    from omnisort_hw.service.status_reply import ServiceStatus
 
 log = logging.getLogger("omnisort.service")
 
@@ -46,7 +47,7 @@ class JobRunner:
 
     if TYPE_CHECKING:  # defined by `Service`
 
-        def service_status(self) -> dict[str, Any]: ...
+        def service_status(self) -> ServiceStatus: ...
 
         def _then_refresh(self, fn: Callable[[], R]) -> R: ...
 

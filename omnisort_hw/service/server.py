@@ -45,6 +45,7 @@ from omnisort_hw.service.listener import check_exposure
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.protocol import Emit
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
+from omnisort_hw.service.status_reply import ServiceStatus
 from omnisort_hw.service.systemd import Notifier
 from omnisort_hw.service.transport import Transport
 
@@ -124,13 +125,18 @@ class Service(Transport, JobRunner):
         log.error("%s", msg)
         self.states.set(State.FAULT, msg)
 
-    def service_status(self) -> dict[str, Any]:
+    def service_status(self) -> ServiceStatus:
         """The service's part of the `status` reply."""
-        out = self.states.snapshot()
         job = self._job
-        out["job"] = job.describe() if job is not None else None
-        out["last_run"] = self.cell.journal.record
-        out["service"] = {
+        return {
+            **self.states.snapshot(),
+            "job": job.describe() if job is not None else None,
+            "last_run": self.cell.journal.record,
+            "service": self._service_record(),
+        }
+
+    def _service_record(self) -> dict[str, Any]:
+        return {
             "version": __version__,
             "pid": os.getpid(),
             "host": self.address[0] if self.address else self.config.host,
@@ -140,7 +146,6 @@ class Service(Transport, JobRunner):
             "uptime_s": round(time.monotonic() - self._started, 3),
             **self.counters,
         }
-        return out
 
     def status_reply(self) -> dict[str, Any]:
         """The `status` reply, from the snapshot (no device call): for the PLC face."""

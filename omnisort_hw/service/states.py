@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from enum import StrEnum
-from typing import Any
+from typing import Any, TypedDict
 
 log = logging.getLogger("omnisort.service")
 
@@ -73,7 +73,7 @@ class StateMachine:
                 log.exception("state change hook failed")
         return tr
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> StateSnapshot:
         with self._lock:
             return {
                 "state": self._state.value,
@@ -81,6 +81,16 @@ class StateMachine:
                 "since": _iso(self._since),
                 "transitions": [t.__dict__ for t in list(self._history)[-10:]],
             }
+
+
+class StateSnapshot(TypedDict):
+    """The state (idle, calibrating, mapping, moving, sorting, stopped or fault), why, since
+    when (ISO 8601, UTC) and the last ten transitions."""
+
+    state: str
+    reason: str
+    since: str
+    transitions: list[dict[str, Any]]
 
 
 def _iso(wall: float) -> str:

@@ -12,6 +12,7 @@ from omnisort_hw.pipeline.request_fields import build, wire_args
 from omnisort_hw.pipeline.requests import LaserRequest, MoveRequest, SortRequest
 from omnisort_hw.service.client import Client, CommandError
 from omnisort_hw.service.protocol import COMMANDS
+from omnisort_hw.service.status_reply import StatusReply
 from tests.service.conftest import TOKEN, Harness
 
 pytestmark = pytest.mark.timeout(60)
@@ -42,7 +43,10 @@ def test_wire_args_give_the_record_back() -> None:
 def test_typed_calls_against_the_service(make_service) -> None:
     h: Harness = make_service(token=TOKEN, move_seconds=1.2)
     with h.client(token=TOKEN, timeout_s=30) as c:
-        assert c.status()["state"] == "idle"
+        status = c.status()
+        assert status["state"] == "idle"
+        required, optional = StatusReply.__required_keys__, StatusReply.__optional_keys__
+        assert required <= set(status) <= required | optional  # the declared reply
         assert c.laser(LaserRequest(on=True)) == {"on": True}
         assert c.laser() == {"on": True}  # omitted: read back
         events: list[dict] = []
