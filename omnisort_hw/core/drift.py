@@ -28,7 +28,7 @@ Conventions: the camera now is R_SC_now = Rot(rotvec_S) . R_SC (rotation vector 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, TypedDict
+from typing import Any
 
 import cv2
 import numpy as np
@@ -40,6 +40,7 @@ from scipy.stats import f as f_dist
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec, to_gray
 from omnisort_hw.core.frames import invert_pose
+from omnisort_hw.core.records import DecisionSummary
 from omnisort_hw.errors import FeatureNotFoundError, InputError
 
 FALSE_ALARM_RATE = 1e-6  # per check, for a camera that did not move
@@ -316,19 +317,6 @@ class BoardCheck:
             "base_shift_mm": _r(self.base_shift_mm, 3),
             "base_shift_xyz_mm": [_r(v, 3) for v in self.base_shift_xyz_mm],
         }
-
-
-class DecisionSummary(TypedDict):
-    """A drift decision as replies carry it: the turn measured, its threshold, its statistics."""
-
-    drift: bool
-    angle_deg: float
-    rotvec_deg: list[float]
-    std_deg: list[float]
-    threshold_deg: float
-    t2: float
-    p_value: float
-    source: str
 
 
 def _r(v: float, n: int) -> float | None:

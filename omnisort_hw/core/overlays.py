@@ -21,7 +21,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any
 
 import cv2
 import numpy as np
@@ -30,6 +30,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration, pl
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
 from omnisort_hw.core.frames import great_circle_normal
 from omnisort_hw.core.mapping import Segment, to_plane_frame
+from omnisort_hw.core.records import PictureReply
 from omnisort_hw.errors import StorageError
 from omnisort_hw.fileio import atomic_write_bytes, os_error_text
 
@@ -155,14 +156,6 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
         return atomic_write_bytes(path, encode_png(image), keep_history=False)
     except OSError as exc:
         raise StorageError(f"{path}: could not write the picture: {os_error_text(exc)}") from None
-
-
-class PictureReply(TypedDict, total=False):
-    """The picture of what a command found: where it was written (None when it was not), and
-    why not."""
-
-    overlay_png: str | None
-    overlay_problem: str
 
 
 def write_picture(path: str | Path, draw: Callable[[], np.ndarray]) -> PictureReply:

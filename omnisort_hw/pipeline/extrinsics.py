@@ -20,8 +20,9 @@ from omnisort_hw.config.target import METHODS_FOR, TARGETS, separation_problem
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
-from omnisort_hw.core.overlays import PictureReply, draw_extrinsics, overlay_path, write_picture
+from omnisort_hw.core.overlays import draw_extrinsics, overlay_path, write_picture
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
+from omnisort_hw.core.records import PictureReply
 from omnisort_hw.core.target_layout import TargetLayout
 from omnisort_hw.errors import InputError
 from omnisort_hw.pipeline.cell_acquisition import acquire

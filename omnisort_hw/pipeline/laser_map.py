@@ -22,7 +22,8 @@ from omnisort_hw.core.map_uncertainty import (
     stripe_pixel_sigma,
 )
 from omnisort_hw.core.mapping import Segment, pixels_to_plane, segments
-from omnisort_hw.core.overlays import PictureReply, draw_map, write_picture
+from omnisort_hw.core.overlays import draw_map, write_picture
+from omnisort_hw.core.records import PictureReply
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.replies import MapReply, MapSummary

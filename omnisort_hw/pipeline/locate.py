@@ -23,8 +23,9 @@ from omnisort_hw.core.cube_uncertainty import add_calibration_part, rotation_cov
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
-from omnisort_hw.core.overlays import PictureReply, write_picture
+from omnisort_hw.core.overlays import write_picture
 from omnisort_hw.core.pick_planning import SortConfig
+from omnisort_hw.core.records import PictureReply
 from omnisort_hw.core.registration import Registration
 from omnisort_hw.errors import NotAvailableError
 from omnisort_hw.pipeline.calibration_source import robot_base_T

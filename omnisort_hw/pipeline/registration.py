@@ -20,7 +20,8 @@ import numpy as np
 from omnisort_hw.config.sorting import RegistrationConfig
 from omnisort_hw.core.cell_pictures import draw_registration
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
-from omnisort_hw.core.overlays import PictureReply, write_picture
+from omnisort_hw.core.overlays import write_picture
+from omnisort_hw.core.records import PictureReply
 from omnisort_hw.core.registration import Registration, register_robot
 from omnisort_hw.errors import CalibrationError, CalibrationFileError, NotAvailableError
 from omnisort_hw.pipeline.cell_acquisition import frame

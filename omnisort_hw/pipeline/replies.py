@@ -1,9 +1,10 @@
 """The replies of the use cases, typed: what every door shows unchanged (the service's
 `result`, the CLI's `--json`, the typed client's return value), declared once here.
 
-Each is a `TypedDict` (the core's own: a picture's `PictureReply`, a drift decision's
-`DecisionSummary`), so a reply stays plain JSON on the wire while its keys and their types
-are checked where it is built and where it is read. A record the reply carries as it was
+Each is a `TypedDict` (the core's own from `core.records`: a picture's `PictureReply`, a
+drift decision's `DecisionSummary`), so a reply stays plain JSON on the wire while its keys
+and their types are checked where it is built and where it is read; nothing here loads numpy,
+so a client reads these types at no start-up cost. A record the reply carries as it was
 stored or measured (an image record, a calibration file's `robot_base`, a capture's record)
 stays a `Record`: its own module declares it. (No postponed annotations here: a TypedDict
 reads `NotRequired` when its class is made, and `tests/service/test_door_agreement.py` holds
@@ -12,8 +13,7 @@ each real reply against its declared keys.)
 
 from typing import Any, Literal, NotRequired, TypedDict
 
-from omnisort_hw.core.drift import DecisionSummary
-from omnisort_hw.core.overlays import PictureReply
+from omnisort_hw.core.records import DecisionSummary, PictureReply
 
 Level = Literal["pass", "warn", "fail"]
 Record = dict[str, Any]

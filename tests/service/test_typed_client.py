@@ -5,6 +5,8 @@ code and field, and a job's progress events reach the caller."""
 from __future__ import annotations
 
 import inspect
+import subprocess
+import sys
 
 import pytest
 
@@ -27,6 +29,17 @@ def test_every_command_has_its_method_taking_its_request_record() -> None:
             assert spec.request.__name__ in str(params["request"].annotation), name
         else:
             assert "request" not in params, name
+
+
+def test_the_client_starts_without_the_numerical_stack() -> None:
+    """`omnisort ctl`, the PLC face and the interface import the client: its command and reply
+    types must not load numpy or OpenCV (a second at every `ctl` call)."""
+    code = (
+        "import sys, omnisort_hw.service.client; "
+        "print(sorted(m for m in ('numpy', 'cv2', 'scipy') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
 
 
 def test_wire_args_give_the_record_back() -> None:

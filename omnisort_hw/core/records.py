@@ -1,0 +1,26 @@
+"""The core's results that travel in replies, as TypedDicts: a picture written (or why not)
+and a drift decision. They import nothing, so a client of the service reads the replies'
+types (`pipeline.replies`) without loading numpy or OpenCV."""
+
+from typing import TypedDict
+
+
+class PictureReply(TypedDict, total=False):
+    """The picture of what a command found: where it was written (None when it was not), and
+    why not."""
+
+    overlay_png: str | None
+    overlay_problem: str
+
+
+class DecisionSummary(TypedDict):
+    """A drift decision as replies carry it: the turn measured, its threshold, its statistics."""
+
+    drift: bool
+    angle_deg: float
+    rotvec_deg: list[float]
+    std_deg: list[float]
+    threshold_deg: float
+    t2: float
+    p_value: float
+    source: str
