@@ -30,9 +30,10 @@ from omnisort_hw.config.sorting import (
     parse_sort_section,
 )
 from omnisort_hw.config.storage import StorageConfig
-from omnisort_hw.config.target import TARGETS, separation_problem
+from omnisort_hw.config.target import separation_problem
 from omnisort_hw.config.toml_file import read_toml
 from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
+from omnisort_hw.core.choices import TARGETS
 from omnisort_hw.errors import ConfigError
 
 SECTIONS = (

@@ -19,12 +19,6 @@ from omnisort_hw.core.features import MARKER_NAMES
 from omnisort_hw.core.target_layout import MarkerSpec, TargetLayout, WallSpec
 from omnisort_hw.errors import ConfigError
 
-TARGETS = ("two-sided", "three-sided", "checkerboards")
-METHODS_FOR = {
-    "two-sided": ("joint", "paper"),
-    "three-sided": ("joint", "method1"),
-    "checkerboards": ("method2",),
-}
 SEPARATION_RANGE_MM = (100.0, 10000.0)
 """Inner wall distances a wall target can have, mm: a value below is a typo or metres."""
 

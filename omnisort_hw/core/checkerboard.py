@@ -22,6 +22,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from omnisort_hw.core.choices import SQUARE_RANGE_MM
 from omnisort_hw.errors import FeatureNotFoundError
 
 _CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
@@ -45,10 +46,6 @@ _RING_SAMPLES = 32
 # Inner corners per side: far beyond any printable calibration board, and a bound on the
 # detector's work for a mistyped size.
 MAX_CORNERS = 60
-SQUARE_RANGE_MM = (1.0, 1000.0)
-"""What a checkerboard's square can be: below 1 mm no fisheye pixel resolves it at a cell's
-distances; 1 m squares make a 9x6 board 10 m x 7 m, larger than a cell (a square given in
-micrometres or metres by mistake lands outside)."""
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from omnisort_hw.core.board_views import (
 )
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec, to_gray
+from omnisort_hw.core.choices import REFINEMENTS
 from omnisort_hw.core.plane_refinement import refine_on_board_plane
 from omnisort_hw.errors import CalibrationError
 
@@ -596,9 +597,6 @@ def _result(
 
 
 # ---- images -> model -------------------------------------------------------------------
-
-
-REFINEMENTS = ("auto", "saddle", "plane")
 
 
 def calibrate_images(

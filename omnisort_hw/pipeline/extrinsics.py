@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from omnisort_hw.config.target import METHODS_FOR, TARGETS, separation_problem
+from omnisort_hw.config.target import separation_problem
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.choices import METHODS_FOR, TARGETS
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
 from omnisort_hw.core.overlays import draw_extrinsics, overlay_path, write_picture

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from omnisort_hw.core.choices import METHODS, REFINEMENTS, SQUARE_RANGE_MM, TARGETS
 from omnisort_hw.errors import InputError
 from omnisort_hw.pipeline.request_fields import GIVEN, param
 
@@ -23,11 +24,6 @@ DEFAULT_BOARD = "9x6"
 """Inner corners COLSxROWS of a checkerboard when none is named (the paper's boards)."""
 DEFAULT_SQUARE_MM = 97.0
 """The square of the extrinsic checkerboards target when none is given (the paper's)."""
-SQUARE_RANGE_MM = (1.0, 1000.0)
-"""A checkerboard square this project can see, from a stamp to a floor tile."""
-TARGETS = ("two-sided", "three-sided", "checkerboards")
-METHODS = ("joint", "paper", "method1", "method2")
-REFINEMENTS = ("auto", "saddle", "plane")
 
 IMAGE_HELP = "image file (over the protocol: an absolute path on the cell PC); omitted: a capture"
 LASER_OFF_HELP = "laser-off image file (over the protocol: an absolute path); omitted: a capture"
