@@ -12,7 +12,6 @@ import argparse
 from collections.abc import Collection, Mapping
 from typing import Any
 
-from omnisort_hw.errors import InputError
 from omnisort_hw.pipeline.request_fields import (
     Arg,
     RequestClass,
@@ -21,6 +20,7 @@ from omnisort_hw.pipeline.request_fields import (
     check_rules,
     check_value,
     condition_text,
+    split_items,
 )
 
 
@@ -43,17 +43,6 @@ def cli_args(
         for a in args_of(cls)
         if a.name not in fixed and a.name not in skip and _holds_fixed(a, fixed)
     ]
-
-
-def _items(text: str) -> tuple[str, ...]:
-    return tuple(item.strip() for item in text.split(",") if item.strip())
-
-
-def _numbers(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not comma-separated numbers: {text!r}") from None
 
 
 def _help(arg: Arg, default: Any, offered: Collection[str]) -> str:
@@ -92,11 +81,9 @@ def add_request_arguments(
         elif arg.kind in ("int", "number"):
             kw["type"] = int if arg.kind == "int" else float
         elif arg.kind == "str_list":
-            kw.update(type=_items, metavar="A,B,...")
-        elif arg.kind == "vector":
-            kw.update(type=_numbers, metavar=",".join(["N"] * (arg.length or 1)))
-        elif arg.kind == "matrix4":
-            raise TypeError(f"{arg.name}: no CLI flag for a 4x4 matrix")
+            kw.update(type=split_items, metavar="A,B,...")
+        elif arg.kind in ("vector", "matrix4"):
+            raise TypeError(f"{arg.name}: no use case's CLI has a {arg.kind} argument")
         if arg.choices:
             kw["choices"] = arg.choices
         parser.add_argument(arg.cli_flag, dest=arg.name, **kw)
@@ -123,7 +110,4 @@ def request_from(
                 arg, command, value, label=arg.cli_flag, cell_paths=False
             )
     check_rules(cls, command, values, labels, supplied=skip)
-    try:
-        return build(cls, values)
-    except ValueError as exc:
-        raise InputError(f"{command}: {exc}") from None
+    return build(cls, values)

@@ -16,6 +16,7 @@ A value of None (or an absent key) always means "not given": the field's default
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import types
@@ -136,7 +137,13 @@ def _kind(hint: Any, name: str) -> tuple[ArgKind, bool]:
 
 
 def args_of(cls: type[RequestClass]) -> tuple[Arg, ...]:
-    """The `Arg` of each field of `cls` declared with `param` (in declaration order)."""
+    """The `Arg` of each field of `cls` declared with `param` (in declaration order); read
+    once per record, as every request checks and builds with them."""
+    return _declared_args(cls)
+
+
+@functools.cache
+def _declared_args(cls: type) -> tuple[Arg, ...]:
     hints = typing.get_type_hints(cls)
     out: list[Arg] = []
     for f in dataclasses.fields(cls):
@@ -344,6 +351,11 @@ def build(cls: type[Any], args: Mapping[str, Any]) -> Any:
     return cls(**values)
 
 
+def split_items(text: str) -> tuple[str, ...]:
+    """A list argument typed as `red, blue`: its items, stripped, empty ones left out."""
+    return tuple(item.strip() for item in text.split(",") if item.strip())
+
+
 def wire_args(request: Any) -> dict[str, Any]:
     """The protocol's `args` of a request record: each argument given (not None), tuples as
     JSON arrays; `build(type(request), wire_args(request))` gives the record back. None: no
@@ -419,11 +431,12 @@ def _all(conditions: tuple[Condition, ...]) -> dict[str, Any]:
     return parts[0] if len(parts) == 1 else {"allOf": parts}
 
 
-def schema_of(cls: type[RequestClass], title: str, description: str = "") -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of the arguments object of the request `cls`: each
-    argument's type, bounds, choices, default, help (`description`) and unit (`x-unit`), and
-    the rules between arguments as `if`/`then` and `oneOf`."""
-    declared = args_of(cls)
+def schema_of(cls: type[RequestClass] | None, title: str, description: str = "") -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of the arguments object of the request `cls` (None: a
+    command without arguments): each argument's type, bounds, choices, default, help
+    (`description`) and unit (`x-unit`), and the rules between arguments as `if`/`then` and
+    `oneOf`."""
+    declared = args_of(cls) if cls is not None else ()
     rules: list[dict[str, Any]] = []
     for arg in declared:
         if arg.required_when:

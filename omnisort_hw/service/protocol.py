@@ -121,16 +121,7 @@ class Command:
 
     def schema(self) -> dict[str, Any]:
         """The JSON Schema (draft 2020-12) of this command's `args` object."""
-        if self.request is not None:
-            return schema_of(self.request, self.name, self.summary)
-        return {
-            "$schema": SCHEMA_DIALECT,
-            "title": self.name,
-            "description": self.summary,
-            "type": "object",
-            "properties": {},
-            "additionalProperties": False,
-        }
+        return schema_of(self.request, self.name, self.summary)
 
     def describe(self) -> dict[str, Any]:
         """What a client needs to offer this command: how it runs, and its arguments."""
