@@ -2,9 +2,9 @@
 drift watchdog, and how old the snapshot is. (No postponed annotations: a TypedDict reads
 `NotRequired` when its class is made.)"""
 
-from typing import Any, NotRequired, TypedDict
+from typing import NotRequired, TypedDict
 
-Record = dict[str, Any]
+from omnisort_hw.core.records import Record
 
 
 class CellStatus(TypedDict):

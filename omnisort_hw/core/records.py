@@ -2,7 +2,11 @@
 and a drift decision. They import nothing, so a client of the service reads the replies'
 types (`pipeline.replies`) without loading numpy or OpenCV."""
 
-from typing import TypedDict
+from typing import Any, TypedDict
+
+Record = dict[str, Any]
+"""A record a reply carries as its own module wrote it (an image's path and sha256, a
+capture, a device's health)."""
 
 
 class PictureReply(TypedDict, total=False):

@@ -13,11 +13,9 @@ each real reply against its declared keys.)
 
 from typing import Any, Literal, NotRequired, TypedDict
 
-from omnisort_hw.core.records import DecisionSummary, PictureReply
+from omnisort_hw.core.records import DecisionSummary, PictureReply, Record
 
 Level = Literal["pass", "warn", "fail"]
-Record = dict[str, Any]
-"""A record carried as its own module wrote it (an image's path and sha256, a capture)."""
 
 
 class CheckReply(TypedDict):

@@ -3,12 +3,9 @@ cell's devices and calibration (`cell.status_reply.CellStatus`), and whether mot
 What the operator interface and `omnisort ctl status` read. (No postponed annotations: a
 TypedDict reads `NotRequired` when its class is made.)"""
 
-from typing import Any
-
 from omnisort_hw.cell.status_reply import CellStatus
+from omnisort_hw.core.records import Record
 from omnisort_hw.service.states import StateSnapshot
-
-Record = dict[str, Any]
 
 
 class ServiceStatus(StateSnapshot):
