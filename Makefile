@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 SHARED ?= ../shared
 
-.PHONY: demo test check timings bench lint clean venv wheelhouse
+.PHONY: demo test check timings bench lint clean venv wheelhouse browser
 
 venv: $(STAMP)
 
@@ -22,8 +22,16 @@ demo: $(STAMP)
 # Every test on every core (pytest-xdist; a module's tests stay on one worker, so its
 # fixtures are built once; the modules go out longest first by tests/timings.json, so no
 # long one starts last while the other cores idle).
-test: lint
+test: lint browser
 	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder
+
+# The operator interface's browser tests drive Debian's Chromium through its chromedriver
+# (tests/ui/ui_procs.py): installed here when missing (as root, or through sudo).
+browser:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || { \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	  $$SUDO apt-get install -y -qq --no-install-recommends chromium chromium-driver; }
 
 # The edit loop: lint, types and the quick test modules (under 5 s each in tests/timings.json),
 # stopping at the first failure.
@@ -31,7 +39,7 @@ check: lint
 	$(BIN)/python -m pytest -q -x -n auto --dist loadfile --no-loadscope-reorder --quick
 
 # Every test, recording each module's time in tests/timings.json (what `check` selects by).
-timings: lint
+timings: lint browser
 	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder --record-timings tests/timings.json
 
 bench: $(STAMP)

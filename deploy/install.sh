@@ -130,17 +130,18 @@ if [[ ! -f "$CONF_DIR/token" ]]; then
     log "wrote a random token to $CONF_DIR/token (use token_file = \"$CONF_DIR/token\")"
 fi
 
-# systemd unit.
+# systemd units: the service, and the operator interface beside it (its own process).
 install -m 0644 "$SRC/deploy/omnisort.service" "$UNIT_DIR/omnisort.service"
+install -m 0644 "$SRC/deploy/omnisort-ui.service" "$UNIT_DIR/omnisort-ui.service"
 if [[ -d /run/systemd/system ]]; then
     systemctl daemon-reload
-    systemctl enable omnisort.service >/dev/null
+    systemctl enable omnisort.service omnisort-ui.service >/dev/null
     if [[ $START -eq 1 ]]; then
-        systemctl restart omnisort.service
-        log "started: systemctl status omnisort; journalctl -u omnisort -f"
+        systemctl restart omnisort.service omnisort-ui.service
+        log "started: systemctl status omnisort omnisort-ui; journalctl -u omnisort -f"
     else
-        log "enabled; start with: systemctl start omnisort"
+        log "enabled; start with: systemctl start omnisort omnisort-ui"
     fi
 else
-    log "systemd is not running here: unit installed in $UNIT_DIR but not enabled"
+    log "systemd is not running here: units installed in $UNIT_DIR but not enabled"
 fi

@@ -126,7 +126,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("omnisort_hw.pipeline",),
     ("omnisort_hw.evaluation",),
     ("omnisort_hw.cell",),
-    ("omnisort_hw.cli", "omnisort_hw.service"),
+    ("omnisort_hw.cli", "omnisort_hw.service", "omnisort_hw.ui"),
 )
 
 
@@ -147,6 +147,28 @@ def test_every_module_has_a_layer() -> None:
 def test_packages_import_only_downwards() -> None:
     up = sorted(f"{n} -> {d}" for n in MODULES for d in _project_edges(n) if _layer(d) > _layer(n))
     assert up == [], up
+
+
+def test_the_interface_is_only_a_client_of_the_service() -> None:
+    """`omnisort ui` reaches the cell through the protocol alone: none of its modules imports
+    the cell, the devices, the simulator or the service's own inside."""
+    inside = (
+        "omnisort_hw.cell",
+        "drivers",
+        "sim_backend",
+        "omnisort_hw.service.server",
+        "omnisort_hw.service.handlers",
+        "omnisort_hw.service.jobs",
+    )
+    ui = [n for n in MODULES if n.startswith("omnisort_hw.ui")]
+    assert "omnisort_hw.ui.link" in ui
+    found = [
+        f"{n} -> {d}"
+        for n in ui
+        for d in _project_edges(n)
+        if any(d == p or d.startswith(p + ".") for p in inside)
+    ]
+    assert found == [], found
 
 
 def test_the_layer_rule_sees_an_upward_import() -> None:

@@ -5,7 +5,7 @@ One record, replaced whole each time (temp file, fsync, rename; never half-writt
 
     {"format": 1, "job": "sort", "request_id": 7, "pid": 1234, "state": "running",
      "started": ISO, "updated": ISO, "ended": ISO|null, "outcome": str|null,
-     "progress": [... the last 50 progress events ...],
+     "progress": [... the last 50 progress events, each stamped "at": ISO ...],
      "in_flight": {"cube": 2, "color": "red", "bin": "red", "phase": "holding", "at": ISO}|null}
 
 `state` is running, done, stopped, failed or interrupted. A record still `running` when a new
@@ -112,7 +112,7 @@ class JobJournal:
             if self._record is None:
                 return
             events = self._record["progress"]
-            events.append(dict(event))
+            events.append({**event, "at": _now()})
             del events[:-PROGRESS_KEEP]
             self._write()
 

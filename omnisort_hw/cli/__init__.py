@@ -23,6 +23,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "omnisort_hw.cli.demo_cmd",
     "omnisort_hw.cli.serve_cmd",
     "omnisort_hw.cli.ctl_cmd",
+    "omnisort_hw.cli.ui_cmd",
     "omnisort_hw.cli.review_cmd",
     "omnisort_hw.cli.devices_cmd",
     "omnisort_hw.cli.sim_cmd",

@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"omnisort ctl: {exc}", file=sys.stderr)
         return EXIT_UNREACHABLE
     if args.command == "status" and reply.get("ok") and not (args.json or args.compact):
-        from omnisort_hw.cli.status_summary import summarise
+        from omnisort_hw.service.status_reading import summarise
 
         print(summarise(reply["result"]))
     elif args.command == "describe" and reply.get("ok") and not (args.json or args.compact):

@@ -8,6 +8,7 @@ command that reads the file) at start with the file and the key in the message:
     [camera] [laser] [arm]       -> omnisort_hw.config.devices
     [sorting] [registration]     -> omnisort_hw.config.sorting
     [target]                     -> TargetConfig (the extrinsic calibration's defaults)
+    [ui]                         -> omnisort_hw.config.ui.UiConfig (the operator interface)
 
 Relative paths resolve against the file's own folder, never the working directory (systemd
 starts the service from /).
@@ -32,6 +33,7 @@ from omnisort_hw.config.sorting import (
 from omnisort_hw.config.storage import StorageConfig
 from omnisort_hw.config.target import separation_problem
 from omnisort_hw.config.toml_file import read_toml
+from omnisort_hw.config.ui import UiConfig
 from omnisort_hw.config.watchdog import PlcConfig, WatchdogConfig
 from omnisort_hw.core.choices import TARGETS
 from omnisort_hw.errors import ConfigError
@@ -49,6 +51,7 @@ SECTIONS = (
     "watchdog",
     "plc",
     "capture",
+    "ui",
 )
 
 
@@ -94,6 +97,7 @@ class CellConfig:
     watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
     plc: PlcConfig = field(default_factory=PlcConfig)
     capture: CaptureSettings = field(default_factory=CaptureSettings)
+    ui: UiConfig = field(default_factory=UiConfig)
 
     @property
     def base_dir(self) -> Path | None:
@@ -127,6 +131,7 @@ class CellConfig:
             watchdog=WatchdogConfig.from_mapping(tables["watchdog"]),
             plc=PlcConfig.from_mapping(tables["plc"]),
             capture=capture_settings(tables["capture"]),
+            ui=UiConfig.from_mapping(tables["ui"]),
         )
 
 
@@ -152,6 +157,7 @@ def section_keys() -> dict[str, frozenset[str]]:
     from omnisort_hw.config.service import LOGGING_KEYS, SERVICE_KEYS
     from omnisort_hw.config.sorting import REGISTRATION_KEYS, SORT_KEYS
     from omnisort_hw.config.storage import STORAGE_KEYS
+    from omnisort_hw.config.ui import UI_KEYS
     from omnisort_hw.config.watchdog import PLC_KEYS, WATCHDOG_KEYS
 
     return {
@@ -164,4 +170,5 @@ def section_keys() -> dict[str, frozenset[str]]:
         "watchdog": WATCHDOG_KEYS,
         "plc": PLC_KEYS,
         "capture": frozenset(f.name for f in fields(CaptureSettings)),
+        "ui": UI_KEYS,
     }

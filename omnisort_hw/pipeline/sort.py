@@ -301,7 +301,15 @@ class Sorter:
                 self._execute(plan, out, planner)
                 done += 1
                 if self.progress is not None:
-                    self.progress({"cube": out.index, "status": out.status, "color": out.color})
+                    self.progress(
+                        {
+                            "cube": out.index,
+                            "status": out.status,
+                            "color": out.color,
+                            "bin": out.bin,
+                            "reason": out.reason,
+                        }
+                    )
                 t_wait = time.perf_counter()
                 nxt = self._join_ahead()
                 changed = self._watch is not None and self._watch.settle(queue, nxt, outcomes)

@@ -67,8 +67,10 @@ def start_service(
     workdir: Path,
     timeout_s: float = 120.0,
     extra_env: dict[str, str] | None = None,
+    port: int = 0,
 ) -> ServiceProcess:
-    """Run `python -m omnisort_hw.cli serve --config CONFIG --port 0`; return once READY.
+    """Run `python -m omnisort_hw.cli serve --config CONFIG --port PORT` (0: any free port);
+    return once READY.
 
     The child's stdout and stderr go to WORKDIR/serve.log; the notify socket is
     WORKDIR/notify.sock. Raises RuntimeError with the log's tail if it does not get ready.
@@ -97,7 +99,7 @@ def start_service(
                 "--config",
                 str(config),
                 "--port",
-                "0",
+                str(port),
             ],
             stdout=log,
             stderr=subprocess.STDOUT,

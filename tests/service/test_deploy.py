@@ -16,6 +16,7 @@ from omnisort_hw.config.cell import CellConfig
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 UNIT = DEPLOY / "omnisort.service"
+UI_UNIT = DEPLOY / "omnisort-ui.service"
 
 
 def test_example_config_parses_and_documents_every_key() -> None:
@@ -31,9 +32,9 @@ def test_example_config_parses_and_documents_every_key() -> None:
             assert lines[i - 1].lstrip().startswith("#"), f"undocumented key: {line}"
 
 
-def _unit_settings() -> dict[str, list[str]]:
+def _unit_settings(unit: Path = UNIT) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
-    for line in UNIT.read_text().splitlines():
+    for line in unit.read_text().splitlines():
         if "=" in line and not line.startswith("#"):
             key, _, value = line.partition("=")
             out.setdefault(key.strip(), []).append(value.strip())
@@ -60,10 +61,39 @@ def test_unit_is_hardened() -> None:
         assert u[key] == ["true"], key
 
 
+def test_ui_unit_is_hardened_and_cannot_read_the_token(tmp_path: Path) -> None:
+    """The interface runs as a user of its own with a copy of the cell file alone, and what it
+    reads of that file does not open the token file."""
+    from omnisort_hw.config.ui import load_ui_settings
+
+    u = _unit_settings(UI_UNIT)
+    assert u["ExecStart"] == ["/opt/omnisort/venv/bin/omnisort ui --config %d/cell.toml"]
+    assert u["LoadCredential"] == ["cell.toml:/etc/omnisort/cell.toml"]
+    assert u["DynamicUser"] == ["true"] and "User" not in u and "SupplementaryGroups" not in u
+    assert u["IPAddressDeny"] == ["any"] and u["IPAddressAllow"] == ["localhost"]
+    assert u["ProtectSystem"] == ["strict"] and u["CapabilityBoundingSet"] == [""]
+    for key in ("PrivateDevices", "PrivateTmp", "ProtectHome", "NoNewPrivileges"):
+        assert u[key] == ["true"], key
+    cell = tmp_path / "cell.toml"
+    cell.write_text(
+        '[service]\nport = 29100\ntoken_file = "/nonexistent/omnisort/token"\n'
+        '[ui]\nport = 29180\nallow_operator = false\n'
+    )
+    from omnisort_hw.config.cell import load_cell_config
+    from omnisort_hw.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="token_file"):
+        load_cell_config(cell)  # what the service reads: the token
+    settings = load_ui_settings(cell)  # what the interface reads: never the token
+    assert (settings.service_host, settings.service_port) == ("127.0.0.1", 29100)
+    assert (settings.ui.port, settings.ui.allow_operator) == (29180, False)
+
+
+@pytest.mark.parametrize("unit", [UNIT, UI_UNIT], ids=lambda u: u.name)
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze")
-def test_systemd_analyze_security_exposure() -> None:
+def test_systemd_analyze_security_exposure(unit: Path) -> None:
     proc = subprocess.run(
-        ["systemd-analyze", "security", "--offline=true", "--no-pager", str(UNIT)],
+        ["systemd-analyze", "security", "--offline=true", "--no-pager", str(unit)],
         capture_output=True,
         text=True,
         timeout=60,

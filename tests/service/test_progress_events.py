@@ -71,7 +71,7 @@ def test_ctl_status_is_one_screen_and_json_on_request(make_service, capsys) -> N
 def test_the_summary_says_refused_when_drift_refuses_motion() -> None:
     """`motion_allowed` in status speaks of the calibration files; a detected drift refuses
     motion too, and the summary must not say "allowed" then."""
-    from omnisort_hw.cli.status_summary import summarise
+    from omnisort_hw.service.status_reading import summarise
 
     status = {
         "state": "idle",

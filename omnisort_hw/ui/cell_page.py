@@ -1,0 +1,364 @@
+"""The cell page: the state, the devices and the calibration, the running job and its per-pick
+log, Stop and E-stop (always shown, open to everyone, as in the protocol), the laser, and the
+sort form built from the command's schema. Everything shown is read from the service's status
+(`ServiceLink.snapshot`); everything done is a command of the protocol.
+
+Operator actions need the session to be signed in (`Operators`); anything that can move the
+arm asks for an explicit confirmation first; every argument is checked against the command's
+schema before anything is sent, and a refusal is shown as the service's typed message.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from dataclasses import asdict
+from datetime import UTC, datetime
+from typing import Any
+
+from nicegui import app, run, ui
+
+from omnisort_hw.service.status_reading import (
+    drift_alarm,
+    pick_log,
+    picks_per_minute,
+    sort_progress,
+    status_rows,
+)
+from omnisort_hw.ui.context import UiContext
+from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.operators import SignInError
+from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields, problems
+
+STATE_COLORS = {
+    "idle": "positive",
+    "sorting": "primary",
+    "mapping": "primary",
+    "calibrating": "primary",
+    "moving": "primary",
+    "stopped": "warning",
+    "fault": "negative",
+}
+PICK_COLUMNS = [
+    {"name": k, "label": label, "field": k, "align": "left"}
+    for k, label in (
+        ("cube", "cube"),
+        ("color", "colour"),
+        ("bin", "bin"),
+        ("outcome", "outcome"),
+        ("reason", "reason"),
+        ("at", "time"),
+    )
+]
+
+
+def tag(element: Any, name: str) -> Any:
+    """Name an element for the tests: a marker for the simulated user, an attribute for a
+    real browser."""
+    return element.mark(name).props(f"data-test={name}")
+
+
+async def confirm(text: str) -> bool:
+    """Ask for an explicit confirmation; True only on the confirm button."""
+    with ui.dialog() as dialog, ui.card():
+        ui.label(text)
+        with ui.row():
+            tag(ui.button("Confirm", on_click=lambda: dialog.submit(True)), "confirm")
+            tag(ui.button("Cancel", on_click=lambda: dialog.submit(False)).props("flat"), "cancel")
+    result = await dialog
+    dialog.clear()
+    return result is True
+
+
+class CellPage:
+    """One browser's cell page; `refresh()` (a timer) redraws it from the last snapshot."""
+
+    def __init__(self, ctx: UiContext, browser: str) -> None:
+        self.ctx, self.browser = ctx, browser
+        self.sort_fields: list[FormField] = []
+        self.sort_inputs: dict[str, Any] = {}
+        self._picks_shown: list[dict[str, Any]] = []
+
+    # -- building -------------------------------------------------------------------------
+
+    def build(self) -> None:
+        with ui.header().classes("items-center gap-4 bg-slate-800"):
+            ui.label("omnisort cell").classes("text-lg font-bold")
+            self.state = tag(ui.badge("…"), "state").classes("text-base")
+            self.link_label = tag(ui.label(""), "link")
+            ui.space()
+            tag(ui.button("Stop", on_click=self.stop, color="orange"), "stop")
+            tag(ui.button("E-stop", on_click=self.estop, color="red"), "estop")
+        self.down = tag(ui.label(""), "unreachable").classes(
+            "w-full p-3 bg-red-100 text-red-900 font-bold"
+        )
+        self.drift = tag(ui.label(""), "drift").classes(
+            "w-full p-3 bg-amber-100 text-amber-900 font-bold"
+        )
+        self.message = tag(ui.label(""), "message").classes("w-full text-base")
+        with ui.row().classes("w-full items-start gap-4"):
+            with ui.column().classes("gap-4"):
+                self._build_operator()
+                self._build_status()
+            with ui.column().classes("gap-4 grow"):
+                self._build_job()
+                self._build_sort()
+
+    def _build_operator(self) -> None:
+        with ui.card().classes("w-[30rem]"):
+            ui.label("Operator").classes("text-lg")
+            if not self.ctx.operators.allowed:
+                tag(ui.label("View-only screen ([ui] allow_operator = false)"), "view-only")
+                return
+            self.signed_label = tag(ui.label(""), "signed")
+            with ui.row().classes("items-center") as self.sign_in_row:
+                self.token_input = tag(
+                    ui.input("service token", password=True).classes("w-52"), "token"
+                )
+                tag(ui.button("Sign in", on_click=self.sign_in), "sign-in")
+            self.sign_out_button = tag(
+                ui.button("Sign out", on_click=self.sign_out).props("flat"), "sign-out"
+            )
+            with ui.row().classes("items-center") as self.operator_row:
+                ui.label("Laser")
+                tag(ui.button("On", on_click=lambda: self.laser(True)).props("flat"), "laser-on")
+                tag(ui.button("Off", on_click=lambda: self.laser(False)).props("flat"), "laser-off")
+                tag(ui.button("Reset", on_click=self.reset).props("flat"), "reset")
+                tag(
+                    ui.button("Acknowledge drift", on_click=self.acknowledge).props("flat"),
+                    "acknowledge",
+                )
+
+    def _build_status(self) -> None:
+        with ui.card().classes("w-[30rem]"):
+            ui.label("Cell").classes("text-lg")
+            self.rows = tag(
+                ui.table(
+                    columns=[
+                        {"name": "k", "label": "", "field": "k", "align": "left"},
+                        {"name": "v", "label": "", "field": "v", "align": "left"},
+                    ],
+                    rows=[],
+                    row_key="i",
+                ).props("dense flat hide-header wrap-cells"),
+                "status-rows",
+            ).classes("w-full")
+
+    def _build_job(self) -> None:
+        with ui.card().classes("w-full"):
+            ui.label("Job").classes("text-lg")
+            self.job_label = tag(ui.label("none"), "job")
+            self.progress = tag(ui.linear_progress(0.0, show_value=False), "progress")
+            self.job_end = tag(ui.label(""), "job-end")
+
+    def _build_sort(self) -> None:
+        with ui.card().classes("w-full"):
+            with ui.row().classes("items-center gap-4"):
+                ui.label("Sort").classes("text-lg")
+                self.rate = tag(ui.label(""), "picks-per-min")
+            self.sort_form = ui.row().classes("items-center gap-4")
+            self.sort_problems = tag(ui.label(""), "sort-problems").classes("text-red-700")
+            self.picks = tag(
+                ui.table(columns=PICK_COLUMNS, rows=[], row_key="cube").props("dense flat"),
+                "pick-log",
+            ).classes("w-full")
+
+    def _fill_sort_form(self) -> None:
+        """The sort form from the command's schema, once the session is signed in."""
+        schema = self.ctx.operators.schema("sort")
+        if schema is None or self.sort_fields:
+            return
+        self.sort_fields = form_fields(schema)
+        with self.sort_form:
+            for f in self.sort_fields:
+                if f.kind == "bool":
+                    field: Any = ui.checkbox(f.label, value=bool(f.default))
+                elif f.kind in ("int", "number"):
+                    field = ui.number(f.label, value=f.default).classes("w-40")
+                elif f.kind == "choice":
+                    field = ui.select(list(f.choices), label=f.label, value=f.default)
+                else:
+                    field = ui.input(f.label + (" (a, b)" if f.kind == "list" else ""))
+                self.sort_inputs[f.name] = tag(field.tooltip(f.help), f"sort-{f.name}")
+            tag(ui.button("Start sort", on_click=self.start_sort), "start-sort")
+
+    # -- reading --------------------------------------------------------------------------
+
+    def refresh(self) -> None:
+        snap = self.ctx.link.snapshot
+        operator = self.ctx.operators.signed_in(self.browser)
+        if self.ctx.operators.allowed:
+            self.sign_in_row.set_visibility(not operator)
+            self.sign_out_button.set_visibility(operator)
+            self.operator_row.set_visibility(operator)
+            self.signed_label.text = (
+                "Signed in as operator" if operator else "Read-only: sign in for operator actions"
+            )
+        if operator:
+            self._fill_sort_form()
+        self.sort_form.set_visibility(operator)
+        end = self.ctx.jobs.last
+        self.job_end.text = end.message if end is not None else ""
+        if snap.status is None:
+            self.state.text, self.state.props["color"] = "unreachable", "grey"
+            self.down.text = f"{snap.problem}; trying again every {self.ctx.link.period_s:g} s"
+            self.down.set_visibility(True)
+            self.link_label.text = "service: unreachable"
+            return
+        status: dict[str, Any] = dict(snap.status)
+        self.down.set_visibility(False)
+        self.link_label.text = f"service: {self.ctx.link.address}"
+        state = str(status.get("state", "?"))
+        self.state.text = state
+        self.state.props["color"] = STATE_COLORS.get(state, "grey")
+        self.state.update()
+        alarm = drift_alarm(status)
+        self.drift.text = f"Calibration drift: {alarm}" if alarm else ""
+        self.drift.set_visibility(alarm is not None)
+        rows = [{"i": i, "k": k, "v": v} for i, (k, v) in enumerate(status_rows(status))]
+        if rows != self.rows.rows:
+            self.rows.rows = rows
+            self.rows.update()
+        self._show_job(status)
+
+    def _show_job(self, status: dict[str, Any]) -> None:
+        job = status.get("job")
+        self.job_label.text = (
+            f"{job.get('cmd')} (request {job.get('request_id')}), {job.get('running_s', 0):.0f} s"
+            if job
+            else "none"
+        )
+        done_total = sort_progress(status)
+        self.progress.value = (
+            done_total[0] / done_total[1] if done_total and done_total[1] else (1.0 if job else 0)
+        )
+        self.progress.props["indeterminate"] = bool(job) and not done_total
+        self.progress.update()
+        picks = [asdict(p) for p in pick_log(status)]
+        for p in picks:
+            p["at"] = p["at"][11:19]
+        if picks != self._picks_shown:
+            self._picks_shown = picks
+            self.picks.rows = picks
+            self.picks.update()
+        rate = picks_per_minute(status, datetime.now(UTC))
+        self.rate.text = f"{rate:.1f} picks/min" if rate is not None else ""
+
+    # -- acting ---------------------------------------------------------------------------
+
+    def say(self, text: str, kind: str = "info") -> None:
+        self.message.text = text
+        ui.notify(text, type=kind)  # type: ignore[arg-type]
+
+    async def _send(
+        self, cmd: str, args: dict[str, Any] | None = None, token: str | None = None
+    ) -> dict[str, Any] | None:
+        """One quick command; its result, or None with the refusal shown."""
+        if not self.ctx.link.snapshot.reachable:
+            self.say(f"{cmd}: not sent, the service is unreachable", "negative")
+            return None
+        try:
+            return await run.io_bound(self.ctx.link.execute, cmd, args, token)
+        except CommandError as exc:
+            self.say(f"{cmd}: {exc.code}: {exc.message}", "negative")
+        except ClientError as exc:
+            self.say(f"{cmd}: the service cannot be reached: {exc}", "negative")
+        return None
+
+    async def stop(self) -> None:
+        if await self._send("stop") is not None:
+            self.say("stop sent: the job and the arm stop", "warning")
+
+    async def estop(self) -> None:
+        if await self._send("estop") is not None:
+            self.say("E-stop sent: everything stopped, the cell latched in fault", "warning")
+
+    def _token(self) -> str | None:
+        token = self.ctx.operators.token(self.browser)
+        if token is None:
+            self.say("sign in as operator first: nothing was sent", "negative")
+        return token
+
+    async def _operator(self, action: Callable[[str], Awaitable[None]]) -> None:
+        token = self._token()
+        if token is not None:
+            await action(token)
+
+    async def sign_in(self) -> None:
+        typed = str(self.token_input.value or "")
+        try:
+            await run.io_bound(self.ctx.operators.sign_in, self.browser, typed)
+        except SignInError as exc:
+            self.say(f"sign-in refused: {exc}", "negative")
+            return
+        finally:
+            self.token_input.value = ""
+        self.say("signed in as operator", "positive")
+        self.refresh()
+
+    def sign_out(self) -> None:
+        self.ctx.operators.sign_out(self.browser)
+        self.say("signed out: read-only")
+        self.refresh()
+
+    async def laser(self, on: bool) -> None:
+        async def act(token: str) -> None:
+            if await self._send("laser", {"on": on}, token) is not None:
+                self.say(f"laser {'on' if on else 'off'}")
+
+        await self._operator(act)
+
+    async def acknowledge(self) -> None:
+        async def act(token: str) -> None:
+            if not await confirm("Accept the drift and allow motion again?"):
+                return
+            if await self._send("acknowledge_drift", None, token) is not None:
+                self.say("drift acknowledged: motion allowed again")
+
+        await self._operator(act)
+
+    async def reset(self) -> None:
+        async def act(token: str) -> None:
+            if await self._send("reset", None, token) is not None:
+                self.say("reset: the cell left the stopped/fault state")
+
+        await self._operator(act)
+
+    async def start_sort(self) -> None:
+        token = self._token()
+        schema = self.ctx.operators.schema("sort")
+        if token is None or schema is None:
+            return
+        typed = {name: field.value for name, field in self.sort_inputs.items()}
+        args = args_from_form(self.sort_fields, typed)
+        found = problems(schema, args)
+        self.sort_problems.text = "; ".join(found)
+        if found:
+            self.say(f"sort: not sent: {'; '.join(found)}", "negative")
+            return
+        snap = self.ctx.link.snapshot
+        if snap.status is None:
+            self.say("sort: not sent, the service is unreachable", "negative")
+            return
+        if self.ctx.jobs.running is not None:
+            self.say(f"sort: not sent: {self.ctx.jobs.running} started here is still running")
+            return
+        if snap.status["state"] not in ("idle", "stopped"):
+            self.say(f"sort: not sent: the cell is {snap.status['state']}", "negative")
+            return
+        if not await confirm("Start sorting? The arm will move."):
+            self.say("sort: cancelled, nothing was sent")
+            return
+        try:
+            self.ctx.jobs.start("sort", args, token)
+        except RuntimeError as exc:
+            self.say(f"sort: not sent: {exc}", "negative")
+            return
+        self.say("sort started")
+
+
+def cell_page(ctx: UiContext) -> None:
+    """Build the page for this browser and keep it fresh."""
+    page = CellPage(ctx, str(app.storage.browser["id"]))
+    page.build()
+    page.refresh()
+    ui.timer(ctx.config.status_period_s, page.refresh)

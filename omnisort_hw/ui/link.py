@@ -1,0 +1,124 @@
+"""The interface's one way to the service: a status reader shared by every page, and each
+command on a connection of its own.
+
+One thread reads `status` every `period_s` whatever the number of browsers, so pages cost the
+service nothing more as they multiply; a page reads the last snapshot. When the service cannot
+be reached the snapshot says why, and the reader keeps trying until it comes back.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from omnisort_hw.service.client import Client, ClientError, CommandError
+from omnisort_hw.service.status_reply import StatusReply
+
+__all__ = ["ClientError", "CommandError", "ServiceLink", "Snapshot"]
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The last reading of the service: its status, or why it could not be read."""
+
+    status: StatusReply | None
+    problem: str | None
+    read_at: float  # time.monotonic() of the reading
+    down_since: float | None = None  # time.monotonic() of the first failed reading
+
+    @property
+    def reachable(self) -> bool:
+        return self.status is not None
+
+
+class ServiceLink:
+    """The service at host:port: `snapshot` (read by a thread every `period_s`), `execute()`
+    for one command on its own connection."""
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        period_s: float = 0.5,
+        timeout_s: float = 5.0,
+        connect_timeout_s: float = 2.0,
+    ) -> None:
+        self.host, self.port, self.period_s = host, port, period_s
+        self.timeout_s, self.connect_timeout_s = timeout_s, connect_timeout_s
+        self._snapshot = Snapshot(None, "not read yet", time.monotonic())
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    @property
+    def snapshot(self) -> Snapshot:
+        with self._lock:
+            return self._snapshot
+
+    def start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._read_loop, name="ui-status", daemon=True)
+            self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=self.timeout_s + self.connect_timeout_s + 1.0)
+            self._thread = None
+
+    def _read_loop(self) -> None:
+        client: Client | None = None
+        while not self._stop.is_set():
+            t0 = time.monotonic()
+            try:
+                if client is None:
+                    client = self._client(None, self.timeout_s)
+                self._store(Snapshot(client.status(), None, time.monotonic()))
+            except (ClientError, CommandError, OSError, ValueError) as exc:
+                if client is not None:
+                    client.close()
+                    client = None
+                self._store_problem(f"service unreachable at {self.address}: {exc}")
+            self._stop.wait(max(0.0, self.period_s - (time.monotonic() - t0)))
+        if client is not None:
+            client.close()
+
+    def _store(self, snap: Snapshot) -> None:
+        with self._lock:
+            self._snapshot = snap
+
+    def _store_problem(self, problem: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            since = self._snapshot.down_since if self._snapshot.problem else None
+            self._snapshot = Snapshot(None, problem, now, since if since is not None else now)
+
+    def _client(self, token: str | None, timeout_s: float) -> Client:
+        return Client(
+            self.host,
+            self.port,
+            token=token,
+            timeout_s=timeout_s,
+            connect_timeout_s=self.connect_timeout_s,
+        )
+
+    def execute(
+        self,
+        cmd: str,
+        args: dict[str, Any] | None = None,
+        token: str | None = None,
+        timeout_s: float | None = None,
+        on_event: Callable[[dict[str, Any]], None] | None = None,
+    ) -> dict[str, Any]:
+        """One command on a fresh connection: its result, or CommandError (the service's typed
+        error) or ClientError (unreachable, no reply in time, connection lost)."""
+        limit = timeout_s if timeout_s is not None else self.timeout_s
+        with self._client(token, limit) as client:
+            return client.execute(cmd, args, on_event=on_event, timeout_s=limit)

@@ -1,0 +1,114 @@
+"""A command's form, read from its JSON Schema (`describe`), and the check of what was typed
+against that schema before anything is sent. Pure functions: the page draws the fields and
+shows the problems; nothing here knows a command by name."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from jsonschema import Draft202012Validator
+
+
+@dataclass(frozen=True)
+class FormField:
+    """One argument as a form offers it."""
+
+    name: str
+    kind: str  # bool, int, number, choice, list, text
+    label: str  # the name, with its unit and bounds
+    help: str
+    default: Any = None
+    choices: tuple[str, ...] = ()
+    required: bool = False
+
+
+def _branch(prop: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The property's schema without its `null` alternative (an omitted argument)."""
+    for alt in prop.get("anyOf", ()):
+        if alt.get("type") != "null":
+            return alt
+    return prop
+
+
+def _bounds(b: Mapping[str, Any], unit: str | None) -> str:
+    lo, hi = b.get("minimum"), b.get("maximum")
+    span = f" {lo:g}..{hi:g}" if lo is not None and hi is not None else ""
+    return f"{span}{f' {unit}' if unit else ''}"
+
+
+def form_fields(schema: Mapping[str, Any]) -> list[FormField]:
+    """The fields of an `args` schema, in its order. Vectors and matrices are left out: no
+    form of this interface offers them (the page's commands take none)."""
+    required = set(schema.get("required", ()))
+    out = []
+    for name, prop in (schema.get("properties") or {}).items():
+        b = _branch(prop)
+        t, xkind = b.get("type"), prop.get("x-kind")
+        unit = prop.get("x-unit")
+        if "enum" in b:
+            kind, choices = "choice", tuple(str(c) for c in b["enum"])
+        elif t == "boolean":
+            kind, choices = "bool", ()
+        elif t == "integer":
+            kind, choices = "int", ()
+        elif t == "number":
+            kind, choices = "number", ()
+        elif t == "array" and xkind == "str_list":
+            kind, choices = "list", ()
+        elif t == "string":
+            kind, choices = "text", ()
+        else:
+            continue
+        label = name + (_bounds(b, unit) if kind in ("int", "number") else "")
+        out.append(
+            FormField(
+                name,
+                kind,
+                label,
+                str(prop.get("description", "")),
+                prop.get("default"),
+                choices,
+                name in required,
+            )
+        )
+    return out
+
+
+def args_from_form(fields: list[FormField], typed: Mapping[str, Any]) -> dict[str, Any]:
+    """The `args` object of what was typed: empty fields are left out (the service's default),
+    a list is read as `a, b`, and a number as typed (the schema judges it)."""
+    args: dict[str, Any] = {}
+    for f in fields:
+        value = typed.get(f.name)
+        if value is None or (isinstance(value, str) and not value.strip()):
+            continue
+        if f.kind == "list" and isinstance(value, str):
+            value = [item.strip() for item in value.split(",") if item.strip()]
+        elif f.kind == "int" and isinstance(value, float) and value.is_integer():
+            value = int(value)
+        elif f.kind == "bool" and value == f.default:
+            continue
+        args[f.name] = value
+    return args
+
+
+def problems(schema: Mapping[str, Any], args: Mapping[str, Any]) -> list[str]:
+    """What is wrong with `args` by the schema, one message per problem, each naming its
+    field; empty when it may be sent."""
+    out = []
+    for err in sorted(Draft202012Validator(schema).iter_errors(dict(args)), key=str):
+        field = ".".join(str(p) for p in err.absolute_path) or "arguments"
+        detail = err.message
+        if err.validator == "anyOf":  # the reason of the alternative that is not `null`
+            alts = err.schema.get("anyOf", [])
+            real = [
+                e
+                for e in err.context or ()
+                if alts[int(e.relative_schema_path[0])].get("type") != "null"
+            ]
+            if real:
+                detail = real[0].message
+        out.append(f"{field}: {detail}")
+    return out

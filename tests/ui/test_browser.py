@@ -1,0 +1,183 @@
+"""The operator interface in a real headless browser (Debian's Chromium through chromedriver)
+against `omnisort ui` and a real `omnisort serve` on the simulated cell, each its own process
+on loopback, the arm paced to the wall clock. An operator: a wrong token is refused, the right
+one signs in; an out-of-range value is refused before anything is sent; a sort starts after
+its confirmation and its per-pick log fills; Stop ends it mid-sort and the service's status
+confirms the arm stopped; a resumed sort puts every remaining cube in its bin.
+
+The screenshots of docs/images/ui_*.png are written here."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from omnisort_hw.service.client import Client
+from omnisort_hw.service.launch import ServiceProcess, start_service
+from tests.ui.ui_procs import TOKEN, chromium, quit_chromium, sim_cell_file, start_ui, stop_process
+
+pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+
+IMAGES = Path(__file__).resolve().parents[2] / "docs" / "images"
+
+
+def wait_for(
+    what: str, predicate: Callable[[], Any], timeout_s: float, every_s: float = 0.1
+) -> Any:
+    """Poll `predicate` until it returns something true; fail naming `what` after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(every_s)
+
+
+class Page:
+    """The cell page in the browser, found by the elements' data-test names."""
+
+    def __init__(self, driver: Any) -> None:
+        self.d = driver
+
+    def el(self, name: str, inner: str = "") -> Any:
+        from selenium.webdriver.common.by import By
+
+        return self.d.find_element(By.CSS_SELECTOR, f"[data-test={name}] {inner}".strip())
+
+    def text(self, name: str) -> str:
+        return str(self.el(name).text)
+
+    def click(self, name: str) -> None:
+        self.el(name).click()
+
+    def type(self, name: str, value: str) -> None:
+        from selenium.webdriver.common.keys import Keys
+
+        box = self.el(name)  # Quasar puts the attribute on the <input> itself, or around it
+        if box.tag_name != "input":
+            box = self.el(name, "input")
+        box.send_keys(Keys.CONTROL, "a")
+        box.send_keys(Keys.DELETE)
+        if value:
+            box.send_keys(value)
+
+    def visible(self, name: str) -> bool:
+        from selenium.common.exceptions import NoSuchElementException
+
+        try:
+            return bool(self.el(name).is_displayed())
+        except NoSuchElementException:
+            return False
+
+    def pick_rows(self) -> list[list[str]]:
+        from selenium.webdriver.common.by import By
+
+        rows = self.el("pick-log").find_elements(By.CSS_SELECTOR, "tbody tr")
+        cells = [[td.text for td in r.find_elements(By.CSS_SELECTOR, "td")] for r in rows]
+        return [c for c in cells if len(c) == 6]
+
+    def confirm(self) -> None:
+        wait_for("the confirmation", lambda: self.visible("confirm"), 10)
+        self.click("confirm")
+
+    def shot(self, name: str) -> None:
+        IMAGES.mkdir(parents=True, exist_ok=True)
+        self.d.save_screenshot(str(IMAGES / f"{name}.png"))
+
+
+@pytest.fixture()
+def cell(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page, Path]]:
+    config = sim_cell_file(tmp_path)
+    with start_service(config, tmp_path) as svc:
+        ui_proc, url = start_ui(config, svc.port, tmp_path)
+        driver = chromium()
+        try:
+            driver.get(url)
+            page = Page(driver)
+            wait_for("the page", lambda: page.text("state") == "idle", 30)
+            yield svc, page, tmp_path
+        finally:
+            quit_chromium(driver)
+            stop_process(ui_proc)
+
+
+def _status(port: int) -> dict[str, Any]:
+    with Client("127.0.0.1", port, timeout_s=10) as c:
+        return dict(c.status())
+
+
+def test_operator_sorts_stops_and_resumes_in_a_real_browser(
+    cell: tuple[ServiceProcess, Page, Path],
+) -> None:
+    svc, page, _ = cell
+    page.shot("ui_read_only")
+    assert not page.visible("start-sort"), "a read-only page offers the sort"
+
+    # A wrong token: refused by the service, the session stays read-only.
+    page.type("token", "not-the-token")
+    page.click("sign-in")
+    wait_for("the refusal", lambda: "wrong token" in page.text("message"), 10)
+    assert "Read-only" in page.text("signed")
+
+    page.type("token", TOKEN)
+    page.click("sign-in")
+    wait_for("the sign-in", lambda: page.text("signed") == "Signed in as operator", 10)
+    wait_for("the sort form", lambda: page.visible("start-sort"), 10)
+
+    # Out of range: the schema refuses it here, nothing reaches the service.
+    before = _status(svc.port)["service"]
+    page.type("sort-max_objects", "0")
+    page.click("start-sort")
+    wait_for("the schema's refusal", lambda: "minimum of 1" in page.text("sort-problems"), 10)
+    assert not page.visible("confirm"), "an invalid sort was offered for confirmation"
+    st = _status(svc.port)
+    assert st["last_run"] is None, "an invalid sort reached the service"
+    assert st["service"]["errors"] == before["errors"], "the service refused something sent"
+    page.shot("ui_bad_input")
+
+    # Sort every cube: confirmed, then watched until the first pick is logged.
+    page.type("sort-max_objects", "")
+    page.click("start-sort")
+    page.confirm()
+    wait_for("the sort to start", lambda: _status(svc.port)["state"] == "sorting", 30)
+    rows = wait_for("the first pick in the log", page.pick_rows, 120, 0.25)
+    assert rows[0][3] == "sorted", rows
+    wait_for("the picks per minute", lambda: "picks/min" in page.text("picks-per-min"), 10)
+    page.shot("ui_cell")
+
+    # Stop mid-sort: the service says stopped, no job, and the arm stands still.
+    page.click("stop")
+    st = wait_for(
+        "the stopped state",
+        lambda: (s := _status(svc.port))["state"] == "stopped" and s["job"] is None and s,
+        15,
+    )
+    joints = st["devices"]["arm"]["joints_deg"]
+    time.sleep(1.0)
+    again = _status(svc.port)["devices"]["arm"]["joints_deg"]
+    assert max(abs(a - b) for a, b in zip(joints, again, strict=True)) < 1e-6, (joints, again)
+    wait_for("the job's end", lambda: "stopped" in page.text("job-end"), 10)
+    first_run = st["last_run"]
+    sorted_first = sum(1 for ev in first_run["progress"] if ev.get("status") == "sorted")
+    located = next(ev["to_pick"] for ev in first_run["progress"] if "to_pick" in ev)
+    assert 1 <= sorted_first < located, (sorted_first, located)
+    wait_for("the state on the page", lambda: page.text("state") == "stopped", 10)
+    page.shot("ui_stopped")
+
+    # Resume: the remaining cubes, each into its bin.
+    page.click("start-sort")
+    page.confirm()
+    wait_for("the resumed sort's end", lambda: "sort done" in page.text("job-end"), 240, 0.5)
+    final = _status(svc.port)
+    assert final["state"] == "idle", final["state"]
+    outcomes = [ev["status"] for ev in final["last_run"]["progress"] if "cube" in ev]
+    assert outcomes and all(o == "sorted" for o in outcomes), outcomes
+    assert sorted_first + len(outcomes) == located, (sorted_first, outcomes, located)
+    assert "0 skipped, 0 failed" in page.text("job-end"), page.text("job-end")
