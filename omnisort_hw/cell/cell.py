@@ -54,6 +54,7 @@ STATUS_POLL_S = 0.1
 CALIBRATION_CACHE_S = 1.0
 LASER_CACHE_S = 1.0
 DEVICE_LOCK_TIMEOUT_S = 5.0
+VIEW_LOCK_TIMEOUT_S = 0.5  # a live picture does not wait for a measurement to end
 
 
 class DeviceLockTimeoutError(OmnisortError):
@@ -252,10 +253,12 @@ class Cell:
         return dev
 
     @contextmanager
-    def _locked(self, lock: threading.Lock, what: str) -> Iterator[None]:
-        if not lock.acquire(timeout=DEVICE_LOCK_TIMEOUT_S):
+    def _locked(
+        self, lock: threading.Lock, what: str, timeout_s: float = DEVICE_LOCK_TIMEOUT_S
+    ) -> Iterator[None]:
+        if not lock.acquire(timeout=timeout_s):
             raise DeviceLockTimeoutError(
-                f"the {what} has been busy with another command for {DEVICE_LOCK_TIMEOUT_S:g} s"
+                f"the {what} has been busy with another command for {timeout_s:g} s"
             )
         try:
             yield
@@ -456,6 +459,34 @@ class Cell:
         self.prune_captures()
         result["path"] = str(path)
         return result
+
+    def view(self, width: int = 960, quality: int = 80) -> dict[str, Any]:
+        """A live picture for a screen: one fresh frame scaled to at most `width` px and
+        JPEG-encoded (base64). Not logged (a screen asks often); while a measurement holds
+        the camera it is refused at once (`device_lock_timeout`) rather than waited for."""
+        import cv2
+
+        cam = self._need("camera")
+        with self._locked(self._camera_lock, "camera", VIEW_LOCK_TIMEOUT_S):
+            frame = cam.grab(None)
+        h, w = frame.image.shape[:2]
+        scale = min(1.0, width / w)
+        image = frame.image
+        if scale < 1.0:
+            size = (max(1, round(w * scale)), max(1, round(h * scale)))
+            image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+        ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        if not ok:
+            raise OmnisortError("could not encode the picture as JPEG")
+        return {
+            "sequence": int(frame.sequence),
+            "wall_time": _iso(frame.wall_time),
+            "width": int(image.shape[1]),
+            "height": int(image.shape[0]),
+            "scale": scale,  # picture px per camera px: overlays in camera px times this
+            "format": "jpg",
+            "base64": base64.b64encode(buf.tobytes()).decode("ascii"),
+        }
 
     def prune_captures(self) -> None:
         files = sorted(self.capture_dir.glob("capture-*"))

@@ -14,6 +14,7 @@ The verdict's lines (`pipeline.verdict.verdict_lines`) go into the legend, colou
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -88,15 +89,32 @@ def draw_registration(
     return _with_legend(left, lines, keys)
 
 
-def _ellipse_px(
-    calib: SystemCalibration, T_SB: np.ndarray, cube: Cube, enlarge: float
+ELLIPSE_ENLARGE = 10.0
+"""How many times a cube's position ellipse is enlarged where it is drawn (a few mm at a metre
+would be a pixel or less)."""
+
+
+def cube_pixels(calib: SystemCalibration, T_SB: np.ndarray, cube: Cube) -> dict[str, Any]:
+    """Where a located cube is in the image, for a client's overlay: its centre and its 95 %
+    position ellipse enlarged `ELLIPSE_ENLARGE` times (25 points), in camera pixels."""
+    centre = project_S(calib, np.asarray(cube.center_S, float)[None, :])[0]
+    ring = ellipse_px(calib, T_SB, cube, ELLIPSE_ENLARGE, points=25)
+    return {
+        "center_px": np.round(centre, 1).tolist(),
+        "ellipse_px": np.round(ring, 1).tolist(),
+        "ellipse_scale": ELLIPSE_ENLARGE,
+    }
+
+
+def ellipse_px(
+    calib: SystemCalibration, T_SB: np.ndarray, cube: Cube, enlarge: float, points: int = 61
 ) -> np.ndarray:
     """The cube's 95 % position ellipse on its own height in B, enlarged, projected (M, 2)."""
     cov = cube.position_cov_xy
     if cov is None:
         cov = np.diag(np.square(cube.sigma_xy_mm))
     vals, vecs = np.linalg.eigh(np.asarray(cov, float))
-    t = np.linspace(0.0, 2.0 * np.pi, 61)
+    t = np.linspace(0.0, 2.0 * np.pi, points)
     circle = np.stack([np.cos(t), np.sin(t)], axis=1) * np.sqrt(
         np.clip(vals, 0.0, None) * CHI2_95_2D
     )
@@ -112,7 +130,7 @@ def draw_cubes(
     T_SB: np.ndarray,
     cubes: Sequence[Cube],
     lines: Sequence[str],
-    enlarge: float = 10.0,
+    enlarge: float = ELLIPSE_ENLARGE,
 ) -> np.ndarray:
     """The location's picture: each cube's outline, its index (the legend `lines` give its
     colour, position and sigma) and its 95 % position ellipse drawn `enlarge` times its
@@ -123,7 +141,7 @@ def draw_cubes(
         if cube.outline_px is not None:
             draw_dots(left, cube.outline_px, (0, 0, 0), thick + 1)
             draw_dots(left, cube.outline_px, (255, 255, 255), max(0, thick - 1))
-        ellipse = _ellipse_px(calib, T_SB, cube, enlarge)
+        ellipse = ellipse_px(calib, T_SB, cube, enlarge)
         draw_polyline(left, ellipse, (0, 0, 0), 2 * thick + 2)
         draw_polyline(left, ellipse, ELLIPSE, 2 * thick)
         x, y = cube.bbox[:2]

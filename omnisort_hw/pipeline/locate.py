@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from omnisort_hw.core.cell_pictures import draw_cubes
+from omnisort_hw.core.cell_pictures import cube_pixels, draw_cubes
 from omnisort_hw.core.cube_location import Cube, LocateSettings, locate_cubes
 from omnisort_hw.core.cube_uncertainty import add_calibration_part, rotation_covariance
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
@@ -59,6 +59,7 @@ class LocateResult:
     max_sigma_mm: float = SortConfig.max_sigma_mm
     picture: PictureReply = field(default_factory=lambda: PictureReply())
     colors: tuple[str, ...] | None = None  # the request's: the reply gives only these
+    pixels: list[dict[str, Any]] = field(default_factory=list)  # each cube's, for overlays
 
     def lines(self) -> list[str]:
         """The location in a few lines for people (the picture's legend, the CLI)."""
@@ -97,7 +98,8 @@ class LocateResult:
     def reply(self) -> LocateReply:
         """The answer at every door: the cubes (of the request's colours), their count, and
         the blobs rejected inside the search region with the reason."""
-        found = [c.summary() for c in self.asked()]
+        where = {id(c): p for c, p in zip(self.cubes, self.pixels, strict=False)}
+        found = [{**c.summary(), **where.get(id(c), {})} for c in self.asked()]
         rejected = [
             r
             for r in self.diagnostics.get("rejected", [])
@@ -149,6 +151,7 @@ def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None)
         what="location",
     )
     result = LocateResult(cubes, diag, cfg.max_sigma_mm, colors=request.colors)
+    result.pixels = [cube_pixels(calib, T_SB, c) for c in cubes]
     result.picture = write_picture(
         rig.picture_path("locate", request.image),
         lambda: draw_cubes(colour, calib, T_SB, cubes, result.lines()),

@@ -245,6 +245,15 @@ class AdoptRequest:
 
 
 @dataclass(frozen=True)
+class ViewRequest:
+    """A live picture for a screen: a fresh frame, scaled down and JPEG-encoded (base64); no
+    file written, nothing switched, nothing logged."""
+
+    width: int = param(960, lo=64, hi=4096, unit="px", help="the picture's width at most")
+    quality: int = param(80, lo=10, hi=95, help="JPEG quality")
+
+
+@dataclass(frozen=True)
 class CaptureRequest:
     """Grab one image; returned as a file path or base64."""
 

@@ -34,6 +34,7 @@ from omnisort_hw.pipeline.requests import (
     RegisterRequest,
     ResetRequest,
     SortRequest,
+    ViewRequest,
 )
 from omnisort_hw.service.status_reply import StatusReply
 
@@ -66,6 +67,9 @@ class CellCommands:
 
     def describe(self) -> Result:
         return self.execute("describe")
+
+    def view(self, request: ViewRequest | None = None) -> Result:
+        return self.execute("view", wire_args(request))
 
     def capture(self, request: CaptureRequest | None = None) -> Result:
         return self.execute("capture", wire_args(request))

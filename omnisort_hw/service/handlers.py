@@ -26,6 +26,7 @@ from omnisort_hw.pipeline.requests import (
     MoveRequest,
     RegisterRequest,
     SortRequest,
+    ViewRequest,
 )
 from omnisort_hw.service.protocol import describe_commands
 from omnisort_hw.service.status_reply import ServiceStatus, StatusReply
@@ -55,6 +56,10 @@ def status(ctx: Context, _request: None) -> StatusReply:
 
 def describe(ctx: Context, _request: None) -> Reply:
     return describe_commands()
+
+
+def view(ctx: Context, request: ViewRequest) -> Reply:
+    return ctx.cell.view(request.width, request.quality)
 
 
 def capture(ctx: Context, request: CaptureRequest) -> Reply:
@@ -116,6 +121,7 @@ def acknowledge_drift(ctx: Context, _request: None) -> Reply:
 HANDLERS: dict[str, Handler] = {
     "status": status,
     "describe": describe,
+    "view": view,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

@@ -164,6 +164,7 @@ COMMANDS: dict[str, Command] = {
             "quick",
             help="each command's kind and the JSON Schema (draft 2020-12) of its arguments",
         ),
+        Command("view", "quick", requests.ViewRequest, needs_token=False),
         Command("capture", "quick", requests.CaptureRequest),
         Command("laser", "quick", requests.LaserRequest),
         Command("calibrate", "job", requests.CalibrateRequest, job_state="calibrating"),
@@ -190,6 +191,10 @@ COMMANDS: dict[str, Command] = {
         Command("shutdown", "control", help="stop the cell and end the service (exit 0)"),
     )
 }
+
+
+OPEN_COMMANDS = tuple(name for name, c in COMMANDS.items() if not c.needs_token)
+"""The commands any client may send without the token: they read, or they stop."""
 
 
 def describe_commands() -> dict[str, Any]:

@@ -287,8 +287,8 @@ class Service(Transport, JobRunner):
         if token is None:
             raise proto.ProtocolError(
                 proto.UNAUTHORIZED,
-                f"{spec.name} needs the service token (field 'token'); only status, stop and "
-                "estop pass without it",
+                f"{spec.name} needs the service token (field 'token'); only "
+                f"{', '.join(proto.OPEN_COMMANDS)} pass without it",
                 id=rid,
             )
         expected = (self.config.token or "").encode()

@@ -27,6 +27,7 @@ from omnisort_hw.service.status_reading import (
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.operators import SignInError
+from omnisort_hw.ui.overlay_svg import cubes_overlay, map_overlay
 from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields, problems
 
 STATE_COLORS = {
@@ -101,6 +102,7 @@ class CellPage:
                 self._build_status()
             with ui.column().classes("gap-4 grow"):
                 self._build_job()
+                self._build_view()
                 self._build_sort()
 
     def _build_operator(self) -> None:
@@ -149,6 +151,18 @@ class CellPage:
             self.job_label = tag(ui.label("none"), "job")
             self.progress = tag(ui.linear_progress(0.0, show_value=False), "progress")
             self.job_end = tag(ui.label(""), "job-end")
+
+    def _build_view(self) -> None:
+        with ui.card().classes("w-full"):
+            with ui.row().classes("items-center gap-4"):
+                ui.label("Live view").classes("text-lg")
+                self.view_note = tag(ui.label(""), "view-note")
+            self.view = tag(ui.interactive_image().classes("w-full max-w-[960px]"), "live-view")
+            self.view_legend = tag(ui.label(""), "view-legend").classes("text-sm")
+            with ui.row().classes("items-center") as self.view_ops:
+                tag(ui.button("Map the laser line", on_click=self.map_line), "map")
+                tag(ui.button("Locate the cubes", on_click=self.locate), "locate")
+        self._view_shown: tuple[int, int] = (-1, -1)
 
     def _build_sort(self) -> None:
         with ui.card().classes("w-full"):
@@ -243,6 +257,35 @@ class CellPage:
         rate = picks_per_minute(status, datetime.now(UTC))
         self.rate.text = f"{rate:.1f} picks/min" if rate is not None else ""
 
+    def refresh_view(self) -> None:
+        """The newest live picture and the overlays of the last map and location."""
+        feed = self.ctx.feed
+        pic = feed.picture
+        fps = feed.fps
+        rate = f", {fps:.1f} pictures/s" if fps is not None else ""
+        self.view_note.text = feed.problem or (
+            f"picture {pic.sequence} at {pic.wall_time[11:19]}{rate}" if pic else "waiting"
+        )
+        self.view_ops.set_visibility(self.ctx.operators.signed_in(self.browser))
+        if pic is None:
+            return
+        unit = pic.width / 960.0
+        overlays = [
+            o
+            for o in (
+                map_overlay(self.ctx.jobs.results.get("map", {}), pic.scale, unit),
+                cubes_overlay(self.ctx.jobs.results.get("locate", {}), pic.scale, unit),
+            )
+            if o is not None
+        ]
+        key = (pic.sequence, self.ctx.jobs.ended)
+        if key == self._view_shown:
+            return
+        self._view_shown = key
+        self.view.set_source(pic.data_url)
+        self.view.content = "".join(o.svg for o in overlays)
+        self.view_legend.text = "; ".join(o.legend for o in overlays)
+
     # -- acting ---------------------------------------------------------------------------
 
     def say(self, text: str, kind: str = "info") -> None:
@@ -323,6 +366,28 @@ class CellPage:
 
         await self._operator(act)
 
+    def _start_job(self, cmd: str, args: dict[str, Any]) -> None:
+        """A job that does not move the arm: no confirmation."""
+        token = self._token()
+        if token is None:
+            return
+        snap = self.ctx.link.snapshot
+        if snap.status is None:
+            self.say(f"{cmd}: not sent, the service is unreachable", "negative")
+            return
+        try:
+            self.ctx.jobs.start(cmd, args, token)
+        except RuntimeError as exc:
+            self.say(f"{cmd}: not sent: {exc}", "negative")
+            return
+        self.say(f"{cmd} started")
+
+    def map_line(self) -> None:
+        self._start_job("map", {"points": True})
+
+    def locate(self) -> None:
+        self._start_job("locate", {})
+
     async def start_sort(self) -> None:
         token = self._token()
         schema = self.ctx.operators.schema("sort")
@@ -362,3 +427,6 @@ def cell_page(ctx: UiContext) -> None:
     page.build()
     page.refresh()
     ui.timer(ctx.config.status_period_s, page.refresh)
+    ui.timer(min(ctx.config.view_period_s, 0.5), page.refresh_view)
+    ctx.feed.watch()
+    ui.context.client.on_delete(ctx.feed.unwatch)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from omnisort_hw.config.ui import UiConfig
 from omnisort_hw.ui.job_runner import JobRunner
 from omnisort_hw.ui.link import ServiceLink
+from omnisort_hw.ui.live_feed import LiveFeed
 from omnisort_hw.ui.operators import Operators
 
 
@@ -17,13 +18,21 @@ class UiContext:
     link: ServiceLink
     operators: Operators
     jobs: JobRunner
+    feed: LiveFeed
 
     @classmethod
     def for_service(cls, config: UiConfig, host: str, port: int) -> UiContext:
         """The context of an interface for the service at host:port (its status read at once)."""
         link = ServiceLink(host, port, config.status_period_s)
         link.start()
-        return cls(config, link, Operators(link, config.allow_operator), JobRunner(link))
+        return cls(
+            config,
+            link,
+            Operators(link, config.allow_operator),
+            JobRunner(link),
+            LiveFeed(link, config.view_period_s, config.view_width_px),
+        )
 
     def close(self) -> None:
+        self.feed.close()
         self.link.close()

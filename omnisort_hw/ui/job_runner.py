@@ -47,6 +47,8 @@ class JobRunner:
         self._lock = threading.Lock()
         self._running: str | None = None
         self.last: JobEnd | None = None
+        self.results: dict[str, Mapping[str, Any]] = {}  # the last result of each command
+        self.ended = 0  # how many jobs have ended (a page redraws what depends on them)
 
     @property
     def running(self) -> str | None:
@@ -78,4 +80,7 @@ class JobRunner:
             end = JobEnd(cmd, False, message, None, time.monotonic())
         with self._lock:
             self.last = end
+            if end.result is not None:
+                self.results[cmd] = end.result
+            self.ended += 1
             self._running = None

@@ -17,7 +17,7 @@ from typing import Any
 from omnisort_hw.service.client import Client, ClientError, CommandError
 from omnisort_hw.service.status_reply import StatusReply
 
-__all__ = ["ClientError", "CommandError", "ServiceLink", "Snapshot"]
+__all__ = ["Client", "ClientError", "CommandError", "ServiceLink", "Snapshot"]
 
 
 @dataclass(frozen=True)
@@ -99,6 +99,10 @@ class ServiceLink:
         with self._lock:
             since = self._snapshot.down_since if self._snapshot.problem else None
             self._snapshot = Snapshot(None, problem, now, since if since is not None else now)
+
+    def client(self) -> Client:
+        """A connection of its own without a token (for a reader like the live view)."""
+        return self._client(None, self.timeout_s)
 
     def _client(self, token: str | None, timeout_s: float) -> Client:
         return Client(

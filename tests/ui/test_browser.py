@@ -83,12 +83,18 @@ class Page:
         cells = [[td.text for td in r.find_elements(By.CSS_SELECTOR, "td")] for r in rows]
         return [c for c in cells if len(c) == 6]
 
+    def count(self, name: str, inner: str) -> int:
+        from selenium.webdriver.common.by import By
+
+        return len(self.d.find_elements(By.CSS_SELECTOR, f"[data-test={name}] {inner}"))
+
     def confirm(self) -> None:
         wait_for("the confirmation", lambda: self.visible("confirm"), 10)
         self.click("confirm")
 
     def shot(self, name: str) -> None:
         IMAGES.mkdir(parents=True, exist_ok=True)
+        self.d.execute_script("window.scrollTo(0, 0)")
         self.d.save_screenshot(str(IMAGES / f"{name}.png"))
 
 
@@ -97,7 +103,7 @@ def cell(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page, Path]]:
     config = sim_cell_file(tmp_path)
     with start_service(config, tmp_path) as svc:
         ui_proc, url = start_ui(config, svc.port, tmp_path)
-        driver = chromium()
+        driver = chromium(1400, 1800)
         try:
             driver.get(url)
             page = Page(driver)
@@ -131,6 +137,25 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     wait_for("the sign-in", lambda: page.text("signed") == "Signed in as operator", 10)
     wait_for("the sort form", lambda: page.visible("start-sort"), 10)
 
+    # The live view, with the laser points of a map and the cubes of a location drawn on it.
+    wait_for("a live picture", lambda: page.text("view-note").startswith("picture"), 30)
+    wait_for("the operator's view controls", lambda: page.visible("map"), 10)
+    page.click("map")
+    wait_for("the map", lambda: "map done" in page.text("job-end"), 60)
+    page.click("locate")
+    wait_for("the location", lambda: "locate done" in page.text("job-end"), 60)
+    legend = wait_for(
+        "the overlays", lambda: "cubes" in page.text("view-legend") and page.text("view-legend"), 10
+    )
+    dots = page.count("live-view", "svg circle")
+    rings = page.count("live-view", "svg polygon")
+    assert dots >= 50, (dots, legend)
+    assert rings == 2 * int(legend.split("; ")[1].split()[0]), (rings, legend)
+    width = page.d.execute_script(
+        "return document.querySelector('[data-test=live-view] img').naturalWidth"
+    )
+    assert width == 320, width  # the simulated camera's frames, at most [ui] view_width_px
+
     # Out of range: the schema refuses it here, nothing reaches the service.
     before = _status(svc.port)["service"]
     page.type("sort-max_objects", "0")
@@ -138,7 +163,7 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     wait_for("the schema's refusal", lambda: "minimum of 1" in page.text("sort-problems"), 10)
     assert not page.visible("confirm"), "an invalid sort was offered for confirmation"
     st = _status(svc.port)
-    assert st["last_run"] is None, "an invalid sort reached the service"
+    assert st["last_run"]["job"] == "locate", "an invalid sort reached the service"
     assert st["service"]["errors"] == before["errors"], "the service refused something sent"
     page.shot("ui_bad_input")
 

@@ -90,6 +90,11 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
             await user.should_see("Read-only: sign in for operator actions")
             await user.should_not_see(marker="start-sort")
             await user.should_not_see(marker="laser-off")
+            # The live picture needs no sign-in (as `status`); the map and locate buttons do.
+            await until(
+                "a live picture", lambda: label(user, "view-note").startswith("picture"), 30
+            )
+            await user.should_not_see(marker="map")
 
             set_value(user, "token", "wrong")
             user.find(marker="sign-in").click()

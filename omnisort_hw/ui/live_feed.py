@@ -1,0 +1,113 @@
+"""The live picture: one thread asks the service for `view` every `period_s` while at least one
+page shows it, whatever the number of pages, and keeps the last picture and the rate it came
+at. A picture the service could not give (the camera busy with a measurement, the service
+down) leaves the last one shown, with the reason."""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from omnisort_hw.ui.link import Client, ClientError, CommandError, ServiceLink
+
+
+@dataclass(frozen=True)
+class Picture:
+    """One live picture as the service gave it (`view`'s reply)."""
+
+    base64: str
+    width: int
+    height: int
+    scale: float  # picture px per camera px
+    sequence: int
+    wall_time: str
+
+    @property
+    def data_url(self) -> str:
+        return f"data:image/jpeg;base64,{self.base64}"
+
+
+class LiveFeed:
+    """`picture`, `problem` and `fps` of the live view; `watch()`/`unwatch()` by each page."""
+
+    def __init__(self, link: ServiceLink, period_s: float, width_px: int) -> None:
+        self.link, self.period_s, self.width_px = link, period_s, width_px
+        self.picture: Picture | None = None
+        self.problem: str | None = None
+        self._times: collections.deque[float] = collections.deque(maxlen=20)
+        self._watchers = 0
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def watch(self) -> None:
+        with self._lock:
+            self._watchers += 1
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._loop, name="ui-view", daemon=True)
+                self._thread.start()
+        self._wake.set()
+
+    def unwatch(self) -> None:
+        with self._lock:
+            self._watchers = max(0, self._watchers - 1)
+
+    @property
+    def watchers(self) -> int:
+        with self._lock:
+            return self._watchers
+
+    @property
+    def fps(self) -> float | None:
+        """Pictures per second over the last (up to) 20."""
+        with self._lock:
+            times = list(self._times)
+        if len(times) < 2 or times[-1] <= times[0]:
+            return None
+        return (len(times) - 1) / (times[-1] - times[0])
+
+    def close(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=self.link.timeout_s + self.link.connect_timeout_s + 1.0)
+
+    def _loop(self) -> None:
+        client: Client | None = None
+        while not self._stop.is_set():
+            if self.watchers == 0:
+                self._wake.wait(1.0)
+                self._wake.clear()
+                continue
+            t0 = time.monotonic()
+            try:
+                if client is None:
+                    client = self.link.client()
+                self._store(client.execute("view", {"width": self.width_px}))
+            except CommandError as exc:
+                self.problem = f"no picture: {exc.code}: {exc.message}"
+            except (ClientError, OSError, ValueError) as exc:
+                if client is not None:
+                    client.close()
+                    client = None
+                self.problem = f"no picture: the service cannot be reached: {exc}"
+            self._stop.wait(max(0.0, self.period_s - (time.monotonic() - t0)))
+        if client is not None:
+            client.close()
+
+    def _store(self, reply: dict[str, Any]) -> None:
+        self.picture = Picture(
+            str(reply["base64"]),
+            int(reply["width"]),
+            int(reply["height"]),
+            float(reply["scale"]),
+            int(reply["sequence"]),
+            str(reply["wall_time"]),
+        )
+        self.problem = None
+        with self._lock:
+            self._times.append(time.monotonic())

@@ -1,0 +1,75 @@
+"""The live view's overlays as SVG, from replies the service gave: the last map's laser points
+coloured by their sigma, and the last located cubes with their position ellipses. Nothing is
+computed here but scaling: the pixels are the service's (`map` with points, `locate`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from html import escape
+from typing import Any
+
+MAX_POINTS = 800  # drawn of a map's points, evenly spaced: enough to see, light to send
+
+
+@dataclass(frozen=True)
+class Overlay:
+    """An SVG fragment in the picture's pixels, and its legend for people."""
+
+    svg: str
+    legend: str
+
+
+def sigma_colour(sigma: float, lo: float, hi: float) -> str:
+    """Green at `lo`, through yellow, to red at `hi` and beyond."""
+    t = 0.0 if hi <= lo else min(1.0, max(0.0, (sigma - lo) / (hi - lo)))
+    red, green = (round(510 * t), 255) if t < 0.5 else (255, round(510 * (1.0 - t)))
+    return f"#{min(red, 255):02x}{min(green, 255):02x}00"
+
+
+def map_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:
+    """The map's points (`pixels`, camera px) coloured by `sigma_normal_mm`; None without
+    points (a map asked without `points`). `unit`: the picture's px per px of a 960 px one
+    (marks keep their size on the screen whatever the picture's)."""
+    pixels: Sequence[Sequence[float]] = reply.get("pixels") or []
+    sigma: Sequence[float] = reply.get("sigma_normal_mm") or []
+    if not pixels or len(sigma) != len(pixels):
+        return None
+    step = max(1, -(-len(pixels) // MAX_POINTS))
+    lo, hi = min(sigma), max(sigma)
+    dots = "".join(
+        f'<circle cx="{u * scale:.1f}" cy="{v * scale:.1f}" r="{2 * unit:.2f}" '
+        f'fill="{sigma_colour(s, lo, hi)}" />'
+        for (u, v), s in zip(pixels[::step], sigma[::step], strict=True)
+    )
+    legend = (
+        f"{len(pixels)} laser points, sigma across the plane {lo:.2f} mm (green) "
+        f"to {hi:.2f} mm (red)" + (f", 1 in {step} drawn" if step > 1 else "")
+    )
+    return Overlay(dots, legend)
+
+
+def cubes_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:
+    """Each located cube: its ellipse (`ellipse_px`, enlarged as `ellipse_scale` says) in its
+    colour, and its index at its centre; None when the reply has no cube pixels."""
+    cubes = [c for c in reply.get("cubes") or [] if c.get("center_px") and c.get("ellipse_px")]
+    if not cubes:
+        return None
+    parts = []
+    for i, cube in enumerate(cubes):
+        colour = escape(str(cube.get("color", "white")))
+        ring = " ".join(f"{u * scale:.1f},{v * scale:.1f}" for u, v in cube["ellipse_px"])
+        u, v = (c * scale for c in cube["center_px"])
+        parts.append(
+            f'<polygon points="{ring}" fill="none" stroke="black" stroke-width="{4 * unit:.2f}" />'
+            f'<polygon points="{ring}" fill="none" stroke="{colour}" '
+            f'stroke-width="{2 * unit:.2f}" />'
+            f'<text x="{u:.1f}" y="{v:.1f}" fill="white" stroke="black" '
+            f'stroke-width="{0.6 * unit:.2f}" font-size="{16 * unit:.1f}" font-weight="bold" '
+            f'text-anchor="middle">{i}</text>'
+        )
+    enlarge = cubes[0].get("ellipse_scale", 1)
+    legend = f"{len(cubes)} cubes: 95 % position ellipse drawn x{enlarge:g}, " + ", ".join(
+        f"{i} {c.get('color')} sigma {c.get('sigma_mm', 0):.2f} mm" for i, c in enumerate(cubes)
+    )
+    return Overlay("".join(parts), legend)

@@ -1,0 +1,58 @@
+"""The live view's overlays: the service's pixels scaled to the picture, the points coloured
+by their sigma, a long map thinned to at most MAX_POINTS, nothing drawn without pixels."""
+
+from __future__ import annotations
+
+import re
+
+from omnisort_hw.ui.overlay_svg import MAX_POINTS, cubes_overlay, map_overlay, sigma_colour
+
+
+def test_sigma_colours_run_from_green_to_red() -> None:
+    assert sigma_colour(0.1, 0.1, 0.5) == "#00ff00"
+    assert sigma_colour(0.3, 0.1, 0.5) == "#ffff00"
+    assert sigma_colour(0.5, 0.1, 0.5) == "#ff0000"
+    assert sigma_colour(9.0, 0.1, 0.5) == "#ff0000"  # beyond the range: red
+    assert sigma_colour(0.2, 0.2, 0.2) == "#00ff00"  # one value: no range
+
+
+def test_map_points_are_scaled_and_thinned() -> None:
+    n = 2 * MAX_POINTS + 1
+    reply = {"pixels": [[2.0 * i, 10.0] for i in range(n)], "sigma_normal_mm": [0.1] * n}
+    overlay = map_overlay(reply, 0.5)
+    assert overlay is not None
+    xs = [float(x) for x in re.findall(r'cx="([\d.]+)"', overlay.svg)]
+    assert len(xs) <= MAX_POINTS and len(xs) >= MAX_POINTS // 2
+    assert xs[0] == 0.0 and xs[1] == 3.0  # every 3rd point, camera px times 0.5
+    assert set(re.findall(r'cy="([\d.]+)"', overlay.svg)) == {"5.0"}
+    assert f"{n} laser points" in overlay.legend and "1 in 3 drawn" in overlay.legend
+
+
+def test_no_overlay_without_pixels() -> None:
+    assert map_overlay({"points": 5}, 1.0) is None  # a map asked without points
+    assert map_overlay({"pixels": [[1, 2]], "sigma_normal_mm": []}, 1.0) is None
+    assert cubes_overlay({"cubes": [{"color": "red"}]}, 1.0) is None
+
+
+def test_cubes_are_drawn_in_their_colour_with_their_index() -> None:
+    ring = [[10.0, 0.0], [0.0, 10.0], [-10.0, 0.0]]
+    reply = {
+        "cubes": [
+            {
+                "color": "red",
+                "center_px": [100, 50],
+                "ellipse_px": ring,
+                "ellipse_scale": 10.0,
+                "sigma_mm": 1.234,
+            },
+            {"color": "<script>", "center_px": [10, 10], "ellipse_px": ring},
+        ]
+    }
+    overlay = cubes_overlay(reply, 2.0)
+    assert overlay is not None
+    assert 'stroke="red"' in overlay.svg and "<script>" not in overlay.svg
+    assert 'points="20.0,0.0 0.0,20.0 -20.0,0.0"' in overlay.svg
+    assert '<text x="200.0" y="100.0"' in overlay.svg and 'font-size="16.0"' in overlay.svg
+    small = cubes_overlay(reply, 2.0, unit=0.5)
+    assert small is not None and 'font-size="8.0"' in small.svg
+    assert "drawn x10" in overlay.legend and "0 red sigma 1.23 mm" in overlay.legend
