@@ -37,7 +37,7 @@ from omnisort_hw.cell.watchdog import DriftWatchdog, WatchdogPorts
 from omnisort_hw.config.capture import CaptureSettings
 from omnisort_hw.config.cell import CellConfig
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.errors import NotAvailableError, OmnisortError
+from omnisort_hw.errors import InputError, NotAvailableError, OmnisortError
 from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.gripper_load import assess
@@ -65,6 +65,28 @@ class DeviceLockTimeoutError(OmnisortError):
 
 # The devices of one cell (a missing device is None): the device factory's record.
 CellDevices = Devices
+
+
+def _jpeg(image: Any, width: int, quality: int) -> dict[str, Any]:
+    """`image` scaled to at most `width` px (never enlarged) as a JPEG in base64, with its
+    size and `scale` (its px per px of `image`: overlays in `image` px times this)."""
+    import cv2
+
+    h, w = image.shape[:2]
+    scale = min(1.0, width / w)
+    if scale < 1.0:
+        size = (max(1, round(w * scale)), max(1, round(h * scale)))
+        image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise OmnisortError("could not encode the picture as JPEG")
+    return {
+        "width": int(image.shape[1]),
+        "height": int(image.shape[0]),
+        "scale": scale,
+        "format": "jpg",
+        "base64": base64.b64encode(buf.tobytes()).decode("ascii"),
+    }
 
 
 def _iso(wall: float) -> str:
@@ -464,29 +486,29 @@ class Cell:
         """A live picture for a screen: one fresh frame scaled to at most `width` px and
         JPEG-encoded (base64). Not logged (a screen asks often); while a measurement holds
         the camera it is refused at once (`device_lock_timeout`) rather than waited for."""
-        import cv2
-
         cam = self._need("camera")
         with self._locked(self._camera_lock, "camera", VIEW_LOCK_TIMEOUT_S):
             frame = cam.grab(None)
-        h, w = frame.image.shape[:2]
-        scale = min(1.0, width / w)
-        image = frame.image
-        if scale < 1.0:
-            size = (max(1, round(w * scale)), max(1, round(h * scale)))
-            image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-        ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-        if not ok:
-            raise OmnisortError("could not encode the picture as JPEG")
         return {
             "sequence": int(frame.sequence),
             "wall_time": _iso(frame.wall_time),
-            "width": int(image.shape[1]),
-            "height": int(image.shape[0]),
-            "scale": scale,  # picture px per camera px: overlays in camera px times this
-            "format": "jpg",
-            "base64": base64.b64encode(buf.tobytes()).decode("ascii"),
+            **_jpeg(frame.image, width, quality),
         }
+
+    def picture(self, path: str, width: int = 960, quality: int = 85) -> dict[str, Any]:
+        """A picture this service wrote (a PNG in the calibration store's folder, as a reply's
+        `overlay_png`), scaled to at most `width` px and JPEG-encoded (base64); any other file
+        is refused (`bad_input`), so a client reads nothing else of the PC through it."""
+        import cv2
+
+        folder = self.store.path("system").parent.resolve()
+        p = Path(path).resolve()
+        if p.parent != folder or p.suffix != ".png":
+            raise InputError(f"{path}: not a picture of this service (a PNG in {folder})")
+        image = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        if image is None:
+            raise InputError(f"{path}: no such picture, or not readable as PNG")
+        return {"path": str(p), **_jpeg(image, width, quality)}
 
     def prune_captures(self) -> None:
         files = sorted(self.capture_dir.glob("capture-*"))

@@ -254,6 +254,18 @@ class ViewRequest:
 
 
 @dataclass(frozen=True)
+class PictureRequest:
+    """A picture the service wrote (a reply's `overlay_png`), scaled down and JPEG-encoded
+    (base64), for a client on another machine or under another user."""
+
+    path: str = param(
+        kind="path", help="absolute path of a picture the service wrote (a reply's overlay_png)"
+    )
+    width: int = param(960, lo=64, hi=4096, unit="px", help="the picture's width at most")
+    quality: int = param(85, lo=10, hi=95, help="JPEG quality")
+
+
+@dataclass(frozen=True)
 class CaptureRequest:
     """Grab one image; returned as a file path or base64."""
 

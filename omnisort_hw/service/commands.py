@@ -31,6 +31,7 @@ from omnisort_hw.pipeline.requests import (
     LocateRequest,
     MapRequest,
     MoveRequest,
+    PictureRequest,
     RegisterRequest,
     ResetRequest,
     SortRequest,
@@ -70,6 +71,9 @@ class CellCommands:
 
     def view(self, request: ViewRequest | None = None) -> Result:
         return self.execute("view", wire_args(request))
+
+    def picture(self, request: PictureRequest) -> Result:
+        return self.execute("picture", wire_args(request))
 
     def capture(self, request: CaptureRequest | None = None) -> Result:
         return self.execute("capture", wire_args(request))

@@ -24,6 +24,7 @@ from omnisort_hw.pipeline.requests import (
     LocateRequest,
     MapRequest,
     MoveRequest,
+    PictureRequest,
     RegisterRequest,
     SortRequest,
     ViewRequest,
@@ -60,6 +61,10 @@ def describe(ctx: Context, _request: None) -> Reply:
 
 def view(ctx: Context, request: ViewRequest) -> Reply:
     return ctx.cell.view(request.width, request.quality)
+
+
+def picture(ctx: Context, request: PictureRequest) -> Reply:
+    return ctx.cell.picture(request.path, request.width, request.quality)
 
 
 def capture(ctx: Context, request: CaptureRequest) -> Reply:
@@ -122,6 +127,7 @@ HANDLERS: dict[str, Handler] = {
     "status": status,
     "describe": describe,
     "view": view,
+    "picture": picture,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

@@ -165,6 +165,7 @@ COMMANDS: dict[str, Command] = {
             help="each command's kind and the JSON Schema (draft 2020-12) of its arguments",
         ),
         Command("view", "quick", requests.ViewRequest, needs_token=False),
+        Command("picture", "quick", requests.PictureRequest),
         Command("capture", "quick", requests.CaptureRequest),
         Command("laser", "quick", requests.LaserRequest),
         Command("calibrate", "job", requests.CalibrateRequest, job_state="calibrating"),

@@ -28,7 +28,9 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.operators import SignInError
 from omnisort_hw.ui.overlay_svg import cubes_overlay, map_overlay
+from omnisort_hw.ui.recovery import RecoveryPanel
 from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields, problems
+from omnisort_hw.ui.widgets import confirm, tag
 
 STATE_COLORS = {
     "idle": "positive",
@@ -50,24 +52,6 @@ PICK_COLUMNS = [
         ("at", "time"),
     )
 ]
-
-
-def tag(element: Any, name: str) -> Any:
-    """Name an element for the tests: a marker for the simulated user, an attribute for a
-    real browser."""
-    return element.mark(name).props(f"data-test={name}")
-
-
-async def confirm(text: str) -> bool:
-    """Ask for an explicit confirmation; True only on the confirm button."""
-    with ui.dialog() as dialog, ui.card():
-        ui.label(text)
-        with ui.row():
-            tag(ui.button("Confirm", on_click=lambda: dialog.submit(True)), "confirm")
-            tag(ui.button("Cancel", on_click=lambda: dialog.submit(False)).props("flat"), "cancel")
-    result = await dialog
-    dialog.clear()
-    return result is True
 
 
 class CellPage:
@@ -92,15 +76,19 @@ class CellPage:
         self.down = tag(ui.label(""), "unreachable").classes(
             "w-full p-3 bg-red-100 text-red-900 font-bold"
         )
-        self.drift = tag(ui.label(""), "drift").classes(
-            "w-full p-3 bg-amber-100 text-amber-900 font-bold"
-        )
+        with ui.row().classes("w-full items-center p-3 bg-amber-100") as self.drift_row:
+            self.drift = tag(ui.label(""), "drift").classes("text-amber-900 font-bold")
+            self.recover_button = tag(
+                ui.button("Recover", on_click=self.start_recovery, color="amber-9"), "recover"
+            )
         self.message = tag(ui.label(""), "message").classes("w-full text-base")
-        with ui.row().classes("w-full items-start gap-4"):
+        with ui.row().classes("w-full items-start gap-4 no-wrap"):
             with ui.column().classes("gap-4"):
                 self._build_operator()
                 self._build_status()
-            with ui.column().classes("gap-4 grow"):
+            with ui.column().classes("gap-4 grow min-w-0"):
+                self.recovery = RecoveryPanel(self.ctx, self._token, self.say)
+                self.recovery.build()
                 self._build_job()
                 self._build_view()
                 self._build_sort()
@@ -212,7 +200,9 @@ class CellPage:
         self.sort_form.set_visibility(operator)
         end = self.ctx.jobs.last
         self.job_end.text = end.message if end is not None else ""
+        self.recovery.show(operator and self.recovery.active)
         if snap.status is None:
+            self.drift_row.set_visibility(False)
             self.state.text, self.state.props["color"] = "unreachable", "grey"
             self.down.text = f"{snap.problem}; trying again every {self.ctx.link.period_s:g} s"
             self.down.set_visibility(True)
@@ -227,7 +217,8 @@ class CellPage:
         self.state.update()
         alarm = drift_alarm(status)
         self.drift.text = f"Calibration drift: {alarm}" if alarm else ""
-        self.drift.set_visibility(alarm is not None)
+        self.drift_row.set_visibility(alarm is not None)
+        self.recover_button.set_visibility(operator and not self.recovery.active)
         rows = [{"i": i, "k": k, "v": v} for i, (k, v) in enumerate(status_rows(status))]
         if rows != self.rows.rows:
             self.rows.rows = rows
@@ -366,6 +357,10 @@ class CellPage:
 
         await self._operator(act)
 
+    def start_recovery(self) -> None:
+        if self._token() is not None:
+            self.recovery.open()
+
     def _start_job(self, cmd: str, args: dict[str, Any]) -> None:
         """A job that does not move the arm: no confirmation."""
         token = self._token()
@@ -428,5 +423,6 @@ def cell_page(ctx: UiContext) -> None:
     page.refresh()
     ui.timer(ctx.config.status_period_s, page.refresh)
     ui.timer(min(ctx.config.view_period_s, 0.5), page.refresh_view)
+    ui.timer(0.5, page.recovery.refresh)
     ctx.feed.watch()
     ui.context.client.on_delete(ctx.feed.unwatch)

@@ -56,6 +56,26 @@ def test_view_is_the_frame_scaled_and_cubes_carry_their_pixels(tmp_path: Path) -
         with Client(running.host, running.port, token=TOKEN, timeout_s=120) as operator:
             located = operator.execute("locate")
             image = _decode(operator.execute("view", {"width": WIDTH}))
+            # The picture the location wrote, sent to a client; nothing else of the PC is.
+            overlay = located["overlay_png"]
+            sent = operator.execute("picture", {"path": overlay, "width": 200})
+            written = cv2.imread(overlay, cv2.IMREAD_COLOR)
+            assert sent["width"] == 200 and sent["scale"] == pytest.approx(200 / written.shape[1])
+            assert _decode(sent).shape[:2] == (sent["height"], 200)
+            with Client(running.host, running.port) as anyone:
+                denied = anyone.call("picture", {"path": overlay})
+            assert denied["error"]["code"] == "unauthorized"
+            state = Path(overlay).parent
+            for path in (
+                "/etc/passwd",
+                str(state / "camera.json"),
+                str(state / "none.png"),
+                str(state / ".." / Path(overlay).name),
+            ):
+                refused = operator.call("picture", {"path": path})
+                assert refused["error"]["code"] == "bad_input", (path, refused)
+            relative = operator.call("picture", {"path": "locate_overlay.png"})
+            assert relative["error"]["code"] == "bad_argument"
         assert located["cubes"], located
         for cube in located["cubes"]:
             u, v = cube["center_px"]

@@ -22,7 +22,9 @@ CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
 
 
-def sim_cell_file(tmp: Path, width: int = 320, realtime: bool = True) -> Path:
+def sim_cell_file(
+    tmp: Path, width: int = 320, realtime: bool = True, view_period_s: float = 0.5
+) -> Path:
     """The simulated cell's file with its true calibration, a service token, and (`realtime`)
     an arm paced to the wall clock, so a sort lasts long enough to watch and stop."""
     config = write_config(tmp, width)
@@ -32,8 +34,32 @@ def sim_cell_file(tmp: Path, width: int = 320, realtime: bool = True) -> Path:
     assert arm in text, "the simulated cell file changed its [arm] section"
     if realtime:
         text = text.replace(arm, arm + "realtime = true\n")
-    config.write_text(text + f'\n[service]\ntoken = "{TOKEN}"\n\n[ui]\nstatus_period_s = 0.25\n')
+    config.write_text(
+        text + f'\n[service]\ntoken = "{TOKEN}"\n\n[ui]\nstatus_period_s = 0.25\n'
+        f"view_period_s = {view_period_s}\n"
+    )
     return config
+
+
+def knock_calibration(config: Path, angle_deg: float, axis: tuple[float, float, float]) -> None:
+    """A drifted system on the simulated cell: the stored camera rotation turned by `angle_deg`
+    about `axis` of S (as a knock turns the camera away from what was calibrated), saved
+    through the calibration store (valid checksum, the previous version kept)."""
+    import json
+
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from omnisort_hw.pipeline.calibration_store import CalibrationStore
+
+    state = config.parent / "state"
+    record = json.loads((state / "system.json").read_text())
+    payload = {k: v for k, v in record.items() if k not in ("storage", "checksum")}
+    turn = Rotation.from_rotvec(np.radians(angle_deg) * np.asarray(axis, float)).as_matrix()
+    R = np.asarray(payload["camera_rotation"]["matrix"], float)
+    payload["camera_rotation"]["matrix"] = (turn @ R).tolist()
+    store = CalibrationStore(state_dir=state, max_age_days=None, expected_serial=None)
+    store.save("system", payload, camera_serial=record["storage"]["camera_serial"])
 
 
 def free_port() -> int:

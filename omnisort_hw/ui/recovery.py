@@ -1,0 +1,200 @@
+"""The guided recovery after a bump: when the drift watchdog refuses motion, the operator is
+led through placing the target, calibrating the camera and the laser plane again (the
+parameters with their sigmas and the residual picture; accept or retake), registering the
+robot again, and a check that finds no drift, then sorts again. Each step is one command of the
+protocol (`calibrate what=extrinsics`, `register_robot`, `check`); the page only shows their
+replies. Started from the drift banner; open to a signed-in operator."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from nicegui import run, ui
+
+from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.ui.context import UiContext
+from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.widgets import tag
+
+STEPS = ("Place the target", "Calibrate camera and laser", "Register the robot", "Verify")
+PARAMETER_UNITS = {"_deg": "deg", "_mm": "mm"}
+
+
+def parameter_rows(reply: Mapping[str, Any]) -> list[dict[str, str]]:
+    """An extrinsic calibration's parameters with their 1-sigma, for a table."""
+    params: Mapping[str, float] = reply.get("parameters") or {}
+    std: Mapping[str, float] = reply.get("std") or {}
+    rows = []
+    for name, value in params.items():
+        unit = next((u for suffix, u in PARAMETER_UNITS.items() if name.endswith(suffix)), "")
+        sigma = std.get(name)
+        rows.append(
+            {
+                "name": name,
+                "value": f"{value:.4f} {unit}".strip(),
+                "sigma": f"{sigma:.4f} {unit}".strip() if sigma is not None else "not given",
+            }
+        )
+    return rows
+
+
+class RecoveryPanel:
+    """The recovery's steps on one page; `refresh()` follows the job each step started."""
+
+    def __init__(
+        self,
+        ctx: UiContext,
+        token: Callable[[], str | None],
+        say: Callable[[str, str], None],
+    ) -> None:
+        self.ctx, self.token, self.say = ctx, token, say
+        self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
+        self.active = False  # opened from the drift banner, until the operator closes it
+
+    def build(self) -> None:
+        with ui.card().classes("w-full") as self.card:
+            ui.label("Recovery after a bump").classes("text-lg")
+            with ui.stepper().props("vertical flat").classes("w-full") as self.stepper:
+                with ui.step(STEPS[0]):
+                    ui.label(
+                        "The camera turned since its calibration: motion is refused until the "
+                        "camera and the laser plane are calibrated again and the robot is "
+                        "registered again. Place the calibration target in the camera's view "
+                        "(the live view shows what the camera sees), clear the floor board."
+                    )
+                    with ui.stepper_navigation():
+                        tag(ui.button("Target placed", on_click=self.stepper.next), "placed")
+                with ui.step(STEPS[1]):
+                    self.calib_note = tag(ui.label(""), "calib-note")
+                    self.params = tag(
+                        ui.table(
+                            columns=[
+                                {"name": k, "label": k, "field": k, "align": "left"}
+                                for k in ("name", "value", "sigma")
+                            ],
+                            rows=[],
+                            row_key="name",
+                        ).props("dense flat"),
+                        "calib-params",
+                    )
+                    self.residuals = tag(
+                        ui.image().classes("w-full max-w-[960px]"), "calib-picture"
+                    )
+                    with ui.stepper_navigation():
+                        tag(ui.button("Calibrate", on_click=self.calibrate), "calibrate")
+                        self.accept = tag(
+                            ui.button("Accept", on_click=self.stepper.next), "accept-calib"
+                        )
+                with ui.step(STEPS[2]):
+                    self.register_note = tag(ui.label(""), "register-note")
+                    with ui.stepper_navigation():
+                        tag(ui.button("Register", on_click=self.register), "register")
+                        self.accept_register = tag(
+                            ui.button("Next", on_click=self.stepper.next), "accept-register"
+                        )
+                with ui.step(STEPS[3]):
+                    self.check_note = tag(ui.label(""), "check-note")
+                    with ui.stepper_navigation():
+                        tag(ui.button("Check", on_click=self.check), "check")
+                        self.done = tag(ui.button("Done", on_click=self.close), "recovery-done")
+        self.done.set_visibility(False)
+        self.accept.set_visibility(False)
+        self.accept_register.set_visibility(False)
+        self.card.set_visibility(False)
+
+    def show(self, visible: bool) -> None:
+        self.card.set_visibility(visible)
+
+    def open(self) -> None:
+        """From the first step."""
+        self.active = True
+        self.stepper.set_value(STEPS[0])
+        for hidden in (self.accept, self.accept_register, self.done):
+            hidden.set_visibility(False)
+        self.card.set_visibility(True)
+
+    def close(self) -> None:
+        self.active = False
+        self.card.set_visibility(False)
+
+    def _start(self, cmd: str, args: dict[str, Any]) -> bool:
+        token = self.token()
+        if token is None:
+            return False
+        try:
+            self.ctx.jobs.start(cmd, args, token)
+        except RuntimeError as exc:
+            self.say(f"{cmd}: not sent: {exc}", "negative")
+            return False
+        self._waiting = (cmd, self.ctx.jobs.ended)
+        return True
+
+    def calibrate(self) -> None:
+        self.accept.set_visibility(False)
+        if self._start("calibrate", {"what": "extrinsics"}):
+            self.calib_note.text = "calibrating from a capture of the target..."
+
+    def register(self) -> None:
+        self.accept_register.set_visibility(False)
+        if self._start("register_robot", {}):
+            self.register_note.text = "registering the robot from the floor board..."
+
+    def check(self) -> None:
+        if self._start("check", {}):
+            self.check_note.text = "checking the camera against the new calibration..."
+
+    async def refresh(self) -> None:
+        """When the job a step started has ended: show its reply, or its error."""
+        if self._waiting is None:
+            return
+        cmd, ended_before = self._waiting
+        end = self.ctx.jobs.last
+        if self.ctx.jobs.ended == ended_before or end is None:
+            return
+        self._waiting = None
+        note = {
+            "calibrate": self.calib_note,
+            "register_robot": self.register_note,
+            "check": self.check_note,
+        }[cmd]
+        if not end.ok or end.result is None:
+            note.text = f"{end.message}: retake after fixing the cause"
+            return
+        note.text = "; ".join(self._summary(cmd, end.result))
+        if cmd == "calibrate":
+            self.params.rows = parameter_rows(end.result)
+            self.params.update()
+            await self._show_picture(end.result)
+            self.accept.set_visibility(True)
+        elif cmd == "register_robot":
+            self.accept_register.set_visibility(True)
+        elif cmd == "check" and not end.result.get("drift"):
+            self.done.set_visibility(True)
+
+    @staticmethod
+    def _summary(cmd: str, result: Mapping[str, Any]) -> list[str]:
+        lines = []
+        if cmd == "check":
+            turned = "DRIFT" if result.get("drift") else "no drift"
+            lines.append(f"{turned}: turned {result.get('angle_deg', 0):.3f} deg")
+        if isinstance(result.get("verdict"), Mapping):
+            lines += [line.strip() for line in verdict_lines(result["verdict"])]
+        return lines or [f"{cmd} done"]
+
+    async def _show_picture(self, result: Mapping[str, Any]) -> None:
+        """The calibration's residual picture, sent by the service (`picture`)."""
+        path = result.get("overlay_png")
+        token = self.token()
+        if not path or token is None:
+            self.residuals.set_source("")
+            return
+        try:
+            sent = await run.io_bound(
+                self.ctx.link.execute, "picture", {"path": path, "width": 960}, token
+            )
+        except (CommandError, ClientError) as exc:
+            self.calib_note.text += f"; the residual picture could not be shown: {exc}"
+            return
+        if sent is not None:  # None: the interface is shutting down
+            self.residuals.set_source(f"data:image/jpeg;base64,{sent['base64']}")

@@ -1,0 +1,126 @@
+"""After a bump, in a real headless browser: the simulated cell's stored calibration is knocked
+(its camera rotation turned 0.3 deg, as a knock turns the camera away from what was calibrated)
+and the operator takes the page's recovery path to a sorted cell. The sort is refused with the
+drift's angle, the banner shows it, the guided steps calibrate the camera and the laser plane
+(parameters with their sigmas, the residual picture), register the robot, check, and the next
+sort puts every cube in its bin. 960 px: the target's markers and the floor board need it."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from omnisort_hw.service.client import Client
+from omnisort_hw.service.launch import ServiceProcess, start_service
+from tests.ui.test_browser import Page, wait_for
+from tests.ui.ui_procs import (
+    TOKEN,
+    chromium,
+    knock_calibration,
+    quit_chromium,
+    sim_cell_file,
+    start_ui,
+    stop_process,
+)
+
+pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+
+KNOCK_DEG = 0.3
+
+
+@pytest.fixture()
+def knocked(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page]]:
+    config = sim_cell_file(tmp_path, width=960, realtime=False, view_period_s=2.0)
+    knock_calibration(config, KNOCK_DEG, (0.0, 1.0, 0.0))
+    with start_service(config, tmp_path) as svc:
+        ui_proc, url = start_ui(config, svc.port, tmp_path)
+        driver = chromium(1400, 1800)
+        try:
+            driver.get(url)
+            page = Page(driver)
+            wait_for("the page", lambda: page.text("state") == "idle", 30)
+            page.type("token", TOKEN)
+            page.click("sign-in")
+            wait_for("the sign-in", lambda: page.visible("start-sort"), 10)
+            yield svc, page
+        finally:
+            quit_chromium(driver)
+            stop_process(ui_proc)
+
+
+def _status(port: int) -> dict[str, Any]:
+    with Client("127.0.0.1", port, timeout_s=10) as c:
+        return dict(c.status())
+
+
+def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, Page]) -> None:
+    svc, page = knocked
+    page.click("start-sort")
+    page.confirm()
+    refused = wait_for(
+        "the refusal",
+        lambda: "calibration_drift" in page.text("job-end") and page.text("job-end"),
+        120,
+        0.5,
+    )
+    assert "turned" in refused, refused
+    alarm = wait_for("the drift banner", lambda: page.visible("drift") and page.text("drift"), 10)
+    angle = float(alarm.split("camera turned ")[1].split(" deg")[0])
+    assert abs(angle - KNOCK_DEG) < 0.1, alarm  # the board's measure of the knock
+    assert _status(svc.port)["last_run"]["job"] != "sort" or not [
+        ev for ev in _status(svc.port)["last_run"]["progress"] if "cube" in ev
+    ], "a cube was picked on the knocked calibration"
+    page.shot("ui_drift")
+
+    page.click("recover")
+    wait_for("the recovery", lambda: page.visible("placed"), 10)
+    page.click("placed")
+    wait_for("the calibration step", lambda: page.visible("calibrate"), 10)
+    page.click("calibrate")
+    note = wait_for(
+        "the calibration",
+        lambda: page.visible("accept-calib") and page.text("calib-note"),
+        180,
+        0.5,
+    )
+    assert note.startswith("PASS"), note
+    rows = page.el("calib-params").text
+    for name in ("cam_roll_deg", "cam_pitch_deg", "laser_distance_mm"):
+        assert name in rows, rows
+    shown = wait_for(
+        "the residual picture",
+        lambda: page.d.execute_script(
+            "return document.querySelector('[data-test=calib-picture] img')?.naturalWidth || 0"
+        ),
+        20,
+    )
+    assert shown >= 400, shown
+    page.shot("ui_recalibration")
+    page.click("accept-calib")
+
+    wait_for("the registration step", lambda: page.visible("register"), 10)
+    page.click("register")
+    wait_for("the registration", lambda: page.visible("accept-register"), 120, 0.5)
+    assert page.text("register-note").startswith("PASS"), page.text("register-note")
+    page.click("accept-register")
+    wait_for("the check step", lambda: page.visible("check"), 10)
+    page.click("check")
+    wait_for("the check", lambda: page.visible("recovery-done"), 120, 0.5)
+    assert page.text("check-note").startswith("no drift"), page.text("check-note")
+    st = _status(svc.port)
+    assert not st["drift"]["motion_refused"] and st["motion_allowed"], st["drift"]
+    wait_for("the banner gone", lambda: not page.visible("drift"), 10)
+    page.click("recovery-done")
+
+    page.click("start-sort")
+    page.confirm()
+    wait_for("the sort", lambda: "sort done" in page.text("job-end"), 240, 0.5)
+    end = page.text("job-end")
+    assert "0 skipped, 0 failed" in end and "0 sorted" not in end, end
+    outcomes = [ev["status"] for ev in _status(svc.port)["last_run"]["progress"] if "cube" in ev]
+    assert outcomes and set(outcomes) == {"sorted"}, outcomes
+    page.shot("ui_recovered")
