@@ -37,6 +37,7 @@ class LiveFeed:
         self.link, self.period_s, self.width_px = link, period_s, width_px
         self.picture: Picture | None = None
         self.problem: str | None = None
+        self.received = 0  # pictures received since the start
         self._times: collections.deque[float] = collections.deque(maxlen=20)
         self._watchers = 0
         self._lock = threading.Lock()
@@ -110,4 +111,5 @@ class LiveFeed:
         )
         self.problem = None
         with self._lock:
+            self.received += 1
             self._times.append(time.monotonic())

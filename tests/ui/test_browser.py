@@ -10,7 +10,7 @@ The screenshots of docs/images/ui_*.png are written here."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,84 +18,11 @@ import pytest
 
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.launch import ServiceProcess, start_service
-from tests.ui.ui_procs import TOKEN, chromium, quit_chromium, sim_cell_file, start_ui, stop_process
+from tests.ui.browser_page import Page, open_cell_page, wait_for
+from tests.ui.ui_procs import TOKEN, quit_chromium, sim_cell_file, start_ui, stop_process
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
-
-IMAGES = Path(__file__).resolve().parents[2] / "docs" / "images"
-
-
-def wait_for(
-    what: str, predicate: Callable[[], Any], timeout_s: float, every_s: float = 0.1
-) -> Any:
-    """Poll `predicate` until it returns something true; fail naming `what` after timeout_s."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(every_s)
-
-
-class Page:
-    """The cell page in the browser, found by the elements' data-test names."""
-
-    def __init__(self, driver: Any) -> None:
-        self.d = driver
-
-    def el(self, name: str, inner: str = "") -> Any:
-        from selenium.webdriver.common.by import By
-
-        return self.d.find_element(By.CSS_SELECTOR, f"[data-test={name}] {inner}".strip())
-
-    def text(self, name: str) -> str:
-        return str(self.el(name).text)
-
-    def click(self, name: str) -> None:
-        self.el(name).click()
-
-    def type(self, name: str, value: str) -> None:
-        from selenium.webdriver.common.keys import Keys
-
-        box = self.el(name)  # Quasar puts the attribute on the <input> itself, or around it
-        if box.tag_name != "input":
-            box = self.el(name, "input")
-        box.send_keys(Keys.CONTROL, "a")
-        box.send_keys(Keys.DELETE)
-        if value:
-            box.send_keys(value)
-
-    def visible(self, name: str) -> bool:
-        from selenium.common.exceptions import NoSuchElementException
-
-        try:
-            return bool(self.el(name).is_displayed())
-        except NoSuchElementException:
-            return False
-
-    def pick_rows(self) -> list[list[str]]:
-        from selenium.webdriver.common.by import By
-
-        rows = self.el("pick-log").find_elements(By.CSS_SELECTOR, "tbody tr")
-        cells = [[td.text for td in r.find_elements(By.CSS_SELECTOR, "td")] for r in rows]
-        return [c for c in cells if len(c) == 6]
-
-    def count(self, name: str, inner: str) -> int:
-        from selenium.webdriver.common.by import By
-
-        return len(self.d.find_elements(By.CSS_SELECTOR, f"[data-test={name}] {inner}"))
-
-    def confirm(self) -> None:
-        wait_for("the confirmation", lambda: self.visible("confirm"), 10)
-        self.click("confirm")
-
-    def shot(self, name: str) -> None:
-        IMAGES.mkdir(parents=True, exist_ok=True)
-        self.d.execute_script("window.scrollTo(0, 0)")
-        self.d.save_screenshot(str(IMAGES / f"{name}.png"))
 
 
 @pytest.fixture()
@@ -103,14 +30,14 @@ def cell(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page, Path]]:
     config = sim_cell_file(tmp_path)
     with start_service(config, tmp_path) as svc:
         ui_proc, url = start_ui(config, svc.port, tmp_path)
-        driver = chromium(1400, 1800)
         try:
-            driver.get(url)
-            page = Page(driver)
-            wait_for("the page", lambda: page.text("state") == "idle", 30)
-            yield svc, page, tmp_path
+            driver, page = open_cell_page(url, sign_in=False)
+            try:
+                wait_for("the page", lambda: page.text("state") == "idle", 30)
+                yield svc, page, tmp_path
+            finally:
+                quit_chromium(driver)
         finally:
-            quit_chromium(driver)
             stop_process(ui_proc)
 
 

@@ -15,10 +15,8 @@ import pytest
 
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.launch import ServiceProcess, start_service
-from tests.ui.test_browser import Page, wait_for
+from tests.ui.browser_page import Page, open_cell_page, wait_for
 from tests.ui.ui_procs import (
-    TOKEN,
-    chromium,
     knock_calibration,
     quit_chromium,
     sim_cell_file,
@@ -38,17 +36,13 @@ def knocked(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page]]:
     knock_calibration(config, KNOCK_DEG, (0.0, 1.0, 0.0))
     with start_service(config, tmp_path) as svc:
         ui_proc, url = start_ui(config, svc.port, tmp_path)
-        driver = chromium(1400, 1800)
         try:
-            driver.get(url)
-            page = Page(driver)
-            wait_for("the page", lambda: page.text("state") == "idle", 30)
-            page.type("token", TOKEN)
-            page.click("sign-in")
-            wait_for("the sign-in", lambda: page.visible("start-sort"), 10)
-            yield svc, page
+            driver, page = open_cell_page(url)
+            try:
+                yield svc, page
+            finally:
+                quit_chromium(driver)
         finally:
-            quit_chromium(driver)
             stop_process(ui_proc)
 
 

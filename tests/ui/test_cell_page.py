@@ -205,3 +205,26 @@ def test_page_outlives_a_service_restart_mid_sort_and_a_service_that_is_down(
         simulate(context(port), scenario)
     finally:
         svc.stop()
+
+
+def test_view_only_screen_offers_no_sign_in_but_stop(tmp_path: Path) -> None:
+    """`[ui] allow_operator = false`: the cell and the live picture, Stop and E-stop, and no
+    way to sign in; Stop still reaches the service (open to everyone, as in the protocol)."""
+    config = sim_cell_file(tmp_path, realtime=False)
+    with start_service(config, tmp_path) as svc:
+        ctx = UiContext.for_service(
+            UiConfig(status_period_s=0.2, allow_operator=False), "127.0.0.1", svc.port
+        )
+
+        async def scenario(user: Any, new_user: Callable[[], Any]) -> None:
+            await user.open("/")
+            await until("the state", lambda: label(user, "state") == "idle", 10)
+            await user.should_see(marker="view-only")
+            for hidden in ("token", "sign-in", "start-sort", "laser-on", "map"):
+                await user.should_not_see(marker=hidden)
+            await until("a picture", lambda: label(user, "view-note").startswith("picture"), 30)
+            user.find(marker="stop").click()
+            await until("stopped", lambda: label(user, "state") == "stopped", 10)
+            assert status(svc.port)["state"] == "stopped"
+
+        simulate(ctx, scenario)

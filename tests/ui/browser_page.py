@@ -1,0 +1,105 @@
+"""The cell page in a real browser for the tests and the benchmark: its elements found by
+their data-test names, waits with a deadline, and a page opened (and signed in)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from tests.ui.ui_procs import TOKEN, chromium, quit_chromium
+
+IMAGES = Path(__file__).resolve().parents[2] / "docs" / "images"
+
+
+def wait_for(
+    what: str, predicate: Callable[[], Any], timeout_s: float, every_s: float = 0.1
+) -> Any:
+    """Poll `predicate` until it returns something true; fail naming `what` after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(every_s)
+
+
+class Page:
+    """The cell page in the browser, found by the elements' data-test names."""
+
+    def __init__(self, driver: Any) -> None:
+        self.d = driver
+
+    def el(self, name: str, inner: str = "") -> Any:
+        from selenium.webdriver.common.by import By
+
+        return self.d.find_element(By.CSS_SELECTOR, f"[data-test={name}] {inner}".strip())
+
+    def text(self, name: str) -> str:
+        return str(self.el(name).text)
+
+    def click(self, name: str) -> None:
+        self.el(name).click()
+
+    def type(self, name: str, value: str) -> None:
+        from selenium.webdriver.common.keys import Keys
+
+        box = self.el(name)  # Quasar puts the attribute on the <input> itself, or around it
+        if box.tag_name != "input":
+            box = self.el(name, "input")
+        box.send_keys(Keys.CONTROL, "a")
+        box.send_keys(Keys.DELETE)
+        if value:
+            box.send_keys(value)
+
+    def visible(self, name: str) -> bool:
+        from selenium.common.exceptions import NoSuchElementException
+
+        try:
+            return bool(self.el(name).is_displayed())
+        except NoSuchElementException:
+            return False
+
+    def pick_rows(self) -> list[list[str]]:
+        from selenium.webdriver.common.by import By
+
+        rows = self.el("pick-log").find_elements(By.CSS_SELECTOR, "tbody tr")
+        cells = [[td.text for td in r.find_elements(By.CSS_SELECTOR, "td")] for r in rows]
+        return [c for c in cells if len(c) == 6]
+
+    def count(self, name: str, inner: str) -> int:
+        from selenium.webdriver.common.by import By
+
+        return len(self.d.find_elements(By.CSS_SELECTOR, f"[data-test={name}] {inner}"))
+
+    def confirm(self) -> None:
+        wait_for("the confirmation", lambda: self.visible("confirm"), 10)
+        self.click("confirm")
+
+    def shot(self, name: str) -> None:
+        IMAGES.mkdir(parents=True, exist_ok=True)
+        self.d.execute_script("window.scrollTo(0, 0)")
+        self.d.save_screenshot(str(IMAGES / f"{name}.png"))
+
+
+def open_cell_page(
+    url: str, sign_in: bool = True, width: int = 1400, height: int = 1800
+) -> tuple[Any, Page]:
+    """Chromium on the cell page, once it shows the state (and, `sign_in`, signed in with the
+    test service's token and showing the sort form)."""
+    driver = chromium(width, height)
+    try:
+        driver.get(url)
+        page = Page(driver)
+        wait_for("the page", lambda: page.text("state") not in ("", "…"), 30)
+        if sign_in:
+            page.type("token", TOKEN)
+            page.click("sign-in")
+            wait_for("the sign-in", lambda: page.visible("start-sort"), 10)
+    except BaseException:
+        quit_chromium(driver)
+        raise
+    return driver, page
