@@ -4,11 +4,14 @@ their data-test names, waits with a deadline, and a page opened (and signed in).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from tests.ui.ui_procs import TOKEN, chromium, quit_chromium
+from omnisort_hw.service.client import Client
+from omnisort_hw.service.launch import ServiceProcess, start_service
+from tests.ui.ui_procs import TOKEN, chromium, quit_chromium, start_ui, stop_process
 
 IMAGES = Path(__file__).resolve().parents[2] / "docs" / "images"
 
@@ -103,3 +106,28 @@ def open_cell_page(
         quit_chromium(driver)
         raise
     return driver, page
+
+
+@contextmanager
+def served_page(
+    config: Path, workdir: Path, sign_in: bool = True
+) -> Iterator[tuple[ServiceProcess, Page]]:
+    """`omnisort serve` on `config`, `omnisort ui` beside it, and Chromium on its page (idle;
+    `sign_in`: signed in); each stopped at the end, whatever happened."""
+    with start_service(config, workdir) as svc:
+        ui_proc, url = start_ui(config, svc.port, workdir)
+        try:
+            driver, page = open_cell_page(url, sign_in=sign_in)
+            try:
+                wait_for("the idle cell", lambda: page.text("state") == "idle", 30)
+                yield svc, page
+            finally:
+                quit_chromium(driver)
+        finally:
+            stop_process(ui_proc)
+
+
+def service_status(port: int) -> dict[str, Any]:
+    """The service's `status` now, on a connection of its own."""
+    with Client("127.0.0.1", port, timeout_s=10) as c:
+        return dict(c.status())

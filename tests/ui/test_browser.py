@@ -12,44 +12,27 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from omnisort_hw.service.client import Client
-from omnisort_hw.service.launch import ServiceProcess, start_service
-from tests.ui.browser_page import Page, open_cell_page, wait_for
-from tests.ui.ui_procs import TOKEN, quit_chromium, sim_cell_file, start_ui, stop_process
+from omnisort_hw.service.launch import ServiceProcess
+from tests.ui.browser_page import Page, served_page, service_status, wait_for
+from tests.ui.ui_procs import TOKEN, sim_cell_file
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
 
 
 @pytest.fixture()
-def cell(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page, Path]]:
-    config = sim_cell_file(tmp_path)
-    with start_service(config, tmp_path) as svc:
-        ui_proc, url = start_ui(config, svc.port, tmp_path)
-        try:
-            driver, page = open_cell_page(url, sign_in=False)
-            try:
-                wait_for("the page", lambda: page.text("state") == "idle", 30)
-                yield svc, page, tmp_path
-            finally:
-                quit_chromium(driver)
-        finally:
-            stop_process(ui_proc)
-
-
-def _status(port: int) -> dict[str, Any]:
-    with Client("127.0.0.1", port, timeout_s=10) as c:
-        return dict(c.status())
+def cell(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page]]:
+    with served_page(sim_cell_file(tmp_path), tmp_path, sign_in=False) as served:
+        yield served
 
 
 def test_operator_sorts_stops_and_resumes_in_a_real_browser(
-    cell: tuple[ServiceProcess, Page, Path],
+    cell: tuple[ServiceProcess, Page],
 ) -> None:
-    svc, page, _ = cell
+    svc, page = cell
     page.shot("ui_read_only")
     assert not page.visible("start-sort"), "a read-only page offers the sort"
 
@@ -84,12 +67,12 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     assert width == 320, width  # the simulated camera's frames, at most [ui] view_width_px
 
     # Out of range: the schema refuses it here, nothing reaches the service.
-    before = _status(svc.port)["service"]
+    before = service_status(svc.port)["service"]
     page.type("sort-max_objects", "0")
     page.click("start-sort")
     wait_for("the schema's refusal", lambda: "minimum of 1" in page.text("sort-problems"), 10)
     assert not page.visible("confirm"), "an invalid sort was offered for confirmation"
-    st = _status(svc.port)
+    st = service_status(svc.port)
     assert st["last_run"]["job"] == "locate", "an invalid sort reached the service"
     assert st["service"]["errors"] == before["errors"], "the service refused something sent"
     page.shot("ui_bad_input")
@@ -98,7 +81,7 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     page.type("sort-max_objects", "")
     page.click("start-sort")
     page.confirm()
-    wait_for("the sort to start", lambda: _status(svc.port)["state"] == "sorting", 30)
+    wait_for("the sort to start", lambda: service_status(svc.port)["state"] == "sorting", 30)
     rows = wait_for("the first pick in the log", page.pick_rows, 120, 0.25)
     assert rows[0][3] == "sorted", rows
     wait_for("the picks per minute", lambda: "picks/min" in page.text("picks-per-min"), 10)
@@ -108,13 +91,19 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     page.click("stop")
     st = wait_for(
         "the stopped state",
-        lambda: (s := _status(svc.port))["state"] == "stopped" and s["job"] is None and s,
+        lambda: (s := service_status(svc.port))["state"] == "stopped" and s["job"] is None and s,
         15,
     )
-    joints = st["devices"]["arm"]["joints_deg"]
+    # The devices' part of a status is a snapshot (its age in `status_age_s`): compare two
+    # read after the stop, a second apart, each younger than the wait before it.
+    time.sleep(0.5)
+    first = service_status(svc.port)
     time.sleep(1.0)
-    again = _status(svc.port)["devices"]["arm"]["joints_deg"]
-    assert max(abs(a - b) for a, b in zip(joints, again, strict=True)) < 1e-6, (joints, again)
+    again = service_status(svc.port)
+    assert max(first.get("status_age_s", 0), again.get("status_age_s", 0)) < 0.5, (first, again)
+    before, after = first["devices"]["arm"]["joints_deg"], again["devices"]["arm"]["joints_deg"]
+    assert max(abs(a - b) for a, b in zip(before, after, strict=True)) < 1e-6, (before, after)
+    assert again["state"] == "stopped" and again["job"] is None
     wait_for("the job's end", lambda: "stopped" in page.text("job-end"), 10)
     first_run = st["last_run"]
     sorted_first = sum(1 for ev in first_run["progress"] if ev.get("status") == "sorted")
@@ -127,7 +116,7 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     page.click("start-sort")
     page.confirm()
     wait_for("the resumed sort's end", lambda: "sort done" in page.text("job-end"), 240, 0.5)
-    final = _status(svc.port)
+    final = service_status(svc.port)
     assert final["state"] == "idle", final["state"]
     outcomes = [ev["status"] for ev in final["last_run"]["progress"] if "cube" in ev]
     assert outcomes and all(o == "sorted" for o in outcomes), outcomes

@@ -9,19 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from omnisort_hw.service.client import Client
-from omnisort_hw.service.launch import ServiceProcess, start_service
-from tests.ui.browser_page import Page, open_cell_page, wait_for
+from omnisort_hw.service.launch import ServiceProcess
+from tests.ui.browser_page import Page, served_page, service_status, wait_for
 from tests.ui.ui_procs import (
     knock_calibration,
-    quit_chromium,
     sim_cell_file,
-    start_ui,
-    stop_process,
 )
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
@@ -34,21 +29,8 @@ KNOCK_DEG = 0.3
 def knocked(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page]]:
     config = sim_cell_file(tmp_path, width=960, realtime=False, view_period_s=2.0)
     knock_calibration(config, KNOCK_DEG, (0.0, 1.0, 0.0))
-    with start_service(config, tmp_path) as svc:
-        ui_proc, url = start_ui(config, svc.port, tmp_path)
-        try:
-            driver, page = open_cell_page(url)
-            try:
-                yield svc, page
-            finally:
-                quit_chromium(driver)
-        finally:
-            stop_process(ui_proc)
-
-
-def _status(port: int) -> dict[str, Any]:
-    with Client("127.0.0.1", port, timeout_s=10) as c:
-        return dict(c.status())
+    with served_page(config, tmp_path) as served:
+        yield served
 
 
 def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, Page]) -> None:
@@ -65,8 +47,8 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     alarm = wait_for("the drift banner", lambda: page.visible("drift") and page.text("drift"), 10)
     angle = float(alarm.split("camera turned ")[1].split(" deg")[0])
     assert abs(angle - KNOCK_DEG) < 0.1, alarm  # the board's measure of the knock
-    assert _status(svc.port)["last_run"]["job"] != "sort" or not [
-        ev for ev in _status(svc.port)["last_run"]["progress"] if "cube" in ev
+    assert service_status(svc.port)["last_run"]["job"] != "sort" or not [
+        ev for ev in service_status(svc.port)["last_run"]["progress"] if "cube" in ev
     ], "a cube was picked on the knocked calibration"
     page.shot("ui_drift")
 
@@ -105,7 +87,7 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     page.click("check")
     wait_for("the check", lambda: page.visible("recovery-done"), 120, 0.5)
     assert page.text("check-note").startswith("no drift"), page.text("check-note")
-    st = _status(svc.port)
+    st = service_status(svc.port)
     assert not st["drift"]["motion_refused"] and st["motion_allowed"], st["drift"]
     wait_for("the banner gone", lambda: not page.visible("drift"), 10)
     page.click("recovery-done")
@@ -115,6 +97,8 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     wait_for("the sort", lambda: "sort done" in page.text("job-end"), 240, 0.5)
     end = page.text("job-end")
     assert "0 skipped, 0 failed" in end and "0 sorted" not in end, end
-    outcomes = [ev["status"] for ev in _status(svc.port)["last_run"]["progress"] if "cube" in ev]
+    outcomes = [
+        ev["status"] for ev in service_status(svc.port)["last_run"]["progress"] if "cube" in ev
+    ]
     assert outcomes and set(outcomes) == {"sorted"}, outcomes
     page.shot("ui_recovered")
