@@ -67,6 +67,16 @@ class DeviceLockTimeoutError(OmnisortError):
 CellDevices = Devices
 
 
+def _encoded(image: Any, fmt: str, params: Sequence[int] = ()) -> bytes:
+    """`image` as a png or jpg file's bytes."""
+    import cv2
+
+    ok, buf = cv2.imencode(f".{fmt}", image, list(params))
+    if not ok:
+        raise OmnisortError(f"could not encode the image as {fmt}")
+    return bytes(buf.tobytes())
+
+
 def _jpeg(image: Any, width: int, quality: int) -> dict[str, Any]:
     """`image` scaled to at most `width` px (never enlarged) as a JPEG in base64, with its
     size and `scale` (its px per px of `image`: overlays in `image` px times this)."""
@@ -77,15 +87,13 @@ def _jpeg(image: Any, width: int, quality: int) -> dict[str, Any]:
     if scale < 1.0:
         size = (max(1, round(w * scale)), max(1, round(h * scale)))
         image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise OmnisortError("could not encode the picture as JPEG")
+    data = _encoded(image, "jpg", (cv2.IMWRITE_JPEG_QUALITY, int(quality)))
     return {
         "width": int(image.shape[1]),
         "height": int(image.shape[0]),
         "scale": scale,
         "format": "jpg",
-        "base64": base64.b64encode(buf.tobytes()).decode("ascii"),
+        "base64": base64.b64encode(data).decode("ascii"),
     }
 
 
@@ -453,16 +461,11 @@ class Cell:
         self, encoding: str = "path", fmt: str = "png", laser: bool | None = None
     ) -> dict[str, Any]:
         """Grab one image; return it as a file under `capture_dir` or as base64."""
-        import cv2
-
         if laser is not None:
             self.set_laser(laser)
         frame = self.grab()
         ext = ".png" if fmt == "png" else ".jpg"
-        ok, buf = cv2.imencode(ext, frame.image)
-        if not ok:
-            raise OmnisortError(f"could not encode the image as {fmt}")
-        data = buf.tobytes()
+        data = _encoded(frame.image, fmt)
         h, w = frame.image.shape[:2]
         result: dict[str, Any] = {
             "sequence": int(frame.sequence),

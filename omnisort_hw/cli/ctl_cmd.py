@@ -100,7 +100,7 @@ def default_timeout(command: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from omnisort_hw.config.service import DEFAULT_PORT
+    from omnisort_hw.config.service import DEFAULT_PORT, client_host
     from omnisort_hw.service.client import Client, ClientError
 
     host, port, token = "127.0.0.1", DEFAULT_PORT, None
@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         from omnisort_hw.config.cell import load_cell_config
 
         svc = load_cell_config(args.config).service
-        host = "127.0.0.1" if svc.host in ("0.0.0.0", "::") else svc.host
+        host = client_host(svc.host)
         port, token = svc.port, svc.token
     host = args.host or host
     port = args.port if args.port is not None else port

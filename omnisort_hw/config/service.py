@@ -81,6 +81,22 @@ def _path(section: Mapping[str, Any], name: str, key: str, default: str, base: P
     return path
 
 
+def client_host(host: str) -> str:
+    """Where a client on this PC reaches a service bound to `host` (every address: loopback)."""
+    return "127.0.0.1" if host in ("0.0.0.0", "::") else host
+
+
+def listen_address(section: Mapping[str, Any]) -> tuple[str, int]:
+    """`[service]` host and port, checked (what the service binds, and its clients read)."""
+    host = section.get("host", "127.0.0.1")
+    if not isinstance(host, str) or not host:
+        raise ConfigError("[service] host must be a non-empty string")
+    port = _integer(section, "service", "port", DEFAULT_PORT, 0)
+    if port > 65535:
+        raise ConfigError(f"[service] port must be in 0..65535, got {port}")
+    return host, port
+
+
 @dataclass(frozen=True)
 class ServiceConfig:
     """Where the service listens and how much it accepts."""
@@ -113,12 +129,7 @@ class ServiceConfig:
         """Parse `[service]`; a token may come inline (`token`) or from a file (`token_file`)."""
         name = "service"
         _check_keys(section, name, SERVICE_KEYS)
-        host = section.get("host", "127.0.0.1")
-        if not isinstance(host, str) or not host:
-            raise ConfigError("[service] host must be a non-empty string")
-        port = _integer(section, name, "port", DEFAULT_PORT, 0)
-        if port > 65535:
-            raise ConfigError(f"[service] port must be in 0..65535, got {port}")
+        host, port = listen_address(section)
         token = section.get("token", "")
         if not isinstance(token, str):
             raise ConfigError("[service] token must be a string")

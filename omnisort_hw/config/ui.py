@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.config.service import DEFAULT_PORT
+from omnisort_hw.config.service import client_host, listen_address
 from omnisort_hw.config.toml_file import read_toml
 from omnisort_hw.config.watchdog import _bool, _num, _unknown
 from omnisort_hw.errors import ConfigError
@@ -76,13 +76,9 @@ def load_ui_settings(path: str | Path) -> UiSettings:
         if not isinstance(section, Mapping) or not isinstance(service, Mapping):
             raise ConfigError("[ui] and [service] must be tables")
         ui = UiConfig.from_mapping(section)
-        host = service.get("host", "127.0.0.1")
-        port = service.get("port", DEFAULT_PORT)
-        if not isinstance(host, str) or not host:
-            raise ConfigError(f"[service] host must be a non-empty string, got {host!r}")
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 < port <= 65535:
-            raise ConfigError(f"[service] port must be in 1..65535, got {port!r}")
+        host, port = listen_address(service)
+        if port == 0:
+            raise ConfigError("[service] port 0 (any free port) cannot be reached: set it")
     except ConfigError as exc:
         raise ConfigError(f"{p}: {exc}") from None
-    # A service listening on every address is reached on this PC through loopback.
-    return UiSettings(ui, "127.0.0.1" if host in ("0.0.0.0", "::") else host, port)
+    return UiSettings(ui, client_host(host), port)

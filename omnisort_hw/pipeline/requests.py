@@ -42,6 +42,11 @@ def board_spec(board: str | None, square_mm: float | None, field: str) -> BoardS
         raise InputError(f"{field}: {exc}") from None
 
 
+def _width_px() -> Any:
+    """The `width` of a picture sent to a client: scaled down to it, never enlarged."""
+    return param(960, lo=64, hi=4096, unit="px", help="the picture's width at most")
+
+
 def _image(help: str = IMAGE_HELP) -> Any:
     """The `image` argument: a path on the cell PC, or a capture when omitted."""
     return param(None, kind="path", help=help, flag="image")
@@ -249,7 +254,7 @@ class ViewRequest:
     """A live picture for a screen: a fresh frame, scaled down and JPEG-encoded (base64); no
     file written, nothing switched, nothing logged."""
 
-    width: int = param(960, lo=64, hi=4096, unit="px", help="the picture's width at most")
+    width: int = _width_px()
     quality: int = param(80, lo=10, hi=95, help="JPEG quality")
 
 
@@ -261,7 +266,7 @@ class PictureRequest:
     path: str = param(
         kind="path", help="absolute path of a picture the service wrote (a reply's overlay_png)"
     )
-    width: int = param(960, lo=64, hi=4096, unit="px", help="the picture's width at most")
+    width: int = _width_px()
     quality: int = param(85, lo=10, hi=95, help="JPEG quality")
 
 

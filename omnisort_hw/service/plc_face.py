@@ -28,6 +28,7 @@ from pymodbus.server import ModbusTcpServer
 from omnisort_hw.config.watchdog import PlcConfig
 from omnisort_hw.errors import ConfigError
 from omnisort_hw.service import protocol as proto
+from omnisort_hw.service.status_reading import pick_log, sort_progress
 
 log = logging.getLogger("omnisort.plc")
 
@@ -133,16 +134,10 @@ class PlcFace:
         st = self.service.status_reply()
         state = STATES.index(st["state"]) if st["state"] in STATES else 0xFFFF
         run = st.get("last_run") or {}
-        counts = {"sorted": 0, "skipped": 0, "failed": 0}
-        done = total = 0
-        if run.get("job") == "sort":
-            for ev in run.get("progress") or []:
-                if "to_pick" in ev:
-                    total = int(ev["to_pick"])
-                status = ev.get("status")
-                if status in counts:
-                    counts[status] += 1
-                    done += 1
+        picks = pick_log(dict(st))
+        counts = {k: sum(p.outcome == k for p in picks) for k in ("sorted", "skipped", "failed")}
+        done = sum(counts.values())
+        total = (sort_progress(dict(st)) or (0, 0))[1]
         ended = run.get("ended")
         if ended and ended != self._seen_end:
             self._seen_end = ended

@@ -87,7 +87,7 @@ class CellPage:
                 self._build_operator()
                 self._build_status()
             with ui.column().classes("gap-4 grow min-w-0"):
-                self.recovery = RecoveryPanel(self.ctx, self._token, self.say)
+                self.recovery = RecoveryPanel(self.ctx, self._token, self._start_job)
                 self.recovery.build()
                 self._build_job()
                 self._build_view()
@@ -260,6 +260,10 @@ class CellPage:
         self.view_ops.set_visibility(self.ctx.operators.signed_in(self.browser))
         if pic is None:
             return
+        key = (pic.sequence, self.ctx.jobs.ended)
+        if key == self._view_shown:
+            return
+        self._view_shown = key
         unit = pic.width / 960.0
         overlays = [
             o
@@ -269,10 +273,6 @@ class CellPage:
             )
             if o is not None
         ]
-        key = (pic.sequence, self.ctx.jobs.ended)
-        if key == self._view_shown:
-            return
-        self._view_shown = key
         self.view.set_source(pic.data_url)
         self.view.content = "".join(o.svg for o in overlays)
         self.view_legend.text = "; ".join(o.legend for o in overlays)
@@ -361,21 +361,22 @@ class CellPage:
         if self._token() is not None:
             self.recovery.open()
 
-    def _start_job(self, cmd: str, args: dict[str, Any]) -> None:
-        """A job that does not move the arm: no confirmation."""
+    def _start_job(self, cmd: str, args: dict[str, Any]) -> bool:
+        """Start a job on the service for this operator; False, with the reason shown, when it
+        was not sent. Motion is confirmed before this (`start_sort`), never here."""
         token = self._token()
         if token is None:
-            return
-        snap = self.ctx.link.snapshot
-        if snap.status is None:
+            return False
+        if not self.ctx.link.snapshot.reachable:
             self.say(f"{cmd}: not sent, the service is unreachable", "negative")
-            return
+            return False
         try:
             self.ctx.jobs.start(cmd, args, token)
         except RuntimeError as exc:
             self.say(f"{cmd}: not sent: {exc}", "negative")
-            return
+            return False
         self.say(f"{cmd} started")
+        return True
 
     def map_line(self) -> None:
         self._start_job("map", {"points": True})
@@ -408,12 +409,7 @@ class CellPage:
         if not await confirm("Start sorting? The arm will move."):
             self.say("sort: cancelled, nothing was sent")
             return
-        try:
-            self.ctx.jobs.start("sort", args, token)
-        except RuntimeError as exc:
-            self.say(f"sort: not sent: {exc}", "negative")
-            return
-        self.say("sort started")
+        self._start_job("sort", args)
 
 
 def cell_page(ctx: UiContext) -> None:

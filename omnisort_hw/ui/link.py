@@ -12,12 +12,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from omnisort_hw.service.client import Client, ClientError, CommandError
 from omnisort_hw.service.status_reply import StatusReply
 
-__all__ = ["Client", "ClientError", "CommandError", "ServiceLink", "Snapshot"]
+__all__ = ["ClientError", "CommandError", "Reader", "ServiceLink", "Snapshot"]
 
 
 @dataclass(frozen=True)
@@ -26,12 +26,34 @@ class Snapshot:
 
     status: StatusReply | None
     problem: str | None
-    read_at: float  # time.monotonic() of the reading
-    down_since: float | None = None  # time.monotonic() of the first failed reading
 
     @property
     def reachable(self) -> bool:
         return self.status is not None
+
+
+class Reader:
+    """One connection kept for a reader that asks again and again (the status, the live
+    view): opened at the first request, dropped after a failure of the connection and opened
+    again at the next; a refusal by the service keeps it."""
+
+    def __init__(self, connect: Callable[[], Client]) -> None:
+        self._connect = connect
+        self._client: Client | None = None
+
+    def execute(self, cmd: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
+        try:
+            if self._client is None:
+                self._client = self._connect()
+            return self._client.execute(cmd, args)
+        except (ClientError, OSError, ValueError):
+            self.close()
+            raise
+
+    def close(self) -> None:
+        if self._client is not None:
+            self._client.close()
+            self._client = None
 
 
 class ServiceLink:
@@ -48,7 +70,7 @@ class ServiceLink:
     ) -> None:
         self.host, self.port, self.period_s = host, port, period_s
         self.timeout_s, self.connect_timeout_s = timeout_s, connect_timeout_s
-        self._snapshot = Snapshot(None, "not read yet", time.monotonic())
+        self._snapshot = Snapshot(None, "not read yet")
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
@@ -74,35 +96,21 @@ class ServiceLink:
             self._thread = None
 
     def _read_loop(self) -> None:
-        client: Client | None = None
+        reader = self.reader()
         while not self._stop.is_set():
             t0 = time.monotonic()
             try:
-                if client is None:
-                    client = self._client(None, self.timeout_s)
-                self._store(Snapshot(client.status(), None, time.monotonic()))
+                snap = Snapshot(cast(StatusReply, reader.execute("status")), None)
             except (ClientError, CommandError, OSError, ValueError) as exc:
-                if client is not None:
-                    client.close()
-                    client = None
-                self._store_problem(f"service unreachable at {self.address}: {exc}")
+                snap = Snapshot(None, f"service unreachable at {self.address}: {exc}")
+            with self._lock:
+                self._snapshot = snap
             self._stop.wait(max(0.0, self.period_s - (time.monotonic() - t0)))
-        if client is not None:
-            client.close()
+        reader.close()
 
-    def _store(self, snap: Snapshot) -> None:
-        with self._lock:
-            self._snapshot = snap
-
-    def _store_problem(self, problem: str) -> None:
-        now = time.monotonic()
-        with self._lock:
-            since = self._snapshot.down_since if self._snapshot.problem else None
-            self._snapshot = Snapshot(None, problem, now, since if since is not None else now)
-
-    def client(self) -> Client:
-        """A connection of its own without a token (for a reader like the live view)."""
-        return self._client(None, self.timeout_s)
+    def reader(self) -> Reader:
+        """A connection of its own, without a token, for a reader that asks again and again."""
+        return Reader(lambda: self._client(None, self.timeout_s))
 
     def _client(self, token: str | None, timeout_s: float) -> Client:
         return Client(

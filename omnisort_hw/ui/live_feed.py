@@ -11,7 +11,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from omnisort_hw.ui.link import Client, ClientError, CommandError, ServiceLink
+from omnisort_hw.ui.link import ClientError, CommandError, ServiceLink
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,7 @@ class LiveFeed:
             self._thread.join(timeout=self.link.timeout_s + self.link.connect_timeout_s + 1.0)
 
     def _loop(self) -> None:
-        client: Client | None = None
+        reader = self.link.reader()
         while not self._stop.is_set():
             if self.watchers == 0:
                 self._wake.wait(1.0)
@@ -86,19 +86,13 @@ class LiveFeed:
                 continue
             t0 = time.monotonic()
             try:
-                if client is None:
-                    client = self.link.client()
-                self._store(client.execute("view", {"width": self.width_px}))
+                self._store(reader.execute("view", {"width": self.width_px}))
             except CommandError as exc:
                 self.problem = f"no picture: {exc.code}: {exc.message}"
             except (ClientError, OSError, ValueError) as exc:
-                if client is not None:
-                    client.close()
-                    client = None
                 self.problem = f"no picture: the service cannot be reached: {exc}"
             self._stop.wait(max(0.0, self.period_s - (time.monotonic() - t0)))
-        if client is not None:
-            client.close()
+        reader.close()
 
     def _store(self, reply: dict[str, Any]) -> None:
         self.picture = Picture(

@@ -46,9 +46,11 @@ class RecoveryPanel:
         self,
         ctx: UiContext,
         token: Callable[[], str | None],
-        say: Callable[[str, str], None],
+        start_job: Callable[[str, dict[str, Any]], bool],
     ) -> None:
-        self.ctx, self.token, self.say = ctx, token, say
+        """`token`: this session's, for the residual picture; `start_job`: the page's one way
+        to start a job (signed in, service reachable, no job of this interface running)."""
+        self.ctx, self.token, self.start_job = ctx, token, start_job
         self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
         self.active = False  # opened from the drift banner, until the operator closes it
 
@@ -119,15 +121,10 @@ class RecoveryPanel:
         self.card.set_visibility(False)
 
     def _start(self, cmd: str, args: dict[str, Any]) -> bool:
-        token = self.token()
-        if token is None:
+        ended = self.ctx.jobs.ended
+        if not self.start_job(cmd, args):
             return False
-        try:
-            self.ctx.jobs.start(cmd, args, token)
-        except RuntimeError as exc:
-            self.say(f"{cmd}: not sent: {exc}", "negative")
-            return False
-        self._waiting = (cmd, self.ctx.jobs.ended)
+        self._waiting = (cmd, ended)
         return True
 
     def calibrate(self) -> None:
