@@ -41,6 +41,8 @@ from omnisort_hw.errors import InputError, NotAvailableError, OmnisortError
 from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.gripper_load import assess
+from omnisort_hw.pipeline.replies import DetectReply, ImageReply
+from omnisort_hw.pipeline.requests import DetectRequest
 from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
 
@@ -77,7 +79,7 @@ def _encoded(image: Any, fmt: str, params: Sequence[int] = ()) -> bytes:
     return bytes(buf.tobytes())
 
 
-def _jpeg(image: Any, width: int, quality: int) -> dict[str, Any]:
+def _jpeg(image: Any, width: int, quality: int) -> ImageReply:
     """`image` scaled to at most `width` px (never enlarged) as a JPEG in base64, with its
     size and `scale` (its px per px of `image`: overlays in `image` px times this)."""
     import cv2
@@ -489,14 +491,27 @@ class Cell:
         """A live picture for a screen: one fresh frame scaled to at most `width` px and
         JPEG-encoded (base64). Not logged (a screen asks often); while a measurement holds
         the camera it is refused at once (`device_lock_timeout`) rather than waited for."""
-        cam = self._need("camera")
-        with self._locked(self._camera_lock, "camera", VIEW_LOCK_TIMEOUT_S):
-            frame = cam.grab(None)
+        frame = self.live_frame()
         return {
             "sequence": int(frame.sequence),
             "wall_time": _iso(frame.wall_time),
             **_jpeg(frame.image, width, quality),
         }
+
+    def live_frame(self) -> Any:
+        """A fresh frame for a screen, the laser as it is: refused at once
+        (`device_lock_timeout`) while a measurement holds the camera, never waited for."""
+        cam = self._need("camera")
+        with self._locked(self._camera_lock, "camera", VIEW_LOCK_TIMEOUT_S):
+            return cam.grab(None)
+
+    def detect(self, request: DetectRequest) -> DetectReply:
+        """A calibration pattern found in a live frame or the request's image, with a picture
+        of that frame (`pipeline.detection`): for a screen where a target is being placed."""
+        from omnisort_hw.pipeline import detection
+
+        found = detection.run(self.jobs, request)
+        return {**found.reply(), "picture": _jpeg(found.image, request.width, request.quality)}
 
     def picture(self, path: str, width: int = 960, quality: int = 85) -> dict[str, Any]:
         """A picture this service wrote (a PNG in the calibration store's folder, as a reply's

@@ -83,6 +83,8 @@ class CellHost(Protocol):
 
     def grab(self, timeout_s: float | None = None) -> Any: ...
 
+    def live_frame(self) -> Any: ...
+
     def set_laser(self, on: bool) -> bool: ...
 
     def measuring(self) -> AbstractContextManager[tuple[Any, Any]]: ...
@@ -226,6 +228,10 @@ class CellJobs:
         finally:
             if laser and self.cell.devices.laser is not None:
                 self.cell.set_laser(False)
+
+    def live_frame(self) -> np.ndarray:
+        """A fresh frame for a screen, the laser as it is (`cell.Cell.live_frame`)."""
+        return np.asarray(self.cell.live_frame().image)
 
     def run_logged(
         self,

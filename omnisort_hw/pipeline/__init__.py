@@ -15,6 +15,7 @@ rig's interface, the calibration store and gate, the capture, the verdict, the s
     drift_check    laser-off image -> has the camera turned since the registration?
     sort_run       capture, locate, plan, pick and place through the device interfaces
     adopt          calibration files made elsewhere -> the cell's store, verified
+    detection      a live frame -> a calibration pattern's pixels, for a screen placing it
 
 Each calls the pure core (`omnisort_hw.core`) and the devices' interfaces (`drivers.base`);
 none imports the simulator.
@@ -29,4 +30,5 @@ USE_CASES = (
     "drift_check",
     "sort_run",
     "adopt",
+    "detection",
 )

@@ -116,3 +116,37 @@ class SortReply(SortExtras):
 class AdoptReply(TypedDict):
     adopted: dict[str, Record]
     drift_reference: bool
+
+
+class LayerReply(TypedDict):
+    """One detected feature's pixels in the frame, its kind and the colour it is drawn in."""
+
+    name: str
+    kind: str
+    colour: str
+    pixels: list[list[float]]
+    labels: NotRequired[list[str]]
+
+
+class ImageReply(TypedDict):
+    """A picture sent to a client: JPEG in base64, its size, and its px per camera px."""
+
+    width: int
+    height: int
+    scale: float
+    format: str
+    base64: str
+
+
+class DetectReply(TypedDict):
+    """A calibration pattern in one frame: its layers, or why it was not found."""
+
+    what: str
+    pattern: str
+    found: bool
+    summary: str
+    image_width: int
+    image_height: int
+    layers: list[LayerReply]
+    problem: NotRequired[str]
+    picture: NotRequired[ImageReply]

@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 
 DEFAULT_BOARD = "9x6"
 """Inner corners COLSxROWS of a checkerboard when none is named (the paper's boards)."""
+DETECT_PATTERNS = ("target", "board", "floor")
 DEFAULT_SQUARE_MM = 97.0
 """The square of the extrinsic checkerboards target when none is given (the paper's)."""
 
@@ -254,6 +255,40 @@ class ViewRequest:
     """A live picture for a screen: a fresh frame, scaled down and JPEG-encoded (base64); no
     file written, nothing switched, nothing logged."""
 
+    width: int = _width_px()
+    quality: int = param(80, lo=10, hi=95, help="JPEG quality")
+
+
+@dataclass(frozen=True)
+class DetectRequest:
+    """Find a calibration pattern in one fresh frame (or an image file), for a person placing
+    it: its pixels and a picture of the same frame. Nothing fitted, saved, switched or logged."""
+
+    what: str = param(
+        "target",
+        choices=DETECT_PATTERNS,
+        help="the extrinsic target, a checkerboard (intrinsics views) or the floor board "
+        "of [registration]",
+    )
+    target: str | None = param(
+        None,
+        choices=TARGETS,
+        help="which target (default: the cell file's [target] kind)",
+        only_when=(("what", (None, "target")),),
+    )
+    board: str | None = param(
+        None,
+        max_chars=16,
+        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
+        only_when=(("what", (None, "target", "board")),),
+    )
+    image: str | None = param(
+        None,
+        kind="path",
+        help="image file (over the protocol: an absolute path on the cell PC); omitted: a "
+        "live frame, the laser as it is",
+        flag="image",
+    )
     width: int = _width_px()
     quality: int = param(80, lo=10, hi=95, help="JPEG quality")
 

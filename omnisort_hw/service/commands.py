@@ -15,6 +15,7 @@ from typing import Any, cast
 
 from omnisort_hw.pipeline.replies import (
     AdoptReply,
+    DetectReply,
     DriftReply,
     LocateReply,
     MapReply,
@@ -27,6 +28,7 @@ from omnisort_hw.pipeline.requests import (
     CalibrateRequest,
     CaptureRequest,
     CheckRequest,
+    DetectRequest,
     LaserRequest,
     LocateRequest,
     MapRequest,
@@ -74,6 +76,9 @@ class CellCommands:
 
     def picture(self, request: PictureRequest) -> Result:
         return self.execute("picture", wire_args(request))
+
+    def detect(self, request: DetectRequest | None = None) -> DetectReply:
+        return cast(DetectReply, self.execute("detect", wire_args(request)))
 
     def capture(self, request: CaptureRequest | None = None) -> Result:
         return self.execute("capture", wire_args(request))

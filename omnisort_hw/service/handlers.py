@@ -20,6 +20,7 @@ from omnisort_hw.pipeline.requests import (
     CalibrateRequest,
     CaptureRequest,
     CheckRequest,
+    DetectRequest,
     LaserRequest,
     LocateRequest,
     MapRequest,
@@ -61,6 +62,10 @@ def describe(ctx: Context, _request: None) -> Reply:
 
 def view(ctx: Context, request: ViewRequest) -> Reply:
     return ctx.cell.view(request.width, request.quality)
+
+
+def detect(ctx: Context, request: DetectRequest) -> Reply:
+    return ctx.cell.detect(request)
 
 
 def picture(ctx: Context, request: PictureRequest) -> Reply:
@@ -128,6 +133,7 @@ HANDLERS: dict[str, Handler] = {
     "describe": describe,
     "view": view,
     "picture": picture,
+    "detect": detect,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

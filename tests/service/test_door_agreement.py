@@ -63,6 +63,7 @@ SERVICE_ONLY = {
     "describe": "the protocol's schema",
     "capture": "the cell's camera, held by the service",
     "view": "a live picture for a client's screen (the CLI's pictures are files)",
+    "detect": "a live frame's pattern for a screen placing it (each calibration detects its own)",
     "picture": "a picture the service wrote, for a client elsewhere (the CLI's are files)",
     "laser": "the cell's laser, held by the service",
     "move": "the arm, held by the service",
