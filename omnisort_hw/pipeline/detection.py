@@ -31,6 +31,8 @@ from omnisort_hw.pipeline.requests import DEFAULT_SQUARE_MM, DetectRequest, boar
 
 REJECTED: Colour = (0, 0, 255)  # a board corner that failed its saddle check (red)
 PIXEL_DECIMALS = 1  # a layer's pixels are sent to 0.1 px: finer than any screen draws
+COUNTED = {"marker": "markers", "corner": "corners", "rejected": "corners rejected"}
+"""The layers counted as things in a summary; the others (lines, the stripe) in pixels."""
 
 
 class DetectionRig(Protocol):
@@ -112,7 +114,7 @@ class Detection:
         counts: dict[str, int] = {}
         for layer in self.layers:
             counts[layer.kind] = counts.get(layer.kind, 0) + len(layer.pixels)
-        text = ", ".join(f"{n} {kind} px" for kind, n in counts.items())
+        text = ", ".join(f"{n} {COUNTED.get(kind, kind + ' px')}" for kind, n in counts.items())
         return f"{self.pattern.name} found: {text}"
 
     def reply(self) -> DetectReply:

@@ -73,3 +73,32 @@ def cubes_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> 
         f"{i} {c.get('color')} sigma {c.get('sigma_mm', 0):.2f} mm" for i, c in enumerate(cubes)
     )
     return Overlay("".join(parts), legend)
+
+
+def detection_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay:
+    """A `detect` reply's layers in their colours: markers ringed and labelled, board corners
+    and rejected corners as larger dots, border, floor line and stripe as small dots."""
+    parts = []
+    for layer in reply.get("layers") or []:
+        colour = escape(str(layer.get("colour", "white")))
+        pixels: Sequence[Sequence[float]] = layer.get("pixels") or []
+        labels: Sequence[str] = layer.get("labels") or []
+        if layer.get("kind") == "marker":
+            for i, (u, v) in enumerate(pixels):
+                x, y = u * scale, v * scale
+                parts.append(
+                    f'<circle cx="{x:.1f}" cy="{y:.1f}" r="{8 * unit:.2f}" fill="none" '
+                    f'stroke="{colour}" stroke-width="{2 * unit:.2f}" />'
+                )
+                if i < len(labels):
+                    parts.append(
+                        f'<text x="{x + 10 * unit:.1f}" y="{y:.1f}" fill="{colour}" '
+                        f'font-size="{12 * unit:.1f}">{escape(labels[i])}</text>'
+                    )
+            continue
+        r = (3 if layer.get("kind") in ("corner", "rejected") else 1.5) * unit
+        parts += [
+            f'<circle cx="{u * scale:.1f}" cy="{v * scale:.1f}" r="{r:.2f}" fill="{colour}" />'
+            for u, v in pixels
+        ]
+    return Overlay("".join(parts), str(reply.get("summary", "")))

@@ -14,6 +14,7 @@ from nicegui import run, ui
 
 from omnisort_hw.pipeline.verdict import verdict_lines
 from omnisort_hw.ui.context import UiContext
+from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.widgets import tag
 
@@ -53,20 +54,24 @@ class RecoveryPanel:
         self.ctx, self.token, self.start_job = ctx, token, start_job
         self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
         self.active = False  # opened from the drift banner, until the operator closes it
+        self.detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "recovery-target")
 
     def build(self) -> None:
-        with ui.card().classes("w-full") as self.card:
+        with tag(ui.card(), "recovery").classes("w-full") as self.card:
             ui.label("Recovery after a bump").classes("text-lg")
             with ui.stepper().props("vertical flat").classes("w-full") as self.stepper:
                 with ui.step(STEPS[0]):
                     ui.label(
                         "The camera turned since its calibration: motion is refused until the "
                         "camera and the laser plane are calibrated again and the robot is "
-                        "registered again. Place the calibration target in the camera's view "
-                        "(the live view shows what the camera sees), clear the floor board."
+                        "registered again. Place the calibration target in the camera's view, "
+                        "with the laser on, until its detection (markers, borders, floor lines "
+                        "and stripe) is drawn below; clear the floor board."
                     )
+                    self.detection.build()
                     with ui.stepper_navigation():
-                        tag(ui.button("Target placed", on_click=self.stepper.next), "placed")
+                        tag(ui.button("Laser on", on_click=self.laser_on), "recovery-laser")
+                        tag(ui.button("Target placed", on_click=self.placed), "placed")
                 with ui.step(STEPS[1]):
                     self.calib_note = tag(ui.label(""), "calib-note")
                     self.params = tag(
@@ -111,6 +116,7 @@ class RecoveryPanel:
     def open(self) -> None:
         """From the first step."""
         self.active = True
+        self.detection.active = True
         self.stepper.set_value(STEPS[0])
         for hidden in (self.accept, self.accept_register, self.done):
             hidden.set_visibility(False)
@@ -118,7 +124,23 @@ class RecoveryPanel:
 
     def close(self) -> None:
         self.active = False
+        self.detection.active = False
         self.card.set_visibility(False)
+
+    def placed(self) -> None:
+        """On to the calibration; the live detection stops asking."""
+        self.detection.active = False
+        self.stepper.next()
+
+    async def laser_on(self) -> None:
+        """The stripe is part of the target's detection: the laser switched on for it."""
+        token = self.token()
+        if token is None:
+            return
+        try:
+            await run.io_bound(self.ctx.link.execute, "laser", {"on": True}, token)
+        except (CommandError, ClientError) as exc:
+            self.detection.summary.text = f"laser: not switched: {exc}"
 
     def _start(self, cmd: str, args: dict[str, Any]) -> bool:
         ended = self.ctx.jobs.ended

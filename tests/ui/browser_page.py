@@ -82,9 +82,13 @@ class Page:
         wait_for("the confirmation", lambda: self.visible("confirm"), 10)
         self.click("confirm")
 
-    def shot(self, name: str) -> None:
+    def shot(self, name: str, at: str | None = None) -> None:
+        """The page from its top, or from the element named `at`."""
         IMAGES.mkdir(parents=True, exist_ok=True)
-        self.d.execute_script("window.scrollTo(0, 0)")
+        if at is None:
+            self.d.execute_script("window.scrollTo(0, 0)")
+        else:
+            self.d.execute_script("arguments[0].scrollIntoView()", self.el(at))
         self.d.save_screenshot(str(IMAGES / f"{name}.png"))
 
 

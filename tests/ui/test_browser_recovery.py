@@ -54,6 +54,21 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
 
     page.click("recover")
     wait_for("the recovery", lambda: page.visible("placed"), 10)
+    # The target's detection, drawn live: without the laser, why not and the markers seen;
+    # with it, the whole target.
+    dark = wait_for("a detection", lambda: page.text("recovery-target-summary"), 30, 0.5)
+    assert "not found" in dark and "laser" in dark, dark
+    page.click("recovery-laser")
+    wait_for(
+        "the target found",
+        lambda: page.text("recovery-target-summary").startswith("the two-sided target found"),
+        30,
+        0.5,
+    )
+    # Eight markers ringed, and the borders, floor lines and stripe as dots.
+    assert page.count("recovery-target-image", "svg circle[fill=none]") == 8
+    assert page.count("recovery-target-image", "svg circle") > 200
+    page.shot("ui_recovery_target", at="recovery")
     page.click("placed")
     wait_for("the calibration step", lambda: page.visible("calibrate"), 10)
     page.click("calibrate")

@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import re
 
-from omnisort_hw.ui.overlay_svg import MAX_POINTS, cubes_overlay, map_overlay, sigma_colour
+from omnisort_hw.ui.overlay_svg import (
+    MAX_POINTS,
+    cubes_overlay,
+    detection_overlay,
+    map_overlay,
+    sigma_colour,
+)
 
 
 def test_sigma_colours_run_from_green_to_red() -> None:
@@ -56,3 +62,24 @@ def test_cubes_are_drawn_in_their_colour_with_their_index() -> None:
     small = cubes_overlay(reply, 2.0, unit=0.5)
     assert small is not None and 'font-size="8.0"' in small.svg
     assert "drawn x10" in overlay.legend and "0 red sigma 1.23 mm" in overlay.legend
+
+
+def test_a_detection_is_drawn_layer_by_layer_in_its_colours() -> None:
+    reply = {
+        "summary": "the two-sided target found: 2 border px, 2 markers",
+        "layers": [
+            {"name": "left wall border", "kind": "border", "colour": "#ffff00",
+             "pixels": [[10.0, 20.0], [12.0, 22.0]]},
+            {"name": "left wall markers", "kind": "marker", "colour": "#0050ff",
+             "pixels": [[100.0, 50.0], [200.0, 60.0]], "labels": ["L:border_near", "L:<far>"]},
+        ],
+    }  # fmt: skip
+    overlay = detection_overlay(reply, 0.5)
+    rings = re.findall(r'<circle cx="([\d.]+)" cy="([\d.]+)" r="8.00" fill="none" '
+                       r'stroke="#0050ff"', overlay.svg)  # fmt: skip
+    assert rings == [("50.0", "25.0"), ("100.0", "30.0")]  # camera px times the picture's scale
+    dots = re.findall(r'<circle cx="([\d.]+)" cy="([\d.]+)" r="1.50" fill="#ffff00"', overlay.svg)
+    assert dots == [("5.0", "10.0"), ("6.0", "11.0")]
+    assert "L:border_near" in overlay.svg and "L:&lt;far&gt;" in overlay.svg  # escaped
+    assert overlay.legend == reply["summary"]
+    assert detection_overlay({"summary": "not found", "layers": []}, 1.0).svg == ""

@@ -1,0 +1,76 @@
+"""A live picture with a calibration pattern's detection drawn on it: while it is shown, the
+service's `detect` is asked every `view_period_s` (one request at a time, with this session's
+token) and its picture, layers and summary replace the last. Used where a person places a
+target or a board: the recovery after a bump and the commissioning."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from nicegui import run, ui
+
+from omnisort_hw.ui.context import UiContext
+from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.overlay_svg import detection_overlay
+from omnisort_hw.ui.widgets import tag
+
+
+class LiveDetection:
+    """`build()` in a container; `active` turns the asking on and off; `found` is the last
+    reply's verdict (None before the first)."""
+
+    def __init__(
+        self,
+        ctx: UiContext,
+        token: Callable[[], str | None],
+        args: Callable[[], dict[str, Any]],
+        name: str,
+    ) -> None:
+        """`args`: the `detect` arguments at each ask (the pattern as the page sets it now);
+        `name`: the tests' name of its elements (`NAME-image`, `NAME-summary`)."""
+        self.ctx, self.token, self.args, self.name = ctx, token, args, name
+        self.active = False
+        self.found: bool | None = None
+        self.last: dict[str, Any] | None = None
+        self._busy = False
+
+    def build(self) -> None:
+        self.summary = tag(ui.label(""), f"{self.name}-summary").classes("text-sm")
+        self.image = tag(
+            ui.interactive_image().classes("w-full max-w-[960px]"), f"{self.name}-image"
+        )
+        ui.timer(self.ctx.config.view_period_s, self.tick)
+
+    async def tick(self) -> None:
+        """Ask once, unless not shown, still waiting for the last answer, or signed out."""
+        if not self.active or self._busy:
+            return
+        token = self.token()
+        if token is None:
+            self.summary.text = "sign in as operator to see the detection"
+            return
+        args = {**self.args(), "width": self.ctx.config.view_width_px}
+        self._busy = True
+        try:
+            reply = await run.io_bound(self.ctx.link.execute, "detect", args, token)
+        except CommandError as exc:
+            self.found, self.summary.text = False, f"no detection: {exc.code}: {exc.message}"
+            return
+        except (ClientError, OSError) as exc:
+            self.found = False
+            self.summary.text = f"no detection: the service cannot be reached: {exc}"
+            return
+        finally:
+            self._busy = False
+        if reply is None or not self.active:  # shutting down, or hidden meanwhile
+            return
+        self.show(reply)
+
+    def show(self, reply: dict[str, Any]) -> None:
+        picture = reply["picture"]
+        overlay = detection_overlay(reply, float(picture["scale"]), picture["width"] / 960.0)
+        self.last, self.found = reply, bool(reply["found"])
+        self.image.set_source(f"data:image/jpeg;base64,{picture['base64']}")
+        self.image.content = overlay.svg
+        self.summary.text = overlay.legend
