@@ -229,6 +229,12 @@ class CellJobs:
             if laser and self.cell.devices.laser is not None:
                 self.cell.set_laser(False)
 
+    @property
+    def views_dir(self) -> Path:
+        """Where the intrinsics' views taken from the live camera are kept (beside the store's
+        files)."""
+        return self.store.path("camera").parent / "views"
+
     def live_frame(self) -> np.ndarray:
         """A fresh frame for a screen, the laser as it is (`cell.Cell.live_frame`)."""
         return np.asarray(self.cell.live_frame().image)

@@ -58,13 +58,15 @@ def image_circle_radius(grays: list[np.ndarray], centre: tuple[float, float]) ->
     return float(good.max()) if good.size else 0.5 * float(min(mean.shape))
 
 
-def report_figures(
-    result: IntrinsicResult, image_size: tuple[int, int], radius: float
-) -> ReportFigures:
-    """Coverage of the outer band and residual against radius."""
-    cu, cv_ = result.model.center_uv
-    pts = np.concatenate([result.corners_px[n] for n in result.images_used])
-    res = np.concatenate([result.residuals_px[n] for n in result.images_used])
+def band_coverage(
+    points: np.ndarray, centre: tuple[float, float], radius: float, image_size: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(covered, inside), each (SECTORS,) bool: the sectors of the circle's outer band (the
+    outer OUTER_BAND of `radius` about `centre`) holding one of `points` ((N, 2) px), and those
+    whose middle lies inside the (width, height) frame. Sector k spans the angles
+    [-pi + k 2pi/SECTORS, -pi + (k + 1) 2pi/SECTORS) of atan2(v - cv, u - cu)."""
+    cu, cv_ = centre
+    pts = np.asarray(points, float).reshape(-1, 2)
     rho = np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_)
     ang = np.arctan2(pts[:, 1] - cv_, pts[:, 0] - cu)
     w, h = image_size
@@ -77,7 +79,24 @@ def report_figures(
     sector = np.clip(np.digitize(ang[in_band], edges) - 1, 0, SECTORS - 1)
     covered = np.zeros(SECTORS, bool)
     covered[sector] = True
-    coverage = float(np.sum(covered & inside) / max(int(inside.sum()), 1))
+    return covered, inside
+
+
+def covered_fraction(covered: np.ndarray, inside: np.ndarray) -> float:
+    """The share of the band's sectors inside the frame that hold a point."""
+    return float(np.sum(covered & inside) / max(int(inside.sum()), 1))
+
+
+def report_figures(
+    result: IntrinsicResult, image_size: tuple[int, int], radius: float
+) -> ReportFigures:
+    """Coverage of the outer band and residual against radius."""
+    cu, cv_ = result.model.center_uv
+    pts = np.concatenate([result.corners_px[n] for n in result.images_used])
+    res = np.concatenate([result.residuals_px[n] for n in result.images_used])
+    rho = np.hypot(pts[:, 0] - cu, pts[:, 1] - cv_)
+    covered, inside = band_coverage(pts, (cu, cv_), radius, image_size)
+    coverage = covered_fraction(covered, inside)
     bins = np.linspace(0.0, radius, 11)
     dist = np.linalg.norm(res, axis=1)
     by_radius = []

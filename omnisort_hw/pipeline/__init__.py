@@ -16,6 +16,7 @@ rig's interface, the calibration store and gate, the capture, the verdict, the s
     sort_run       capture, locate, plan, pick and place through the device interfaces
     adopt          calibration files made elsewhere -> the cell's store, verified
     detection      a live frame -> a calibration pattern's pixels, for a screen placing it
+    views          live frames with the full board -> the intrinsics' views and their coverage
 
 Each calls the pure core (`omnisort_hw.core`) and the devices' interfaces (`drivers.base`);
 none imports the simulator.
@@ -31,4 +32,5 @@ USE_CASES = (
     "sort_run",
     "adopt",
     "detection",
+    "views",
 )

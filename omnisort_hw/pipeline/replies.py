@@ -150,3 +150,39 @@ class DetectReply(TypedDict):
     layers: list[LayerReply]
     problem: NotRequired[str]
     picture: NotRequired[ImageReply]
+
+
+class KeptViewReply(TypedDict):
+    """One view kept for the intrinsics: its name, when it was taken, the board's outline."""
+
+    name: str
+    taken: str
+    outline_px: list[list[float]]
+
+
+class CoverageReply(TypedDict):
+    """The views' corners over the image circle's outer band: which of its sectors (equal
+    angles from -180 deg, about `centre_px`) hold a corner, and which lie inside the frame."""
+
+    centre_px: list[float]
+    radius_px: float
+    outer_band: float
+    covered: list[bool]
+    inside: list[bool]
+    fraction: float
+
+
+class ViewsReply(TypedDict):
+    """The views kept for the intrinsics (`calibrate what=intrinsics folder=<folder>`)."""
+
+    folder: str
+    count: int
+    need: int
+    views: list[KeptViewReply]
+    verdict: VerdictReply
+    board: NotRequired[str]
+    image_width: NotRequired[int]
+    image_height: NotRequired[int]
+    coverage: NotRequired[CoverageReply]
+    added: NotRequired[str]
+    removed: NotRequired[list[str]]

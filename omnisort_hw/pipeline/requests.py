@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 DEFAULT_BOARD = "9x6"
 """Inner corners COLSxROWS of a checkerboard when none is named (the paper's boards)."""
 DETECT_PATTERNS = ("target", "board", "floor")
+VIEW_ACTIONS = ("list", "add", "remove", "clear")
 DEFAULT_SQUARE_MM = 97.0
 """The square of the extrinsic checkerboards target when none is given (the paper's)."""
 
@@ -291,6 +292,28 @@ class DetectRequest:
     )
     width: int = _width_px()
     quality: int = param(80, lo=10, hi=95, help="JPEG quality")
+
+
+@dataclass(frozen=True)
+class ViewsRequest:
+    """The intrinsic calibration's views, taken from the live camera: add one (the full board
+    must be in it), list them with their coverage of the image circle, remove one, or clear
+    them."""
+
+    action: str = param("list", choices=VIEW_ACTIONS, help="what to do with the views")
+    board: str | None = param(
+        None,
+        max_chars=16,
+        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
+        only_when=(("action", ("add",)),),
+    )
+    name: str | None = param(
+        None,
+        max_chars=32,
+        help="the view to remove (view_001...)",
+        only_when=(("action", ("remove",)),),
+        required_when=(("action", ("remove",)),),
+    )
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from omnisort_hw.pipeline.replies import (
     MapReply,
     RegisterReply,
     SortReply,
+    ViewsReply,
 )
 from omnisort_hw.pipeline.request_fields import wire_args
 from omnisort_hw.pipeline.requests import (
@@ -38,6 +39,7 @@ from omnisort_hw.pipeline.requests import (
     ResetRequest,
     SortRequest,
     ViewRequest,
+    ViewsRequest,
 )
 from omnisort_hw.service.status_reply import StatusReply
 
@@ -79,6 +81,9 @@ class CellCommands:
 
     def detect(self, request: DetectRequest | None = None) -> DetectReply:
         return cast(DetectReply, self.execute("detect", wire_args(request)))
+
+    def views(self, request: ViewsRequest | None = None) -> ViewsReply:
+        return cast(ViewsReply, self.execute("views", wire_args(request)))
 
     def capture(self, request: CaptureRequest | None = None) -> Result:
         return self.execute("capture", wire_args(request))

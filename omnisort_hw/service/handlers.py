@@ -29,6 +29,7 @@ from omnisort_hw.pipeline.requests import (
     RegisterRequest,
     SortRequest,
     ViewRequest,
+    ViewsRequest,
 )
 from omnisort_hw.service.protocol import describe_commands
 from omnisort_hw.service.status_reply import ServiceStatus, StatusReply
@@ -66,6 +67,12 @@ def view(ctx: Context, request: ViewRequest) -> Reply:
 
 def detect(ctx: Context, request: DetectRequest) -> Reply:
     return ctx.cell.detect(request)
+
+
+def views(ctx: Context, request: ViewsRequest) -> Reply:
+    from omnisort_hw.pipeline import views as kept_views
+
+    return kept_views.run(ctx.cell.jobs, request).reply()
 
 
 def picture(ctx: Context, request: PictureRequest) -> Reply:
@@ -134,6 +141,7 @@ HANDLERS: dict[str, Handler] = {
     "view": view,
     "picture": picture,
     "detect": detect,
+    "views": views,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

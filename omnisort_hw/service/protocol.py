@@ -167,6 +167,7 @@ COMMANDS: dict[str, Command] = {
         Command("view", "quick", requests.ViewRequest, needs_token=False),
         Command("picture", "quick", requests.PictureRequest),
         Command("detect", "quick", requests.DetectRequest),
+        Command("views", "quick", requests.ViewsRequest),
         Command("capture", "quick", requests.CaptureRequest),
         Command("laser", "quick", requests.LaserRequest),
         Command("calibrate", "job", requests.CalibrateRequest, job_state="calibrating"),

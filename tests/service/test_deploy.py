@@ -77,7 +77,7 @@ def test_ui_unit_is_hardened_and_cannot_read_the_token(tmp_path: Path) -> None:
     cell = tmp_path / "cell.toml"
     cell.write_text(
         '[service]\nport = 29100\ntoken_file = "/nonexistent/omnisort/token"\n'
-        '[ui]\nport = 29180\nallow_operator = false\n'
+        "[ui]\nport = 29180\nallow_operator = false\n"
     )
     from omnisort_hw.config.cell import load_cell_config
     from omnisort_hw.errors import ConfigError

@@ -64,6 +64,7 @@ SERVICE_ONLY = {
     "capture": "the cell's camera, held by the service",
     "view": "a live picture for a client's screen (the CLI's pictures are files)",
     "detect": "a live frame's pattern for a screen placing it (each calibration detects its own)",
+    "views": "the cell's camera's views kept in its store (the CLI calibrates from any folder)",
     "picture": "a picture the service wrote, for a client elsewhere (the CLI's are files)",
     "laser": "the cell's laser, held by the service",
     "move": "the arm, held by the service",
