@@ -324,6 +324,22 @@ def board_view_poses(
     return poses
 
 
+def screen_views(
+    base: Scene,
+    n: int,
+    seed: int,
+    inner_corners: tuple[int, int] = (9, 6),
+    square_mm: float = 116.0,
+) -> list[Scene]:
+    """The calibration screen `base` with a board at each of n poses covering its camera's
+    field of view (`board_view_poses`, seeded)."""
+    model = camera_model_for(base)
+    R_SC = camera_rotation(0.0, 0.0, 0.0)
+    circle = min(np.deg2rad(base.camera.image_circle_fov_deg) / 2.0, model.theta_max)
+    poses = board_view_poses(n, seed, model, R_SC, circle, base.floor_z, inner_corners, square_mm)
+    return [base.replace(checkerboards=(spec,)) for spec in poses]
+
+
 def calibration_screen_scene(width: int | None = None, model_file: str = "") -> Scene:
     """The scene of the calibration screen: the camera high above the floor, no target,
     no boom, laser off (like the published simulator's intrinsic views)."""
@@ -355,20 +371,16 @@ def checkerboard_views(
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     base = calibration_screen_scene(width, model_file)
-    model = camera_model_for(base)
-    R_SC = camera_rotation(0.0, 0.0, 0.0)
-    circle = min(np.deg2rad(base.camera.image_circle_fov_deg) / 2.0, model.theta_max)
-    poses = board_view_poses(n, seed, model, R_SC, circle, base.floor_z, inner_corners, square_mm)
+    scenes = screen_views(base, n, seed, inner_corners, square_mm)
     paths = []
     bar = tqdm(
-        poses,
+        scenes,
         desc="sim checkerboard views",
         unit="img",
         file=sys.stderr,
         disable=None if progress else True,
     )
-    for i, spec in enumerate(bar):
-        scene = base.replace(checkerboards=(spec,))
+    for i, scene in enumerate(bar):
         image, truth = render_scene(scene, seed=seed * 1009 + i, degraded=degraded)
         img_path, _ = write_render(out_dir, f"view_{i:02d}", image, truth)
         paths.append(img_path)

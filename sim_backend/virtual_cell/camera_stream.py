@@ -52,10 +52,13 @@ def world_state(cell: Any) -> dict[str, Any]:
 
 
 def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
-    """True when states a and b look the same to the camera: the laser alike, joints within
-    0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm and 0.15 deg (tolerances, not
-    rounding, so a cube's physics jitter never makes the picture out of date)."""
-    if a is None or a["laser"] != b["laser"] or len(a["cubes"]) != len(b["cubes"]):
+    """True when states a and b look the same to the camera: the same board held (or none),
+    the laser alike, joints within 0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm
+    and 0.15 deg (tolerances, not rounding, so a cube's physics jitter never makes the picture
+    out of date)."""
+    if a is None or a.get("board") != b.get("board"):
+        return False
+    if a["laser"] != b["laser"] or len(a["cubes"]) != len(b["cubes"]):
         return False
     if "q" in b and np.max(np.abs(np.subtract(a["q"], b["q"]))) >= 0.01:
         return False
@@ -79,11 +82,14 @@ def _render_worker(
     rendered state, not per served frame."""
     from sim_backend.devices import SimCell
     from sim_backend.exposed_frames import ExposedFrames
+    from sim_backend.scene_images import render_scene
     from sim_backend.sensor import Exposure
+    from sim_backend.virtual_cell.held_board import held_board_scene
 
     cell = SimCell.from_scene(scene, seed=seed, width=width, height=height)
     world = cell.world
     sensor = ExposedFrames(world, cell.model, seed, cell.lighting) if degraded else None
+    held: dict[int, np.ndarray] = {}  # the held board's pictures, by pose (each rendered once)
     conn.send(("ready", None))
     n = 0
     while True:
@@ -93,6 +99,13 @@ def _render_worker(
             return
         if state is None:
             return
+        view = state.get("board")
+        if view is not None:
+            if view not in held:
+                board = held_board_scene(cell.scene, view)
+                held[view], _ = render_scene(board, seed=seed + view, degraded=degraded)
+            conn.send(("image", held[view]))
+            continue
         if world.arm is not None and "q" in state:
             world.set_joints(np.asarray(state["q"]))
             world.set_fingers(state["fingers_mm"])
@@ -137,6 +150,7 @@ class FrameSource:
         self.cond = threading.Condition()
         self.stop = threading.Event()
         self._encoded: dict[tuple, bytes] = {}
+        self.board: int | None = None  # the pose of the board held in front of the camera
         self._thread = threading.Thread(target=self._run, name="camera-render", daemon=True)
 
     def start(self, timeout_s: float = 60.0) -> None:
@@ -149,7 +163,7 @@ class FrameSource:
 
     def _render(self, timeout_s: float) -> bool:
         """Render the world's current state; False if stopped or the renderer died."""
-        state = world_state(self.cell)
+        state = self.state()
         self._conn.send(state)
         deadline = time.monotonic() + timeout_s
         while not self._conn.poll(0.5):
@@ -169,7 +183,22 @@ class FrameSource:
         moves)."""
         if self.controller is not None and self.controller.moving:
             return False
-        return same_picture(self.shown, world_state(self.cell))
+        return same_picture(self.shown, self.state())
+
+    def state(self) -> dict[str, Any]:
+        """What the next picture shows: the world's state, and the board held."""
+        return {**world_state(self.cell), "board": self.board}
+
+    def hold_board(self, view: int | None, timeout_s: float = 60.0) -> bool:
+        """Hold the board at pose `view` (None: put it down); True once a picture shows it
+        (at once when no client watches: the next picture will)."""
+        self.board = view
+        deadline = time.monotonic() + timeout_s
+        while self.clients > 0 and not self.current():
+            if self.stop.is_set() or time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+        return True
 
     def _run(self) -> None:
         while not self.stop.is_set():
@@ -177,7 +206,7 @@ class FrameSource:
                 time.sleep(0.05)
                 continue
             moving = self.controller is not None and self.controller.moving
-            if moving or same_picture(self.shown, world_state(self.cell)):
+            if moving or same_picture(self.shown, self.state()):
                 time.sleep(0.02)
                 continue
             if not self._render(600.0):

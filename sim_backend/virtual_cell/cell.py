@@ -9,7 +9,9 @@ Faces on `host` (the ports are a UR controller's, so parallel cells need distinc
 addresses): RTDE 30004, dashboard 29999, script port 30003, the laser's Modbus TCP 5020, the
 camera's MJPEG stream 8080 and the control channel 30111 (one JSON object per line:
 `{"cmd": "status"}`, "truth", "protective_stop", "emergency_stop", "release_emergency_stop",
-`{"cmd": "drop", "what": "arm"}`, `{"cmd": "stall", "what": "arm", "seconds": 5}`, "unstall").
+`{"cmd": "drop", "what": "arm"}`, `{"cmd": "stall", "what": "arm", "seconds": 5}`, "unstall",
+and `{"cmd": "board", "view": 3}` / `{"cmd": "board", "view": null}`: a checkerboard held in
+front of the camera for the intrinsics' views, `held_board.py`).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from sim_backend.devices import SimArm, SimCell
 from sim_backend.sort_harness import SimVerifier
 from sim_backend.virtual_cell.camera_stream import CAMERA_PORT, CameraStreamServer, FrameSource
 from sim_backend.virtual_cell.controller import RATE_HZ, URController
+from sim_backend.virtual_cell.held_board import HELD_VIEWS, check_view
 from sim_backend.virtual_cell.laser_modbus import MODBUS_PORT, LaserModbusServer
 from sim_backend.virtual_cell.servers import (
     DASHBOARD_PORT,
@@ -205,6 +208,10 @@ class VirtualCell:
         elif cmd == "unstall":
             for face in faces:
                 self.faults.clear(face)
+        elif cmd == "board":
+            view = check_view(req.get("view"))
+            shown = self.frames.hold_board(view)
+            return {"view": view, "views": HELD_VIEWS, "shown": shown}
         else:
             raise ValueError(f"unknown command {cmd!r}")
         return {}

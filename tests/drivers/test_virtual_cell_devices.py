@@ -12,6 +12,7 @@ import pytest
 from drivers.errors import BadReplyError, DeviceNotFoundError, DeviceTimeoutError
 from drivers.modbus_laser import ModbusLaser, ModbusLaserConfig
 from drivers.v4l2_camera import V4L2Camera, V4L2CameraConfig
+from sim_backend.virtual_cell.launcher import VirtualCellError
 from tests.drivers.contract import CameraContract, LaserSwitchContract
 from tests.sim.virtual_cell_fixture import virtual_cell
 
@@ -109,3 +110,31 @@ def test_a_stream_nobody_serves_is_device_not_found(vc) -> None:
     host = vc.host.rsplit(".", 1)[0] + ".1"
     with pytest.raises(DeviceNotFoundError):
         camera(host, device=f"http://{host}:8081/stream.mjpg").connect()
+
+
+def test_a_held_board_is_in_the_next_frame_and_put_down_again(vc) -> None:
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
+    from sim_backend.virtual_cell.held_board import HELD_VIEWS, held_board_scene
+
+    cell_scene = sized(load_scene("sorting"), WIDTH)
+    with camera(vc.host) as cam:
+        before = cam.grab().image
+        shown = vc.control("board", timeout_s=60.0, view=HELD_VIEWS - 1)
+        held = cam.grab().image
+        second = vc.control("board", timeout_s=60.0, view=0)
+        other = cam.grab().image
+        vc.control("board", timeout_s=60.0, view=None)
+        after = cam.grab().image
+        with pytest.raises(VirtualCellError, match="view must be"):
+            vc.control("board", view=HELD_VIEWS)
+    assert shown == {"view": HELD_VIEWS - 1, "views": HELD_VIEWS, "shown": True}
+    assert second["shown"]
+    # The frame is the calibration screen's render of that pose through the cell's lens
+    # (within the stream's JPEG noise: 0.8 levels here, against 12 for another pose), and the
+    # cell is back once the board is put down.
+    for view, frame in ((HELD_VIEWS - 1, held), (0, other)):
+        expected, _ = render_scene(held_board_scene(cell_scene, view), seed=view)
+        assert np.abs(frame.astype(float) - expected).mean() < 2.0, view
+    assert np.count_nonzero(_changed(before, held)) > 0.2 * WIDTH * WIDTH
+    assert np.count_nonzero(_changed(before, after)) < 0.01 * WIDTH * WIDTH
