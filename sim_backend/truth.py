@@ -85,23 +85,10 @@ def _pose_dict(T: np.ndarray) -> dict[str, Any]:
     return {"matrix": _r(T, 6), "xyz_mm": _r(T[:3, 3]), "rpy_deg": _r([roll, pitch, yaw], 6)}
 
 
-def build_truth(
-    world: SimWorld,
-    model: OcamModel,
-    laser_on: bool,
-    seed: int | None = None,
-    degraded: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """The truth dict of the world's current state (image fields are added when written)."""
-    scene = world.scene
-    cam = scene.camera
-    las = scene.laser
-    proj = Projector.for_world(world, model)
-    plane = LaserPlane(world.laser_normal, world.laser_distance)
-    truth: dict[str, Any] = {
-        "format": TRUTH_FORMAT,
-        "scene": {"name": scene.name, "description": scene.scene.description},
-        "camera": {**model.to_dict(), "image_circle_fov_deg": cam.image_circle_fov_deg},
+def mounting_truth(world: SimWorld, laser_on: bool) -> dict[str, Any]:
+    """The camera's rotation in S and the laser plane, as system.json holds them."""
+    cam, las = world.scene.camera, world.scene.laser
+    return {
         "camera_rotation": {
             "roll_deg": cam.roll_deg,
             "pitch_deg": cam.pitch_deg,
@@ -116,6 +103,26 @@ def build_truth(
             "on": bool(laser_on),
             "width_mm": las.width_mm,
         },
+    }
+
+
+def build_truth(
+    world: SimWorld,
+    model: OcamModel,
+    laser_on: bool,
+    seed: int | None = None,
+    degraded: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The truth dict of the world's current state (image fields are added when written)."""
+    scene = world.scene
+    cam = scene.camera
+    proj = Projector.for_world(world, model)
+    plane = LaserPlane(world.laser_normal, world.laser_distance)
+    truth: dict[str, Any] = {
+        "format": TRUTH_FORMAT,
+        "scene": {"name": scene.name, "description": scene.scene.description},
+        "camera": {**model.to_dict(), "image_circle_fov_deg": cam.image_circle_fov_deg},
+        **mounting_truth(world, laser_on),
         "floor_z_mm": world.floor_z,
         "target": _target_truth(world),
         "robot_base": None,

@@ -28,6 +28,11 @@ from typing import TYPE_CHECKING, Any
 
 from omnisort_hw import fileio
 from omnisort_hw.cell.compute_worker import ComputeWorker
+from omnisort_hw.cell.device_locks import (
+    VIEW_GRAB_TIMEOUT_S,
+    CameraLock,
+    locked,
+)
 from omnisort_hw.cell.devices import Devices, open_devices
 from omnisort_hw.cell.jobs import CellJobs
 from omnisort_hw.cell.journal import JobJournal
@@ -55,16 +60,6 @@ STATUS_CACHE_S = 0.05
 STATUS_POLL_S = 0.1
 CALIBRATION_CACHE_S = 1.0
 LASER_CACHE_S = 1.0
-DEVICE_LOCK_TIMEOUT_S = 5.0
-VIEW_LOCK_TIMEOUT_S = 0.5  # a live picture does not wait for a measurement to end
-
-
-class DeviceLockTimeoutError(OmnisortError):
-    """A device stayed busy with another command for longer than the lock timeout."""
-
-    code = "busy"
-
-
 # The devices of one cell (a missing device is None): the device factory's record.
 CellDevices = Devices
 
@@ -129,7 +124,7 @@ class Cell:
             self.sort_config, self.registration_config = resolve_sorting(
                 self.config.sorting, self.config.registration, devices.scene
             )
-        self._camera_lock = threading.Lock()
+        self._camera_lock = CameraLock()
         self._laser_lock = threading.Lock()
         self._cache_lock = threading.Lock()
         self._caches = Caches()
@@ -285,26 +280,13 @@ class Cell:
         return dev
 
     @contextmanager
-    def _locked(
-        self, lock: threading.Lock, what: str, timeout_s: float = DEVICE_LOCK_TIMEOUT_S
-    ) -> Iterator[None]:
-        if not lock.acquire(timeout=timeout_s):
-            raise DeviceLockTimeoutError(
-                f"the {what} has been busy with another command for {timeout_s:g} s"
-            )
-        try:
-            yield
-        finally:
-            lock.release()
-
-    @contextmanager
     def measuring(self) -> Iterator[tuple[Any, Any]]:
         """(camera, laser) held for one measurement capture (`pipeline.cell_acquisition`):
         refused when nothing may actuate; the laser's state is read back at the end."""
         camera, laser = self._need("camera"), self._need("laser")
         if self.actuation_guard is not None:
             self.actuation_guard()
-        with self._locked(self._camera_lock, "camera"), self._locked(self._laser_lock, "laser"):
+        with self._camera_lock.held(), locked(self._laser_lock, "laser"):
             try:
                 yield camera, laser
             finally:
@@ -430,7 +412,7 @@ class Cell:
     def grab(self, timeout_s: float | None = None) -> Any:
         """One fresh frame (`drivers.base.Frame`), logged as `camera/raw`."""
         cam = self._need("camera")
-        with self._locked(self._camera_lock, "camera"):
+        with self._camera_lock.held():
             frame = cam.grab(timeout_s)
         rl = self.runlog
         rl.set_step("frame", int(frame.sequence))
@@ -440,7 +422,7 @@ class Cell:
     def set_laser(self, on: bool) -> bool:
         """Switch the laser (confirmed by the driver's read-back) and return the state."""
         laser = self._need("laser")
-        with self._locked(self._laser_lock, "laser"):
+        with locked(self._laser_lock, "laser"):
             if on and self.actuation_guard is not None:
                 self.actuation_guard()
             laser.set(bool(on))
@@ -454,7 +436,7 @@ class Cell:
         laser = self._need("laser")
         if on is not None:
             return {"on": self.set_laser(on)}
-        with self._locked(self._laser_lock, "laser"):
+        with locked(self._laser_lock, "laser"):
             state = bool(laser.state())
         self._cache_laser(state)
         return {"on": state}
@@ -499,11 +481,13 @@ class Cell:
         }
 
     def live_frame(self) -> Any:
-        """A fresh frame for a screen, the laser as it is: refused at once
-        (`device_lock_timeout`) while a measurement holds the camera, never waited for."""
+        """A fresh frame for a screen, the laser as it is: refused (`busy`) at once while a
+        command waits for the camera, and after VIEW_LOCK_TIMEOUT_S while one holds it (a live
+        picture gives way: a screen asking every half second must never keep a sort from its
+        camera)."""
         cam = self._need("camera")
-        with self._locked(self._camera_lock, "camera", VIEW_LOCK_TIMEOUT_S):
-            return cam.grab(None)
+        with self._camera_lock.for_screen():
+            return cam.grab(VIEW_GRAB_TIMEOUT_S)
 
     def detect(self, request: DetectRequest) -> DetectReply:
         """A calibration pattern found in a live frame or the request's image, with a picture

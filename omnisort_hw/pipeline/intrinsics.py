@@ -59,18 +59,19 @@ class IntrinsicCalibration:
     def write_report(self, camera_json: str | Path) -> Path:
         """Write the report picture (and the projection uncertainty's map, `*_uncertainty.png`)
         beside `camera_json` (atomically); the report's path."""
-        path = report_png_path(Path(camera_json))
         if self.uncertainty_picture is not None:
-            write_png(
-                path.with_name(Path(camera_json).stem + "_uncertainty.png"),
-                self.uncertainty_picture,
-            )
-        return write_png(path, self.picture)
+            write_png(uncertainty_png_path(Path(camera_json)), self.uncertainty_picture)
+        return write_png(report_png_path(Path(camera_json)), self.picture)
 
 
 def report_png_path(camera_json: Path) -> Path:
     """The report picture's place: beside camera.json, named after it."""
     return camera_json.with_name(camera_json.stem + "_report.png")
+
+
+def uncertainty_png_path(camera_json: Path) -> Path:
+    """The projection uncertainty map's place: beside camera.json, named after it."""
+    return camera_json.with_name(camera_json.stem + "_uncertainty.png")
 
 
 def board_record(board: BoardSpec) -> dict[str, Any]:
@@ -128,9 +129,13 @@ class IntrinsicsResult:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         cal = self.calibration
         result, record, figures = cal.result, cal.record, cal.figures
+        unc = {}
+        if cal.uncertainty_picture is not None:
+            unc["uncertainty_png"] = str(uncertainty_png_path(self.path))
         return {
             "path": str(self.path),
             "report": str(self.report),
+            **unc,
             **record,
             "rms_px": result.rms_px,
             "images_used": len(result.images_used),

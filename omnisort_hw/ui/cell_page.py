@@ -24,6 +24,7 @@ from omnisort_hw.service.status_reading import (
     sort_progress,
     status_rows,
 )
+from omnisort_hw.ui.commissioning import CommissioningPanel
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.operators import SignInError
@@ -90,8 +91,19 @@ class CellPage:
                 self.recovery = RecoveryPanel(self.ctx, self._token, self._start_job)
                 self.recovery.build()
                 self._build_job()
-                self._build_view()
-                self._build_sort()
+                with ui.tabs().classes("w-full") as tabs:
+                    tag(ui.tab("Cell"), "tab-cell")
+                    tag(ui.tab("Commission"), "tab-commission")
+                with ui.tab_panels(tabs, value="Cell").classes("w-full") as panels:
+                    with ui.tab_panel("Cell").classes("gap-4 p-0"):
+                        self._build_view()
+                        self._build_sort()
+                    with ui.tab_panel("Commission").classes("p-0"):
+                        self.commissioning = CommissioningPanel(
+                            self.ctx, self._token, self._start_job, self._operator_send
+                        )
+                        self.commissioning.build()
+                panels.on_value_change(lambda e: self.commissioning.show(e.value == "Commission"))
 
     def _build_operator(self) -> None:
         with ui.card().classes("w-[30rem]"):
@@ -298,6 +310,13 @@ class CellPage:
             self.say(f"{cmd}: the service cannot be reached: {exc}", "negative")
         return None
 
+    async def _operator_send(
+        self, cmd: str, args: dict[str, Any] | None = None
+    ) -> dict[str, Any] | None:
+        """One quick command with this session's token; None, with why, when not sent."""
+        token = self._token()
+        return None if token is None else await self._send(cmd, args, token)
+
     async def stop(self) -> None:
         if await self._send("stop") is not None:
             self.say("stop sent: the job and the arm stop", "warning")
@@ -420,5 +439,6 @@ def cell_page(ctx: UiContext) -> None:
     ui.timer(ctx.config.status_period_s, page.refresh)
     ui.timer(min(ctx.config.view_period_s, 0.5), page.refresh_view)
     ui.timer(0.5, page.recovery.refresh)
+    ui.timer(0.5, page.commissioning.refresh)
     ctx.feed.watch()
     ui.context.client.on_delete(ctx.feed.unwatch)

@@ -12,7 +12,7 @@ from nicegui import run, ui
 
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import ClientError, CommandError
-from omnisort_hw.ui.overlay_svg import detection_overlay
+from omnisort_hw.ui.overlay_svg import Overlay, detection_overlay
 from omnisort_hw.ui.widgets import tag
 
 
@@ -26,10 +26,13 @@ class LiveDetection:
         token: Callable[[], str | None],
         args: Callable[[], dict[str, Any]],
         name: str,
+        extra: Callable[[float, float], Overlay | None] | None = None,
     ) -> None:
         """`args`: the `detect` arguments at each ask (the pattern as the page sets it now);
-        `name`: the tests' name of its elements (`NAME-image`, `NAME-summary`)."""
+        `name`: the tests' name of its elements (`NAME-image`, `NAME-summary`); `extra`: a
+        further overlay drawn under the detection, given the picture's scale and unit."""
         self.ctx, self.token, self.args, self.name = ctx, token, args, name
+        self.extra = extra
         self.active = False
         self.found: bool | None = None
         self.last: dict[str, Any] | None = None
@@ -69,8 +72,11 @@ class LiveDetection:
 
     def show(self, reply: dict[str, Any]) -> None:
         picture = reply["picture"]
-        overlay = detection_overlay(reply, float(picture["scale"]), picture["width"] / 960.0)
+        scale, unit = float(picture["scale"]), picture["width"] / 960.0
+        overlays = [self.extra(scale, unit) if self.extra else None]
+        overlays.append(detection_overlay(reply, scale, unit))
+        shown = [o for o in overlays if o is not None]
         self.last, self.found = reply, bool(reply["found"])
         self.image.set_source(f"data:image/jpeg;base64,{picture['base64']}")
-        self.image.content = overlay.svg
-        self.summary.text = overlay.legend
+        self.image.content = "".join(o.svg for o in shown)
+        self.summary.text = "; ".join(o.legend for o in reversed(shown))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -84,3 +84,35 @@ class JobRunner:
                 self.results[cmd] = end.result
             self.ended += 1
             self._running = None
+
+
+class JobWatch:
+    """The job one panel started, followed until it ends: `start()` sends it through the page's
+    one way to start a job and notes how many jobs had ended, so a job that ends at once is
+    not missed; `ended()` gives its end once."""
+
+    def __init__(self, jobs: JobRunner, start_job: Callable[[str, dict[str, Any]], bool]) -> None:
+        self.jobs, self.start_job = jobs, start_job
+        self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
+
+    @property
+    def waiting(self) -> str | None:
+        return self._waiting[0] if self._waiting else None
+
+    def start(self, cmd: str, args: dict[str, Any]) -> bool:
+        ended = self.jobs.ended
+        if not self.start_job(cmd, args):
+            return False
+        self._waiting = (cmd, ended)
+        return True
+
+    def ended(self) -> JobEnd | None:
+        """The end of the job started here, once, when it has ended; else None."""
+        if self._waiting is None:
+            return None
+        _, ended_before = self._waiting
+        end = self.jobs.last
+        if self.jobs.ended == ended_before or end is None:
+            return None
+        self._waiting = None
+        return end

@@ -4,6 +4,7 @@ computed here but scaling: the pixels are the service's (`map` with points, `loc
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from html import escape
@@ -102,3 +103,41 @@ def detection_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0)
             for u, v in pixels
         ]
     return Overlay("".join(parts), str(reply.get("summary", "")))
+
+
+def coverage_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:
+    """A `views` reply over the picture: the image circle's outer band, each of its sectors
+    green where a view's corners reach it and red where none does yet (sectors outside the
+    frame not drawn), and every kept view's board outline; None without views."""
+    cov = reply.get("coverage")
+    if not cov:
+        return None
+    cu, cv = (c * scale for c in cov["centre_px"])
+    r_out = cov["radius_px"] * scale
+    r_in = (1.0 - cov["outer_band"]) * r_out
+    n = len(cov["covered"])
+    parts = []
+    for k, (covered, inside) in enumerate(zip(cov["covered"], cov["inside"], strict=True)):
+        if not inside:
+            continue
+        a0, a1 = -math.pi + 2 * math.pi * k / n, -math.pi + 2 * math.pi * (k + 1) / n
+        p = [(cu + r * math.cos(a), cv + r * math.sin(a)) for r, a in
+             ((r_out, a0), (r_out, a1), (r_in, a1), (r_in, a0))]  # fmt: skip
+        colour = "#22c55e" if covered else "#ef4444"
+        parts.append(
+            f'<path d="M {p[0][0]:.1f} {p[0][1]:.1f} A {r_out:.1f} {r_out:.1f} 0 0 1 '
+            f"{p[1][0]:.1f} {p[1][1]:.1f} L {p[2][0]:.1f} {p[2][1]:.1f} A {r_in:.1f} {r_in:.1f} "
+            f'0 0 0 {p[3][0]:.1f} {p[3][1]:.1f} Z" fill="{colour}" fill-opacity="0.35" '
+            f'data-covered="{str(bool(covered)).lower()}" />'
+        )
+    for view in reply.get("views") or []:
+        ring = " ".join(f"{u * scale:.1f},{v * scale:.1f}" for u, v in view["outline_px"])
+        parts.append(
+            f'<polygon points="{ring}" fill="none" stroke="#38bdf8" '
+            f'stroke-width="{1.5 * unit:.2f}" />'
+        )
+    legend = (
+        f"{reply.get('count', 0)} views; the image circle's rim covered "
+        f"{cov['fraction']:.0%} (green: reached by a view's corners, red: not yet)"
+    )
+    return Overlay("".join(parts), legend)

@@ -15,7 +15,9 @@ from nicegui import run, ui
 from omnisort_hw.pipeline.verdict import verdict_lines
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
+from omnisort_hw.ui.job_runner import JobWatch
 from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.pictures import fetch_picture
 from omnisort_hw.ui.widgets import tag
 
 STEPS = ("Place the target", "Calibrate camera and laser", "Register the robot", "Verify")
@@ -51,8 +53,8 @@ class RecoveryPanel:
     ) -> None:
         """`token`: this session's, for the residual picture; `start_job`: the page's one way
         to start a job (signed in, service reachable, no job of this interface running)."""
-        self.ctx, self.token, self.start_job = ctx, token, start_job
-        self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
+        self.ctx, self.token = ctx, token
+        self.watch = JobWatch(ctx.jobs, start_job)
         self.active = False  # opened from the drift banner, until the operator closes it
         self.detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "recovery-target")
 
@@ -142,36 +144,26 @@ class RecoveryPanel:
         except (CommandError, ClientError) as exc:
             self.detection.summary.text = f"laser: not switched: {exc}"
 
-    def _start(self, cmd: str, args: dict[str, Any]) -> bool:
-        ended = self.ctx.jobs.ended
-        if not self.start_job(cmd, args):
-            return False
-        self._waiting = (cmd, ended)
-        return True
-
     def calibrate(self) -> None:
         self.accept.set_visibility(False)
-        if self._start("calibrate", {"what": "extrinsics"}):
+        if self.watch.start("calibrate", {"what": "extrinsics"}):
             self.calib_note.text = "calibrating from a capture of the target..."
 
     def register(self) -> None:
         self.accept_register.set_visibility(False)
-        if self._start("register_robot", {}):
+        if self.watch.start("register_robot", {}):
             self.register_note.text = "registering the robot from the floor board..."
 
     def check(self) -> None:
-        if self._start("check", {}):
+        if self.watch.start("check", {}):
             self.check_note.text = "checking the camera against the new calibration..."
 
     async def refresh(self) -> None:
         """When the job a step started has ended: show its reply, or its error."""
-        if self._waiting is None:
+        end = self.watch.ended()
+        if end is None:
             return
-        cmd, ended_before = self._waiting
-        end = self.ctx.jobs.last
-        if self.ctx.jobs.ended == ended_before or end is None:
-            return
-        self._waiting = None
+        cmd = end.cmd
         note = {
             "calibrate": self.calib_note,
             "register_robot": self.register_note,
@@ -209,11 +201,9 @@ class RecoveryPanel:
             self.residuals.set_source("")
             return
         try:
-            sent = await run.io_bound(
-                self.ctx.link.execute, "picture", {"path": path, "width": 960}, token
-            )
+            source = await fetch_picture(self.ctx, token, str(path))
         except (CommandError, ClientError) as exc:
             self.calib_note.text += f"; the residual picture could not be shown: {exc}"
             return
-        if sent is not None:  # None: the interface is shutting down
-            self.residuals.set_source(f"data:image/jpeg;base64,{sent['base64']}")
+        if source is not None:
+            self.residuals.set_source(source)

@@ -28,6 +28,7 @@ import numpy as np
 
 from sim_backend.devices import SimArm, SimCell
 from sim_backend.sort_harness import SimVerifier
+from sim_backend.truth import mounting_truth
 from sim_backend.virtual_cell.camera_stream import CAMERA_PORT, CameraStreamServer, FrameSource
 from sim_backend.virtual_cell.controller import RATE_HZ, URController
 from sim_backend.virtual_cell.held_board import HELD_VIEWS, check_view
@@ -145,7 +146,8 @@ class VirtualCell:
     # ---- control channel --------------------------------------------------------------------
 
     def truth(self) -> dict[str, Any]:
-        """Where every cube is (S, mm), which bin holds it, and the collisions so far."""
+        """Where every cube is (S, mm), which bin holds it, the collisions so far, and the
+        camera's rotation and the laser plane (as system.json holds them)."""
         cubes = []
         for c in self.verifier.true_cubes():
             cubes.append(
@@ -156,8 +158,10 @@ class VirtualCell:
                     "bin": self.verifier.bin_of(c.center_S),
                 }
             )
-        T = self.cell.world.T_S_B
+        world = self.cell.world
+        T = world.T_S_B
         return {
+            **mounting_truth(world, bool(world.laser_on)),
             "cubes": cubes,
             "collisions": list(self.verifier.collisions),
             "T_S_B": np.asarray(T).tolist() if T is not None else None,

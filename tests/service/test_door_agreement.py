@@ -39,7 +39,7 @@ VIEWS = 6
 TIME_KEYS = {"checked_at", "created", "cycle"}
 """When a reply was made and how long it took (a sort's measured cycle, and every measured
 duration `*_s` but the planned ones): never the same twice."""
-PLACE_KEYS = {"overlay_png", "report"}
+PLACE_KEYS = {"overlay_png", "report", "uncertainty_png"}
 """Files each door writes in its own place (the service beside its store, the CLI beside the
 files it was given); both must exist. An image kept (a capture) is compared by its sha256."""
 DOOR_KEYS = {"camera_serial"}

@@ -1,0 +1,338 @@
+"""Commissioning: a cell set up from nothing, step by step, each step judged against its
+criteria (docs/commissioning.md) by the verdict the service gives with its reply.
+
+1. Camera intrinsics: views taken from the live camera (`views add`, the board's detection
+   drawn live with the image circle's rim coverage under it), then `calibrate what=intrinsics`
+   from them: the RMS, the cross-validated RMS, the rejected views and why, the report and
+   the projection uncertainty map.
+2. Camera and laser plane: the target placed with its detection drawn live, then
+   `calibrate what=extrinsics`: the parameters with their sigmas beside the residual picture;
+   accept or retake.
+3. Robot registration from the floor board, its detection drawn live (`register_robot`).
+4. Verification: `map` and `locate` of what is in front of the camera, with their verdicts.
+
+Every action is a command of the protocol; the page only shows the replies.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Any
+
+from nicegui import ui
+
+from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.ui.context import UiContext
+from omnisort_hw.ui.detection_view import LiveDetection
+from omnisort_hw.ui.job_runner import JobEnd, JobWatch
+from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
+from omnisort_hw.ui.pictures import fetch_picture
+from omnisort_hw.ui.recovery import parameter_rows
+from omnisort_hw.ui.schema_form import problems
+from omnisort_hw.ui.widgets import tag
+
+STEPS = ("Camera intrinsics", "Camera and laser plane", "Robot registration", "Verification")
+Send = Callable[[str, dict[str, Any]], Awaitable[dict[str, Any] | None]]
+
+
+def verdict_text(result: Mapping[str, Any]) -> str:
+    """A reply's verdict in lines: PASS/WARN/FAIL first, then each check with its reason."""
+    verdict = result.get("verdict")
+    if not isinstance(verdict, Mapping):
+        return ""
+    return "\n".join(line.strip() for line in verdict_lines(verdict))
+
+
+def passed(result: Mapping[str, Any] | None) -> bool:
+    """True when a reply's verdict lets the next step go on (pass or warn)."""
+    verdict = (result or {}).get("verdict") or {}
+    return verdict.get("level") in ("pass", "warn")
+
+
+def intrinsics_lines(result: Mapping[str, Any]) -> list[str]:
+    """The intrinsics' figures a technician judges: the RMS against its cross-validated twin,
+    the views used, and each rejected view with its reason."""
+    cv = (result.get("cross_validation") or {}).get("rms_px")
+    lines = [
+        f"RMS {result.get('rms_px', float('nan')):.3f} px over {result.get('images_used')} "
+        "views; cross-validated RMS "
+        + (f"{cv:.3f} px" if cv is not None else "not computed (fewer than 4 views)")
+    ]
+    for rejected in result.get("images_rejected") or []:
+        lines.append(f"rejected {rejected['file'].rsplit('/', 1)[-1]}: {rejected['reason']}")
+    return lines
+
+
+class CommissioningPanel:
+    """The commissioning steps; `refresh()` (a timer) follows the job a step started."""
+
+    def __init__(
+        self,
+        ctx: UiContext,
+        token: Callable[[], str | None],
+        start_job: Callable[[str, dict[str, Any]], bool],
+        send: Send,
+    ) -> None:
+        """`token`: this session's; `start_job`: the page's one way to start a job; `send`: its
+        one way to send a quick command (None with the refusal shown)."""
+        self.ctx, self.token, self.send = ctx, token, send
+        self.watch = JobWatch(ctx.jobs, start_job)
+        self.views: dict[str, Any] = {}  # the last `views` reply
+        self.results: dict[str, Mapping[str, Any]] = {}  # each step's last reply
+        self.visible = False
+        self._what = ""  # the step whose job is being followed
+        self.board_detection = LiveDetection(
+            ctx, token, self._board_args, "intr-detect", self._coverage
+        )
+        self.target_detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "extr-detect")
+        self.floor_detection = LiveDetection(ctx, token, lambda: {"what": "floor"}, "reg-detect")
+        self.detections = (self.board_detection, self.target_detection, self.floor_detection)
+
+    # -- building -------------------------------------------------------------------------
+
+    def build(self) -> None:
+        with ui.stepper().props("vertical flat").classes("w-full") as self.stepper:
+            with ui.step(STEPS[0]):
+                self._build_intrinsics()
+            with ui.step(STEPS[1]):
+                self._build_extrinsics()
+            with ui.step(STEPS[2]):
+                self._build_registration()
+            with ui.step(STEPS[3]):
+                self._build_verification()
+        self.stepper.on_value_change(lambda _: self._follow_step())
+
+    def _build_intrinsics(self) -> None:
+        ui.label(
+            "Hold the checkerboard in the camera's view, whole, at another place and angle for "
+            "each view; reach the rim of the image circle (red sectors) as well as its centre."
+        )
+        with ui.row().classes("items-center gap-4"):
+            self.board = tag(ui.input("board (inner corners)", value="9x6"), "board")
+            self.square = tag(ui.number("square (mm)", min=1.0, format="%.2f"), "square")
+        self.board_detection.build()
+        with ui.row().classes("items-center"):
+            tag(ui.button("Add view", on_click=self.add_view), "add-view")
+            tag(ui.button("Remove last", on_click=self.remove_last).props("flat"), "remove-view")
+            tag(ui.button("Clear views", on_click=self.clear_views).props("flat"), "clear-views")
+        self.views_note = tag(ui.label(""), "views-note").classes("whitespace-pre-line")
+        with ui.row().classes("items-center"):
+            tag(ui.button("Calibrate", on_click=self.calibrate_intrinsics), "calibrate-intr")
+            self.intr_next = tag(ui.button("Next", on_click=self.stepper.next), "intr-next")
+        self.intr_note = tag(ui.label(""), "intr-note").classes("whitespace-pre-line")
+        with ui.row().classes("w-full no-wrap gap-2"):
+            self.intr_report = tag(ui.image().classes("w-1/2"), "intr-report")
+            self.intr_uncertainty = tag(ui.image().classes("w-1/2"), "intr-uncertainty")
+
+    def _build_extrinsics(self) -> None:
+        ui.label(
+            "Place the calibration target in the camera's view with the laser on, until its "
+            "markers, borders, floor lines and stripe are drawn; then calibrate."
+        )
+        self.target_detection.build()
+        with ui.row().classes("items-center"):
+            tag(ui.button("Laser on", on_click=lambda: self.laser(True)), "commission-laser")
+            tag(ui.button("Calibrate", on_click=self.calibrate_extrinsics), "calibrate-extr")
+            self.extr_next = tag(ui.button("Accept", on_click=self.stepper.next), "extr-next")
+        self.extr_note = tag(ui.label(""), "extr-note").classes("whitespace-pre-line")
+        with ui.row().classes("w-full no-wrap gap-2"):
+            self.extr_params = tag(
+                ui.table(
+                    columns=[
+                        {"name": k, "label": k, "field": k, "align": "left"}
+                        for k in ("name", "value", "sigma")
+                    ],
+                    rows=[],
+                    row_key="name",
+                ).props("dense flat"),
+                "extr-params",
+            )
+            self.extr_picture = tag(ui.image().classes("grow"), "extr-picture")
+
+    def _build_registration(self) -> None:
+        ui.label(
+            "Clear the floor board of the target and anything else: the robot base is "
+            "registered from it, with the laser off."
+        )
+        self.floor_detection.build()
+        with ui.row().classes("items-center"):
+            tag(ui.button("Register", on_click=self.register), "commission-register")
+            self.reg_next = tag(ui.button("Next", on_click=self.stepper.next), "reg-next")
+        self.reg_note = tag(ui.label(""), "reg-note").classes("whitespace-pre-line")
+
+    def _build_verification(self) -> None:
+        ui.label(
+            "Put known objects (the cubes) in front of the camera: the laser map and the "
+            "location must pass before the cell sorts."
+        )
+        with ui.row().classes("items-center"):
+            tag(ui.button("Map the laser line", on_click=self.verify_map), "verify-map")
+            tag(ui.button("Locate the cubes", on_click=self.verify_locate), "verify-locate")
+        self.map_note = tag(ui.label(""), "verify-map-note").classes("whitespace-pre-line")
+        self.locate_note = tag(ui.label(""), "verify-locate-note").classes("whitespace-pre-line")
+        self.commissioned = tag(ui.label(""), "commissioned").classes("font-bold")
+
+    # -- showing --------------------------------------------------------------------------
+
+    def show(self, visible: bool) -> None:
+        """The panel is shown (its tab open): its step's live detection asks the service."""
+        self.visible = visible
+        self._follow_step()
+
+    def _follow_step(self) -> None:
+        step = STEPS.index(self.stepper.value) if self.stepper.value in STEPS else 0
+        for i, detection in enumerate(self.detections):
+            detection.active = self.visible and i == step
+        for button, what in (
+            (self.intr_next, "intrinsics"),
+            (self.extr_next, "extrinsics"),
+            (self.reg_next, "register_robot"),
+        ):
+            button.set_visibility(passed(self.results.get(what)))
+
+    def _board_args(self) -> dict[str, Any]:
+        return {"what": "board", "board": str(self.board.value or "9x6")}
+
+    def _coverage(self, scale: float, unit: float) -> Overlay | None:
+        return coverage_overlay(self.views, scale, unit) if self.views else None
+
+    def _show_views(self, reply: dict[str, Any]) -> None:
+        self.views = reply
+        names = ", ".join(v["name"] for v in reply["views"]) or "none"
+        self.views_note.text = f"views kept: {names}\n{verdict_text(reply)}"
+
+    # -- acting: the views ------------------------------------------------------------------
+
+    def _problems(self, cmd: str, args: dict[str, Any]) -> list[str]:
+        """What the command's schema finds wrong with `args` (nothing before sign-in: the
+        service refuses then)."""
+        schema = self.ctx.operators.schema(cmd)
+        return problems(schema, args) if schema is not None else []
+
+    async def add_view(self) -> None:
+        args = {"action": "add", "board": str(self.board.value or "")}
+        found = self._problems("views", args)
+        if found:
+            self.views_note.text = "not sent: " + "; ".join(found)
+            return
+        reply = await self.send("views", args)
+        if reply is not None:
+            self._show_views(reply)
+
+    async def remove_last(self) -> None:
+        if not self.views.get("views"):
+            return
+        name = self.views["views"][-1]["name"]
+        reply = await self.send("views", {"action": "remove", "name": name})
+        if reply is not None:
+            self._show_views(reply)
+
+    async def clear_views(self) -> None:
+        reply = await self.send("views", {"action": "clear"})
+        if reply is not None:
+            self._show_views(reply)
+
+    async def load_views(self) -> None:
+        """The views already kept (a page opened after some were taken)."""
+        if self.token() is None or self.views:
+            return
+        reply = await self.send("views", {"action": "list"})
+        if reply is not None:
+            self._show_views(reply)
+
+    async def laser(self, on: bool) -> None:
+        await self.send("laser", {"on": on})
+
+    # -- acting: the jobs -------------------------------------------------------------------
+
+    def _start(self, what: str, cmd: str, args: dict[str, Any]) -> bool:
+        if not self.watch.start(cmd, args):
+            return False
+        self._what = what
+        return True
+
+    def calibrate_intrinsics(self) -> None:
+        args = {
+            "what": "intrinsics",
+            "folder": str(self.views.get("folder", "")),
+            "board": str(self.board.value or ""),
+            "square_mm": self.square.value,
+        }
+        if found := self._problems("calibrate", args):
+            self.intr_note.text = "not sent: " + "; ".join(found)
+            return
+        if self._start("intrinsics", "calibrate", args):
+            self.intr_note.text = f"calibrating the lens from {self.views.get('count', 0)} views..."
+
+    def calibrate_extrinsics(self) -> None:
+        if self._start("extrinsics", "calibrate", {"what": "extrinsics"}):
+            self.extr_note.text = "calibrating camera and laser plane from a capture..."
+
+    def register(self) -> None:
+        if self._start("register_robot", "register_robot", {}):
+            self.reg_note.text = "registering the robot base from the floor board..."
+
+    def verify_map(self) -> None:
+        if self._start("map", "map", {"points": True}):
+            self.map_note.text = "mapping the laser line..."
+
+    def verify_locate(self) -> None:
+        if self._start("locate", "locate", {}):
+            self.locate_note.text = "locating the cubes..."
+
+    async def refresh(self) -> None:
+        """When the job a step started has ended: show its reply and verdict, or its error."""
+        if not self.views and self.visible:
+            await self.load_views()
+        end = self.watch.ended()
+        if end is None:
+            return
+        what = self._what
+        self.results.pop(what, None)
+        if end.result is not None:
+            self.results[what] = end.result
+        note = {
+            "intrinsics": self.intr_note,
+            "extrinsics": self.extr_note,
+            "register_robot": self.reg_note,
+            "map": self.map_note,
+            "locate": self.locate_note,
+        }[what]
+        if not end.ok or end.result is None:
+            note.text = f"FAIL: {end.message}\nfix the cause and retake"
+        else:
+            await self._show_end(what, end, note)
+        self._follow_step()
+
+    async def _show_end(self, what: str, end: JobEnd, note: Any) -> None:
+        result = end.result or {}
+        lines = [verdict_text(result)]
+        if what == "intrinsics":
+            lines += intrinsics_lines(result)
+            await self._picture(result.get("report"), self.intr_report, note)
+            await self._picture(result.get("uncertainty_png"), self.intr_uncertainty, note)
+        elif what == "extrinsics":
+            self.extr_params.rows = parameter_rows(result)
+            self.extr_params.update()
+            await self._picture(result.get("overlay_png"), self.extr_picture, note)
+        elif what == "map":
+            lines.append(f"{result.get('points_on_plane', 0)} points on the laser plane")
+        elif what == "locate":
+            lines.append(f"{result.get('count', 0)} cubes located")
+        note.text = "\n".join(line for line in lines if line)
+        if all(passed(self.results.get(k)) for k in ("map", "locate")):
+            self.commissioned.text = "Commissioned: every step passed; the cell may sort."
+
+    async def _picture(self, path: Any, image: Any, note: Any) -> None:
+        token = self.token()
+        if not path or token is None:
+            image.set_source("")
+            return
+        try:
+            source = await fetch_picture(self.ctx, token, str(path))
+        except (CommandError, ClientError) as exc:
+            note.text += f"\nthe picture {path} could not be shown: {exc}"
+            return
+        if source is not None:
+            image.set_source(source)
