@@ -44,12 +44,16 @@ class Page:
     def text(self, name: str) -> str:
         return str(self.el(name).text)
 
-    def click(self, name: str) -> None:
+    def click(self, name: str, timeout_s: float = 10.0) -> None:
+        """Click the element once it is shown (a step's content appears after its
+        transition)."""
+        wait_for(f"{name} to be shown", lambda: self.visible(name), timeout_s, 0.1)
         self.el(name).click()
 
     def type(self, name: str, value: str) -> None:
         from selenium.webdriver.common.keys import Keys
 
+        wait_for(f"{name} to be shown", lambda: self.visible(name), 10.0, 0.1)
         box = self.el(name)  # Quasar puts the attribute on the <input> itself, or around it
         if box.tag_name != "input":
             box = self.el(name, "input")

@@ -1,0 +1,64 @@
+"""Commissioning the virtual cell from nothing through the operator interface's Commission tab,
+against the same steps through `omnisort ctl` (`tests/ui/commissioning_flow.py`): 10 views of
+the held board, the intrinsics, the camera and laser plane from the two-sided target, the
+robot registration, the verification (map and locate). Each door on a fresh virtual cell
+(960 px) and a fresh `omnisort serve` on the real drivers, no calibration at the start; the
+wall time of each step, and the calibration against the virtual cell's truth.
+
+The page's time includes what a person's clicks cannot skip (the live detection that shows
+the target before it is calibrated, the pictures a step shows); a person adds their own
+pace, which neither figure holds.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+from typing import Any
+
+WIDTH = 960
+
+
+def _rounded(errors: dict[str, float]) -> dict[str, float]:
+    return {k: round(v, 4) for k, v in errors.items()}
+
+
+def _in_page(vc: Any, config: Path, port: int, tmp: Path) -> dict[str, float]:
+    """The page's steps: `omnisort ui` for the service at `port`, Chromium signed in on it."""
+    from tests.ui import commissioning_flow as flow
+    from tests.ui.browser_page import open_cell_page, wait_for
+    from tests.ui.ui_procs import quit_chromium, start_ui, stop_process
+
+    ui_proc, url = start_ui(config, port, tmp)
+    try:
+        driver, page = open_cell_page(url)
+        try:
+            wait_for("the idle cell", lambda: page.text("state") == "idle", 30)
+            return flow.in_page(vc, page, shots=False)
+        finally:
+            quit_chromium(driver)
+    finally:
+        stop_process(ui_proc)
+
+
+def run(shared: Path) -> dict[str, Any]:
+    from omnisort_hw.service.launch import start_service
+    from sim_backend.virtual_cell.launcher import VirtualCellProcess
+    from tests.ui import commissioning_flow as flow
+
+    out: dict[str, Any] = {"cell": f"virtual cell (scene sorting, {WIDTH} px), real drivers"}
+    for door in ("page", "ctl"):
+        with tempfile.TemporaryDirectory() as tmp_name:
+            tmp = Path(tmp_name)
+            with VirtualCellProcess("sorting", width=WIDTH, unlock_delay_s=5.0) as vc:
+                config = flow.virtual_cell_file(vc, tmp)
+                with start_service(config, tmp) as svc:
+                    if door == "ctl":
+                        out["ctl_s"] = flow.with_ctl(vc, svc.port)
+                    else:
+                        out["page_s"] = _in_page(vc, config, svc.port, tmp)
+                truth = vc.truth()
+            errors = flow.calibration_errors(tmp / "state" / "system.json", truth)
+            out[f"{door}_calibration_error"] = _rounded(errors)
+    out["page_over_ctl"] = round(out["page_s"]["total"] / out["ctl_s"]["total"], 2)
+    return out

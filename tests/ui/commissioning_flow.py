@@ -1,0 +1,217 @@
+"""The virtual cell commissioned from nothing, two ways, for the browser test and the
+benchmark: through the page's Commission tab (`in_page`), and through `omnisort ctl` for the
+same steps (`with_ctl`). The hand that holds the board for the intrinsics' views is the
+virtual cell's control channel (`{"cmd": "board", "view": k}`); everything else is the
+operator's. Each returns the wall time of each step."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim_backend.virtual_cell.cell_file import cell_file_text
+from sim_backend.virtual_cell.held_board import HELD_SQUARE_MM
+from sim_backend.virtual_cell.launcher import VirtualCellProcess
+from tests.ui.browser_page import Page, wait_for
+from tests.ui.ui_procs import PROJECT_ROOT, TOKEN
+
+VIEWS = 10  # of the held board's poses: the demo's number of intrinsics views
+STEP_TIMEOUT_S = 300.0
+
+
+def virtual_cell_file(vc: VirtualCellProcess, tmp: Path) -> Path:
+    """The cell file of `vc` with no calibration yet, the tests' token and a brisk page."""
+    config = tmp / "cell.toml"
+    config.write_text(
+        cell_file_text(vc.host, state_dir="state", log_dir="logs")
+        + f'\n[service]\ntoken = "{TOKEN}"\n\n[ui]\nstatus_period_s = 0.25\n'
+        "view_period_s = 0.5\n"
+    )
+    return config
+
+
+def _step_passed(page: Page, note: str, timeout_s: float = STEP_TIMEOUT_S) -> str:
+    """The step's note once its job has ended; it must not be a failure."""
+    text = wait_for(
+        f"the {note}",
+        lambda: (t := page.text(note)) and not t.endswith("...") and t,
+        timeout_s,
+        0.25,
+    )
+    assert text.startswith(("PASS", "WARN")), text
+    return str(text)
+
+
+def in_page(
+    vc: VirtualCellProcess, page: Page, shots: bool = True, views: int = VIEWS
+) -> dict[str, float]:
+    """Commission through the Commission tab, from the tab's opening to the verification's
+    verdict; the wall time of each step (s). `shots`: a screenshot of each step."""
+
+    def shot(name: str, at: str) -> None:
+        if shots:
+            page.shot(name, at=at)
+
+    times: dict[str, float] = {}
+    t0 = mark = time.monotonic()
+
+    def lap(step: str) -> None:
+        nonlocal mark
+        now = time.monotonic()
+        times[step] = round(now - mark, 1)
+        mark = now
+
+    page.click("tab-commission")
+    page.type("square", f"{HELD_SQUARE_MM:g}")
+    for k in range(views):
+        vc.control("board", timeout_s=60.0, view=k)
+        page.click("add-view")
+        name = f"view_{k + 1:03d}"
+        wait_for(name, lambda name=name: name in page.text("views-note"), 30, 0.1)
+        if k == views // 2:
+            wait_for("the coverage", lambda: page.count("intr-detect-image", "path"), 10)
+            shot("commission_views", "intr-detect-image")
+    lap("views")
+    page.click("calibrate-intr")
+    intrinsics = _step_passed(page, "intr-note")
+    assert "cross-validated RMS" in intrinsics, intrinsics
+    lap("intrinsics")
+    if shots:
+        wait_for(
+            "the report",
+            lambda: page.d.execute_script(
+                "return document.querySelector('[data-test=intr-uncertainty] img')"
+                "?.naturalWidth || 0"
+            ),
+            20,
+        )
+        time.sleep(1.0)  # the pictures fade in
+        shot("commission_intrinsics", "intr-note")
+    vc.control("board", timeout_s=60.0, view=None)
+    page.click("intr-next")
+    mark = time.monotonic()
+
+    page.click("commission-laser")
+    wait_for(
+        "the target drawn",
+        lambda: page.text("extr-detect-summary").startswith("the two-sided target found"),
+        60,
+        0.25,
+    )
+    shot("commission_target", "extr-detect-image")
+    page.click("calibrate-extr")
+    _step_passed(page, "extr-note")
+    assert "laser_distance_mm" in page.el("extr-params").text
+    lap("extrinsics")
+    if shots:
+        time.sleep(1.5)  # the residual picture is fetched, then fades in
+    shot("commission_extrinsics", "extr-note")
+    page.click("extr-next")
+    mark = time.monotonic()
+
+    wait_for(
+        "the floor board drawn",
+        lambda: "checkerboard found" in page.text("reg-detect-summary"),
+        60,
+        0.25,
+    )
+    page.click("commission-register")
+    _step_passed(page, "reg-note")
+    lap("registration")
+    shot("commission_registration", "reg-note")
+    page.click("reg-next")
+    mark = time.monotonic()
+
+    page.click("verify-map")
+    _step_passed(page, "verify-map-note")
+    page.click("verify-locate")
+    located = _step_passed(page, "verify-locate-note")
+    assert "4 cubes located" in located, located
+    wait_for("the verdict", lambda: page.text("commissioned").startswith("Commissioned"), 5)
+    lap("verification")
+    shot("commission_verified", "verify-map-note")
+    times["total"] = round(time.monotonic() - t0, 1)
+    return times
+
+
+def ctl(port: int, *words: str, timeout_s: float = STEP_TIMEOUT_S) -> dict[str, Any]:
+    """`omnisort ctl --json COMMAND k=v ...` as a technician types it; its reply's result."""
+    door = [sys.executable, "-m", "omnisort_hw.cli", "ctl", "--port", str(port)]
+    run = subprocess.run(
+        [*door, "--token", TOKEN, "--json", *words],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        cwd=PROJECT_ROOT,
+    )
+    assert run.returncode == 0, (words, run.stdout[-2000:], run.stderr[-2000:])
+    return dict(json.loads(run.stdout)["result"])
+
+
+def with_ctl(vc: VirtualCellProcess, port: int, views: int = VIEWS) -> dict[str, float]:
+    """The same steps through `omnisort ctl`, one command line each (a view: the board held,
+    then `views action=add`); the wall time of each step (s)."""
+    times: dict[str, float] = {}
+    t0 = mark = time.monotonic()
+
+    def lap(step: str) -> None:
+        nonlocal mark
+        now = time.monotonic()
+        times[step] = round(now - mark, 1)
+        mark = now
+
+    folder = ""
+    for k in range(views):
+        vc.control("board", timeout_s=60.0, view=k)
+        folder = ctl(port, "views", "action=add", "board=9x6")["folder"]
+    lap("views")
+    ctl(port, "calibrate", "what=intrinsics", f"folder={folder}", f"square_mm={HELD_SQUARE_MM}")
+    lap("intrinsics")
+    vc.control("board", timeout_s=60.0, view=None)
+    ctl(port, "laser", "on=true")
+    ctl(port, "calibrate", "what=extrinsics")
+    lap("extrinsics")
+    ctl(port, "register_robot")
+    lap("registration")
+    ctl(port, "map", "points=true")
+    located = ctl(port, "locate")
+    assert located["count"] == 4, located
+    lap("verification")
+    times["total"] = round(time.monotonic() - t0, 1)
+    return times
+
+
+def calibration_errors(system_json: Path, truth: dict[str, Any]) -> dict[str, float]:
+    """The stored calibration against the virtual cell's truth: the turn between the camera
+    rotations and between the laser planes' normals (deg), the laser distance's error (mm)."""
+    system = json.loads(system_json.read_text())
+
+    def angle(a: np.ndarray, b: np.ndarray) -> float:
+        if a.ndim == 1:
+            a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+            return float(np.degrees(np.arccos(np.clip(abs(a @ b), -1.0, 1.0))))
+        c = (np.trace(a.T @ b) - 1.0) / 2.0
+        return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+    def vec(record: dict[str, Any], *keys: str) -> np.ndarray:
+        for key in keys:
+            record = record[key]
+        return np.asarray(record, float)
+
+    return {
+        "camera_deg": angle(
+            vec(system, "camera_rotation", "matrix"), vec(truth, "camera_rotation", "matrix")
+        ),
+        "laser_plane_deg": angle(
+            vec(system, "laser_plane", "normal"), vec(truth, "laser_plane", "normal")
+        ),
+        "laser_distance_mm": abs(
+            system["laser_plane"]["distance_mm"] - truth["laser_plane"]["distance_mm"]
+        ),
+    }
