@@ -17,6 +17,7 @@ rig's interface, the calibration store and gate, the capture, the verdict, the s
     adopt          calibration files made elsewhere -> the cell's store, verified
     detection      a live frame -> a calibration pattern's pixels, for a screen placing it
     views          live frames with the full board -> the intrinsics' views and their coverage
+    calibration_history  the store's kept versions of a calibration file, verified
 
 Each calls the pure core (`omnisort_hw.core`) and the devices' interfaces (`drivers.base`);
 none imports the simulator.
@@ -33,4 +34,5 @@ USE_CASES = (
     "adopt",
     "detection",
     "views",
+    "calibration_history",
 )

@@ -186,3 +186,21 @@ class ViewsReply(TypedDict):
     coverage: NotRequired[CoverageReply]
     added: NotRequired[str]
     removed: NotRequired[list[str]]
+
+
+class VersionReply(TypedDict):
+    """One kept version of a calibration file: its figures, or why it does not verify."""
+
+    path: str
+    current: bool
+    saved: NotRequired[str]
+    checksum: NotRequired[str]
+    summary: NotRequired[str]
+    problem: NotRequired[str]
+
+
+class HistoryReply(TypedDict):
+    """A calibration file's current version and the ones kept before it, newest first."""
+
+    kind: str
+    versions: list[VersionReply]

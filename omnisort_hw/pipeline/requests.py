@@ -317,6 +317,14 @@ class ViewsRequest:
 
 
 @dataclass(frozen=True)
+class HistoryRequest:
+    """A calibration file's current version and the versions kept before it (go back to one
+    with `adopt`)."""
+
+    kind: str = param("system", choices=("camera", "system"), help="which calibration file")
+
+
+@dataclass(frozen=True)
 class PictureRequest:
     """A picture the service wrote (a reply's `overlay_png`), scaled down and JPEG-encoded
     (base64), for a client on another machine or under another user."""

@@ -17,6 +17,7 @@ from omnisort_hw.pipeline.replies import (
     AdoptReply,
     DetectReply,
     DriftReply,
+    HistoryReply,
     LocateReply,
     MapReply,
     RegisterReply,
@@ -30,6 +31,7 @@ from omnisort_hw.pipeline.requests import (
     CaptureRequest,
     CheckRequest,
     DetectRequest,
+    HistoryRequest,
     LaserRequest,
     LocateRequest,
     MapRequest,
@@ -84,6 +86,9 @@ class CellCommands:
 
     def views(self, request: ViewsRequest | None = None) -> ViewsReply:
         return cast(ViewsReply, self.execute("views", wire_args(request)))
+
+    def history(self, request: HistoryRequest | None = None) -> HistoryReply:
+        return cast(HistoryReply, self.execute("history", wire_args(request)))
 
     def capture(self, request: CaptureRequest | None = None) -> Result:
         return self.execute("capture", wire_args(request))

@@ -21,6 +21,7 @@ from omnisort_hw.pipeline.requests import (
     CaptureRequest,
     CheckRequest,
     DetectRequest,
+    HistoryRequest,
     LaserRequest,
     LocateRequest,
     MapRequest,
@@ -73,6 +74,12 @@ def views(ctx: Context, request: ViewsRequest) -> Reply:
     from omnisort_hw.pipeline import views as kept_views
 
     return kept_views.run(ctx.cell.jobs, request).reply()
+
+
+def history(ctx: Context, request: HistoryRequest) -> Reply:
+    from omnisort_hw.pipeline import calibration_history
+
+    return calibration_history.run(ctx.cell.jobs, request).reply()
 
 
 def picture(ctx: Context, request: PictureRequest) -> Reply:
@@ -142,6 +149,7 @@ HANDLERS: dict[str, Handler] = {
     "picture": picture,
     "detect": detect,
     "views": views,
+    "history": history,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

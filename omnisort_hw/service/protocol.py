@@ -168,6 +168,7 @@ COMMANDS: dict[str, Command] = {
         Command("picture", "quick", requests.PictureRequest),
         Command("detect", "quick", requests.DetectRequest),
         Command("views", "quick", requests.ViewsRequest),
+        Command("history", "quick", requests.HistoryRequest),
         Command("capture", "quick", requests.CaptureRequest),
         Command("laser", "quick", requests.LaserRequest),
         Command("calibrate", "job", requests.CalibrateRequest, job_state="calibrating"),
