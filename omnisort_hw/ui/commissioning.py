@@ -10,6 +10,7 @@ criteria (docs/commissioning.md) by the verdict the service gives with its reply
    accept or retake.
 3. Robot registration from the floor board, its detection drawn live (`register_robot`).
 4. Verification: `map` and `locate` of what is in front of the camera, with their verdicts.
+5. Saved versions: each file's kept versions (`history`), and going back to one (`adopt`).
 
 Every action is a command of the protocol; the page only shows the replies.
 """
@@ -19,11 +20,12 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
-from nicegui import ui
+from nicegui import background_tasks, ui
 
 from omnisort_hw.pipeline.verdict import verdict_lines
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
+from omnisort_hw.ui.history_panel import HistoryPanel
 from omnisort_hw.ui.job_runner import JobEnd, JobWatch
 from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
@@ -32,7 +34,13 @@ from omnisort_hw.ui.recovery import parameter_rows
 from omnisort_hw.ui.schema_form import problems
 from omnisort_hw.ui.widgets import tag
 
-STEPS = ("Camera intrinsics", "Camera and laser plane", "Robot registration", "Verification")
+STEPS = (
+    "Camera intrinsics",
+    "Camera and laser plane",
+    "Robot registration",
+    "Verification",
+    "Saved versions",
+)
 Send = Callable[[str, dict[str, Any]], Awaitable[dict[str, Any] | None]]
 
 
@@ -88,6 +96,7 @@ class CommissioningPanel:
         self.target_detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "extr-detect")
         self.floor_detection = LiveDetection(ctx, token, lambda: {"what": "floor"}, "reg-detect")
         self.detections = (self.board_detection, self.target_detection, self.floor_detection)
+        self.history = HistoryPanel(send, lambda cmd, args: self._start("restore", cmd, args))
 
     # -- building -------------------------------------------------------------------------
 
@@ -101,6 +110,9 @@ class CommissioningPanel:
                 self._build_registration()
             with ui.step(STEPS[3]):
                 self._build_verification()
+                tag(ui.button("Saved versions", on_click=self.stepper.next), "to-history")
+            with ui.step(STEPS[4]):
+                self.history.build()
         self.stepper.on_value_change(lambda _: self._follow_step())
 
     def _build_intrinsics(self) -> None:
@@ -184,6 +196,8 @@ class CommissioningPanel:
         step = STEPS.index(self.stepper.value) if self.stepper.value in STEPS else 0
         for i, detection in enumerate(self.detections):
             detection.active = self.visible and i == step
+        if self.visible and step == STEPS.index("Saved versions"):
+            background_tasks.create(self.history.load(), name="history")
         for button, what in (
             (self.intr_next, "intrinsics"),
             (self.extr_next, "extrinsics"),
@@ -289,6 +303,9 @@ class CommissioningPanel:
         if end is None:
             return
         what = self._what
+        if what == "restore":
+            await self.history.ended(end.ok, end.message, dict(end.result or {}))
+            return
         self.results.pop(what, None)
         if end.result is not None:
             self.results[what] = end.result

@@ -17,7 +17,7 @@ from omnisort_hw.pipeline.extrinsics import ANGLE_STD_DEG, DISTANCE_STD_MM
 from omnisort_hw.service.virtual_cell_demo import check_truth
 from tests.sim.virtual_cell_fixture import virtual_cell
 from tests.ui import commissioning_flow as flow
-from tests.ui.browser_page import served_page, wait_for
+from tests.ui.browser_page import served_page, service_status, wait_for
 
 pytest.importorskip("pybullet", reason="the virtual cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
@@ -28,7 +28,7 @@ WIDTH = 960  # the demo's size: the target's markers and the floor board need it
 def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: Path) -> None:
     with virtual_cell("sorting", width=WIDTH, unlock_delay_s=5.0) as vc:
         config = flow.virtual_cell_file(vc, tmp_path)
-        with served_page(config, tmp_path) as (_svc, page):
+        with served_page(config, tmp_path) as (svc, page):
             times = flow.in_page(vc, page)
             page.click("tab-cell")
             page.click("start-sort")
@@ -40,7 +40,31 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
                 1.0,
             )
             page.shot("commission_sorted")
-        truth = vc.truth()
+            truth = vc.truth()
+
+            # Going back to the kept system calibration (the one before the registration).
+            page.click("tab-commission")
+            page.click("to-history")
+            wait_for(
+                "the versions",
+                lambda: (
+                    page.visible("history-system") and "(current)" in page.text("history-system")
+                ),
+                20,
+            )
+            page.click("history-restore-system")
+            page.confirm()
+            back = wait_for(
+                "the restore",
+                lambda: (
+                    (t := page.text("history-note")).startswith(("system.json is now", "FAIL"))
+                    and t
+                ),
+                60,
+                0.5,
+            )
+            page.shot("commission_history", at="history-system")
+            status = service_status(svc.port)
 
     assert "4 sorted, 0 skipped, 0 failed" in end, end
     assert check_truth(truth) == [], check_truth(truth)
@@ -51,3 +75,8 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
     assert errors["camera_deg"] < ANGLE_STD_DEG[1], errors
     assert errors["laser_plane_deg"] < ANGLE_STD_DEG[1], errors
     assert errors["laser_distance_mm"] < DISTANCE_STD_MM[1], errors
+    # The kept version is current again: the calibration from before the registration, so
+    # the robot must be registered again before a sort.
+    assert back.startswith("system.json is now") and "/history/system.json." in back, back
+    assert status["calibration"]["files"]["system"]["health"] == "ok", status["calibration"]
+    assert not status["calibration"]["robot_registered"]
