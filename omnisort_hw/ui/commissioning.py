@@ -27,10 +27,9 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.history_panel import HistoryPanel
 from omnisort_hw.ui.job_runner import JobEnd, JobWatch
-from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
-from omnisort_hw.ui.pictures import fetch_picture
-from omnisort_hw.ui.recovery import parameter_rows
+from omnisort_hw.ui.pictures import show_picture
+from omnisort_hw.ui.recovery import parameter_rows, parameter_table
 from omnisort_hw.ui.schema_form import problems
 from omnisort_hw.ui.widgets import tag
 
@@ -149,17 +148,7 @@ class CommissioningPanel:
             self.extr_next = tag(ui.button("Accept", on_click=self.stepper.next), "extr-next")
         self.extr_note = tag(ui.label(""), "extr-note").classes("whitespace-pre-line")
         with ui.row().classes("w-full no-wrap gap-2"):
-            self.extr_params = tag(
-                ui.table(
-                    columns=[
-                        {"name": k, "label": k, "field": k, "align": "left"}
-                        for k in ("name", "value", "sigma")
-                    ],
-                    rows=[],
-                    row_key="name",
-                ).props("dense flat"),
-                "extr-params",
-            )
+            self.extr_params = parameter_table("extr-params")
             self.extr_picture = tag(ui.image().classes("grow"), "extr-picture")
 
     def _build_registration(self) -> None:
@@ -327,12 +316,16 @@ class CommissioningPanel:
         lines = [verdict_text(result)]
         if what == "intrinsics":
             lines += intrinsics_lines(result)
-            await self._picture(result.get("report"), self.intr_report, note)
-            await self._picture(result.get("uncertainty_png"), self.intr_uncertainty, note)
+            await show_picture(self.ctx, self.token(), result.get("report"), self.intr_report, note)
+            await show_picture(
+                self.ctx, self.token(), result.get("uncertainty_png"), self.intr_uncertainty, note
+            )
         elif what == "extrinsics":
             self.extr_params.rows = parameter_rows(result)
             self.extr_params.update()
-            await self._picture(result.get("overlay_png"), self.extr_picture, note)
+            await show_picture(
+                self.ctx, self.token(), result.get("overlay_png"), self.extr_picture, note
+            )
         elif what == "map":
             lines.append(f"{result.get('points_on_plane', 0)} points on the laser plane")
         elif what == "locate":
@@ -340,16 +333,3 @@ class CommissioningPanel:
         note.text = "\n".join(line for line in lines if line)
         if all(passed(self.results.get(k)) for k in ("map", "locate")):
             self.commissioned.text = "Commissioned: every step passed; the cell may sort."
-
-    async def _picture(self, path: Any, image: Any, note: Any) -> None:
-        token = self.token()
-        if not path or token is None:
-            image.set_source("")
-            return
-        try:
-            source = await fetch_picture(self.ctx, token, str(path))
-        except (CommandError, ClientError) as exc:
-            note.text += f"\nthe picture {path} could not be shown: {exc}"
-            return
-        if source is not None:
-            image.set_source(source)

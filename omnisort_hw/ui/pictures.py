@@ -4,12 +4,14 @@ folder, scaled and JPEG-encoded."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from nicegui import run
 
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import ClientError, CommandError
 
-__all__ = ["ClientError", "CommandError", "fetch_picture"]
+__all__ = ["ClientError", "CommandError", "fetch_picture", "show_picture"]
 
 
 async def fetch_picture(ctx: UiContext, token: str, path: str, width: int = 960) -> str | None:
@@ -19,3 +21,20 @@ async def fetch_picture(ctx: UiContext, token: str, path: str, width: int = 960)
     if sent is None:
         return None
     return f"data:image/jpeg;base64,{sent['base64']}"
+
+
+async def show_picture(
+    ctx: UiContext, token: str | None, path: object, image: Any, note: Any
+) -> None:
+    """The picture at `path` (a reply's) in the `image` element; none without a path or a
+    token; why not appended to the `note` label when the service does not send it."""
+    if not path or token is None:
+        image.set_source("")
+        return
+    try:
+        source = await fetch_picture(ctx, token, str(path))
+    except (CommandError, ClientError) as exc:
+        note.text += f"\nthe picture {path} could not be shown: {exc}"
+        return
+    if source is not None:
+        image.set_source(source)

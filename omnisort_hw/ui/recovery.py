@@ -17,11 +17,12 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.job_runner import JobWatch
 from omnisort_hw.ui.link import ClientError, CommandError
-from omnisort_hw.ui.pictures import fetch_picture
+from omnisort_hw.ui.pictures import show_picture
 from omnisort_hw.ui.widgets import tag
 
 STEPS = ("Place the target", "Calibrate camera and laser", "Register the robot", "Verify")
 PARAMETER_UNITS = {"_deg": "deg", "_mm": "mm"}
+PARAMETER_COLUMNS = ("name", "value", "sigma")
 
 
 def parameter_rows(reply: Mapping[str, Any]) -> list[dict[str, str]]:
@@ -40,6 +41,12 @@ def parameter_rows(reply: Mapping[str, Any]) -> list[dict[str, str]]:
             }
         )
     return rows
+
+
+def parameter_table(name: str) -> Any:
+    """An empty table for `parameter_rows`, named `name` for the tests."""
+    columns = [{"name": k, "label": k, "field": k, "align": "left"} for k in PARAMETER_COLUMNS]
+    return tag(ui.table(columns=columns, rows=[], row_key="name").props("dense flat"), name)
 
 
 class RecoveryPanel:
@@ -76,17 +83,7 @@ class RecoveryPanel:
                         tag(ui.button("Target placed", on_click=self.placed), "placed")
                 with ui.step(STEPS[1]):
                     self.calib_note = tag(ui.label(""), "calib-note")
-                    self.params = tag(
-                        ui.table(
-                            columns=[
-                                {"name": k, "label": k, "field": k, "align": "left"}
-                                for k in ("name", "value", "sigma")
-                            ],
-                            rows=[],
-                            row_key="name",
-                        ).props("dense flat"),
-                        "calib-params",
-                    )
+                    self.params = parameter_table("calib-params")
                     self.residuals = tag(
                         ui.image().classes("w-full max-w-[960px]"), "calib-picture"
                     )
@@ -176,7 +173,9 @@ class RecoveryPanel:
         if cmd == "calibrate":
             self.params.rows = parameter_rows(end.result)
             self.params.update()
-            await self._show_picture(end.result)
+            await show_picture(
+                self.ctx, self.token(), end.result.get("overlay_png"), self.residuals, note
+            )
             self.accept.set_visibility(True)
         elif cmd == "register_robot":
             self.accept_register.set_visibility(True)
@@ -192,18 +191,3 @@ class RecoveryPanel:
         if isinstance(result.get("verdict"), Mapping):
             lines += [line.strip() for line in verdict_lines(result["verdict"])]
         return lines or [f"{cmd} done"]
-
-    async def _show_picture(self, result: Mapping[str, Any]) -> None:
-        """The calibration's residual picture, sent by the service (`picture`)."""
-        path = result.get("overlay_png")
-        token = self.token()
-        if not path or token is None:
-            self.residuals.set_source("")
-            return
-        try:
-            source = await fetch_picture(self.ctx, token, str(path))
-        except (CommandError, ClientError) as exc:
-            self.calib_note.text += f"; the residual picture could not be shown: {exc}"
-            return
-        if source is not None:
-            self.residuals.set_source(source)

@@ -36,6 +36,26 @@ def virtual_cell_file(vc: VirtualCellProcess, tmp: Path) -> Path:
     return config
 
 
+class Laps:
+    """Each step's wall time (s) from the end of the one before (or a restart: time spent
+    between steps is not a step's), and the total from the start."""
+
+    def __init__(self) -> None:
+        self.start = self.mark = time.monotonic()
+        self.times: dict[str, float] = {}
+
+    def lap(self, step: str) -> None:
+        now = time.monotonic()
+        self.times[step] = round(now - self.mark, 1)
+        self.mark = now
+
+    def restart(self) -> None:
+        self.mark = time.monotonic()
+
+    def total(self) -> dict[str, float]:
+        return {**self.times, "total": round(time.monotonic() - self.start, 1)}
+
+
 def _step_passed(page: Page, note: str, timeout_s: float = STEP_TIMEOUT_S) -> str:
     """The step's note once its job has ended; it must not be a failure."""
     text = wait_for(
@@ -58,15 +78,7 @@ def in_page(
         if shots:
             page.shot(name, at=at)
 
-    times: dict[str, float] = {}
-    t0 = mark = time.monotonic()
-
-    def lap(step: str) -> None:
-        nonlocal mark
-        now = time.monotonic()
-        times[step] = round(now - mark, 1)
-        mark = now
-
+    laps = Laps()
     page.click("tab-commission")
     page.type("square", f"{HELD_SQUARE_MM:g}")
     for k in range(views):
@@ -77,11 +89,11 @@ def in_page(
         if k == views // 2:
             wait_for("the coverage", lambda: page.count("intr-detect-image", "path"), 10)
             shot("commission_views", "intr-detect-image")
-    lap("views")
+    laps.lap("views")
     page.click("calibrate-intr")
     intrinsics = _step_passed(page, "intr-note")
     assert "cross-validated RMS" in intrinsics, intrinsics
-    lap("intrinsics")
+    laps.lap("intrinsics")
     if shots:
         wait_for(
             "the report",
@@ -95,7 +107,7 @@ def in_page(
         shot("commission_intrinsics", "intr-note")
     vc.control("board", timeout_s=60.0, view=None)
     page.click("intr-next")
-    mark = time.monotonic()
+    laps.restart()
 
     page.click("commission-laser")
     wait_for(
@@ -108,12 +120,12 @@ def in_page(
     page.click("calibrate-extr")
     _step_passed(page, "extr-note")
     assert "laser_distance_mm" in page.el("extr-params").text
-    lap("extrinsics")
+    laps.lap("extrinsics")
     if shots:
         time.sleep(1.5)  # the residual picture is fetched, then fades in
     shot("commission_extrinsics", "extr-note")
     page.click("extr-next")
-    mark = time.monotonic()
+    laps.restart()
 
     wait_for(
         "the floor board drawn",
@@ -123,10 +135,10 @@ def in_page(
     )
     page.click("commission-register")
     _step_passed(page, "reg-note")
-    lap("registration")
+    laps.lap("registration")
     shot("commission_registration", "reg-note")
     page.click("reg-next")
-    mark = time.monotonic()
+    laps.restart()
 
     page.click("verify-map")
     _step_passed(page, "verify-map-note")
@@ -134,10 +146,9 @@ def in_page(
     located = _step_passed(page, "verify-locate-note")
     assert "4 cubes located" in located, located
     wait_for("the verdict", lambda: page.text("commissioned").startswith("Commissioned"), 5)
-    lap("verification")
+    laps.lap("verification")
     shot("commission_verified", "verify-map-note")
-    times["total"] = round(time.monotonic() - t0, 1)
-    return times
+    return laps.total()
 
 
 def ctl(port: int, *words: str, timeout_s: float = STEP_TIMEOUT_S) -> dict[str, Any]:
@@ -157,34 +168,25 @@ def ctl(port: int, *words: str, timeout_s: float = STEP_TIMEOUT_S) -> dict[str, 
 def with_ctl(vc: VirtualCellProcess, port: int, views: int = VIEWS) -> dict[str, float]:
     """The same steps through `omnisort ctl`, one command line each (a view: the board held,
     then `views action=add`); the wall time of each step (s)."""
-    times: dict[str, float] = {}
-    t0 = mark = time.monotonic()
-
-    def lap(step: str) -> None:
-        nonlocal mark
-        now = time.monotonic()
-        times[step] = round(now - mark, 1)
-        mark = now
-
+    laps = Laps()
     folder = ""
     for k in range(views):
         vc.control("board", timeout_s=60.0, view=k)
         folder = ctl(port, "views", "action=add", "board=9x6")["folder"]
-    lap("views")
+    laps.lap("views")
     ctl(port, "calibrate", "what=intrinsics", f"folder={folder}", f"square_mm={HELD_SQUARE_MM}")
-    lap("intrinsics")
+    laps.lap("intrinsics")
     vc.control("board", timeout_s=60.0, view=None)
     ctl(port, "laser", "on=true")
     ctl(port, "calibrate", "what=extrinsics")
-    lap("extrinsics")
+    laps.lap("extrinsics")
     ctl(port, "register_robot")
-    lap("registration")
+    laps.lap("registration")
     ctl(port, "map", "points=true")
     located = ctl(port, "locate")
     assert located["count"] == 4, located
-    lap("verification")
-    times["total"] = round(time.monotonic() - t0, 1)
-    return times
+    laps.lap("verification")
+    return laps.total()
 
 
 def calibration_errors(system_json: Path, truth: dict[str, Any]) -> dict[str, float]:
