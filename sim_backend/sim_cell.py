@@ -16,6 +16,7 @@ from drivers.errors import (
     DeviceConfigError,
     DeviceDisconnectedError,
 )
+from omnisort_hw.core.frames import camera_rotation
 from sim_backend.hostile_light import Lighting, apply_to_scene, lighting
 from sim_backend.scene import Scene, load_scene, sized
 from sim_backend.scene_images import camera_model_for, render_world
@@ -91,6 +92,16 @@ class SimCell:
         turn = Rotation.from_rotvec(np.radians(angle_deg) * ax / np.linalg.norm(ax)).as_matrix()
         with self.lock:
             self.world.R_SC = turn @ self.world.R_SC
+            return self.world.R_SC.copy()
+
+    def mount_camera(self, roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
+        """Mount the camera at these angles (docs/frames.md's roll, pitch, yaw of S), as the
+        simulator's panel sets it; returns the new R_SC. Renders and truth follow."""
+        angles = np.array([roll_deg, pitch_deg, yaw_deg], float)
+        if not np.all(np.isfinite(angles)) or np.any(np.abs(angles) > 180.0):
+            raise ValueError(f"camera mounting: angles must be within +-180 deg, got {angles}")
+        with self.lock:
+            self.world.R_SC = camera_rotation(*np.radians(angles))
             return self.world.R_SC.copy()
 
     def release_stops(self) -> None:

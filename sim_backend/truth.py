@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from omnisort_hw.core.camera_model import OcamModel
-from omnisort_hw.core.frames import invert_pose, rpy_deg
+from omnisort_hw.core.frames import camera_angles, invert_pose, rpy_deg
 from sim_backend.laser import LaserPlane, laser_polylines, visible_from
 from sim_backend.world import SimWorld
 
@@ -87,12 +87,13 @@ def _pose_dict(T: np.ndarray) -> dict[str, Any]:
 
 def mounting_truth(world: SimWorld, laser_on: bool) -> dict[str, Any]:
     """The camera's rotation in S and the laser plane, as system.json holds them."""
-    cam, las = world.scene.camera, world.scene.laser
+    las = world.scene.laser
+    roll, pitch, yaw = np.degrees(camera_angles(world.R_SC))
     return {
-        "camera_rotation": {
-            "roll_deg": cam.roll_deg,
-            "pitch_deg": cam.pitch_deg,
-            "yaw_deg": cam.yaw_deg,
+        "camera_rotation": {  # as it is now: mounted, or knocked, since the scene was loaded
+            "roll_deg": round(float(roll), 9),
+            "pitch_deg": round(float(pitch), 9),
+            "yaw_deg": round(float(yaw), 9),
             "matrix": _r(world.R_SC, 12),
         },
         "laser_plane": {

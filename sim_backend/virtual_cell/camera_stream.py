@@ -35,10 +35,15 @@ CAMERA_PORT = 8080
 
 
 def world_state(cell: Any) -> dict[str, Any]:
-    """What the picture depends on: joints, fingers, cube poses, laser (under the cell lock)."""
+    """What the picture depends on: joints, fingers, cube poses, laser, the camera's rotation
+    (under the cell lock)."""
     world = cell.world
     with cell.lock:
-        state: dict[str, Any] = {"laser": bool(world.laser_on), "cubes": []}
+        state: dict[str, Any] = {
+            "laser": bool(world.laser_on),
+            "R_SC": np.asarray(world.R_SC, float).tolist(),
+            "cubes": [],
+        }
         if world.arm is not None:
             state["q"] = world.joints().tolist()
             fingers = p.getJointStates(
@@ -53,12 +58,14 @@ def world_state(cell: Any) -> dict[str, Any]:
 
 def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
     """True when states a and b look the same to the camera: the same board held (or none),
-    the laser alike, joints within 0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm
-    and 0.15 deg (tolerances, not rounding, so a cube's physics jitter never makes the picture
-    out of date)."""
+    the camera not turned, the laser alike, joints within 0.01 deg, fingers within 0.1 mm,
+    every cube within 0.5 mm and 0.15 deg (tolerances, not rounding, so a cube's physics
+    jitter never makes the picture out of date)."""
     if a is None or a.get("board") != b.get("board"):
         return False
     if a["laser"] != b["laser"] or len(a["cubes"]) != len(b["cubes"]):
+        return False
+    if np.max(np.abs(np.subtract(a["R_SC"], b["R_SC"]))) >= 1e-7:  # the camera turned
         return False
     if "q" in b and np.max(np.abs(np.subtract(a["q"], b["q"]))) >= 0.01:
         return False
@@ -112,6 +119,7 @@ def _render_worker(
         for (_, body), (pos, orn) in zip(world.info.cubes, state["cubes"], strict=True):
             p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=world.client)
         world.laser_on = state["laser"]
+        world.R_SC = np.asarray(state["R_SC"], float)
         n += 1
         if sensor is not None:
             settings = Exposure(
@@ -193,6 +201,11 @@ class FrameSource:
         """Hold the board at pose `view` (None: put it down); True once a picture shows it
         (at once when no client watches: the next picture will)."""
         self.board = view
+        return self.wait_shown(timeout_s)
+
+    def wait_shown(self, timeout_s: float = 60.0) -> bool:
+        """True once a picture shows the state as it is now (at once when no client watches:
+        the next picture will); False after `timeout_s`."""
         deadline = time.monotonic() + timeout_s
         while self.clients > 0 and not self.current():
             if self.stop.is_set() or time.monotonic() > deadline:

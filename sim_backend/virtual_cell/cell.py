@@ -10,8 +10,10 @@ addresses): RTDE 30004, dashboard 29999, script port 30003, the laser's Modbus T
 camera's MJPEG stream 8080 and the control channel 30111 (one JSON object per line:
 `{"cmd": "status"}`, "truth", "protective_stop", "emergency_stop", "release_emergency_stop",
 `{"cmd": "drop", "what": "arm"}`, `{"cmd": "stall", "what": "arm", "seconds": 5}`, "unstall",
-and `{"cmd": "board", "view": 3}` / `{"cmd": "board", "view": null}`: a checkerboard held in
-front of the camera for the intrinsics' views, `held_board.py`).
+`{"cmd": "board", "view": 3}` / `{"cmd": "board", "view": null}`: a checkerboard held in
+front of the camera for the intrinsics' views, `held_board.py`; `{"cmd": "camera", "roll_deg":
+5, "pitch_deg": 0, "yaw_deg": 0}`: the camera mounted at those angles; `{"cmd": "knock",
+"angle_deg": 0.5, "axis": "x"}`: the camera turned from where it is, as a knock turns it).
 """
 
 from __future__ import annotations
@@ -212,6 +214,16 @@ class VirtualCell:
         elif cmd == "unstall":
             for face in faces:
                 self.faults.clear(face)
+        elif cmd == "camera":
+            R = self.cell.mount_camera(
+                float(req.get("roll_deg", 0.0)),
+                float(req.get("pitch_deg", 0.0)),
+                float(req.get("yaw_deg", 0.0)),
+            )
+            return {"R_SC": R.tolist(), "shown": self.frames.wait_shown()}
+        elif cmd == "knock":
+            R = self.cell.bump_camera(float(req.get("angle_deg", 0.5)), req.get("axis", "x"))
+            return {"R_SC": R.tolist(), "shown": self.frames.wait_shown()}
         elif cmd == "board":
             view = check_view(req.get("view"))
             shown = self.frames.hold_board(view)

@@ -138,3 +138,33 @@ def test_a_held_board_is_in_the_next_frame_and_put_down_again(vc) -> None:
         assert np.abs(frame.astype(float) - expected).mean() < 2.0, view
     assert np.count_nonzero(_changed(before, held)) > 0.2 * WIDTH * WIDTH
     assert np.count_nonzero(_changed(before, after)) < 0.01 * WIDTH * WIDTH
+
+
+def test_the_camera_mounted_or_knocked_is_rendered_so(vc) -> None:
+    from omnisort_hw.core.frames import rotation_angle_deg
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
+
+    scene = sized(load_scene("sorting"), WIDTH)
+    with camera(vc.host) as cam:
+        mounted = vc.control("camera", timeout_s=60.0, roll_deg=5.0)
+        rolled = cam.grab().image
+        truth = vc.truth()
+        knocked = vc.control("knock", timeout_s=60.0, angle_deg=0.5, axis="y")
+        after_knock = vc.truth()
+        vc.control("camera", timeout_s=60.0)  # back to the scene's mounting
+        level = cam.grab().image
+    assert mounted["shown"] and knocked["shown"]
+    # The truth reports the mounting asked, and the knock's turn from it.
+    assert abs(truth["camera_rotation"]["roll_deg"] - 5.0) < 1e-6, truth["camera_rotation"]
+    R5 = np.asarray(truth["camera_rotation"]["matrix"], float)
+    Rk = np.asarray(after_knock["camera_rotation"]["matrix"], float)
+    assert abs(float(rotation_angle_deg(R5, Rk)) - 0.5) < 1e-6
+    # The streamed frame is the scene rendered at 5 deg of roll, not at 0 (within the stream's
+    # JPEG noise and the cubes' settling, against what 5 deg changes).
+    at_5, _ = render_scene(scene.replace(camera={"roll_deg": 5.0}), seed=0)
+    at_0, _ = render_scene(scene, seed=0)
+    near = np.abs(rolled.astype(float) - at_5).mean()
+    far = np.abs(rolled.astype(float) - at_0).mean()
+    assert near < far / 4, (near, far)
+    assert np.abs(level.astype(float) - at_0).mean() < far / 4

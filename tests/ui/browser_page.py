@@ -42,7 +42,16 @@ class Page:
         return self.d.find_element(By.CSS_SELECTOR, f"[data-test={name}] {inner}".strip())
 
     def text(self, name: str) -> str:
-        return str(self.el(name).text)
+        """The element's text; empty while it is not on the page (a step still opening)."""
+        from selenium.common.exceptions import (
+            NoSuchElementException,
+            StaleElementReferenceException,
+        )
+
+        try:
+            return str(self.el(name).text)
+        except (NoSuchElementException, StaleElementReferenceException):
+            return ""
 
     def click(self, name: str, timeout_s: float = 10.0) -> None:
         """Click the element once it is shown (a step's content appears after its

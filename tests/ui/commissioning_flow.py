@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.core.frames import rotation_angle_deg
 from sim_backend.virtual_cell.cell_file import cell_file_text
 from sim_backend.virtual_cell.held_board import HELD_SQUARE_MM
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
@@ -195,11 +196,10 @@ def calibration_errors(system_json: Path, truth: dict[str, Any]) -> dict[str, fl
     system = json.loads(system_json.read_text())
 
     def angle(a: np.ndarray, b: np.ndarray) -> float:
-        if a.ndim == 1:
+        if a.ndim == 1:  # two planes' normals, either sign
             a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
             return float(np.degrees(np.arccos(np.clip(abs(a @ b), -1.0, 1.0))))
-        c = (np.trace(a.T @ b) - 1.0) / 2.0
-        return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+        return float(rotation_angle_deg(a, b))
 
     def vec(record: dict[str, Any], *keys: str) -> np.ndarray:
         for key in keys:
