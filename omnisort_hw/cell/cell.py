@@ -471,8 +471,8 @@ class Cell:
 
     def view(self, width: int = 960, quality: int = 80) -> dict[str, Any]:
         """A live picture for a screen: one fresh frame scaled to at most `width` px and
-        JPEG-encoded (base64). Not logged (a screen asks often); while a measurement holds
-        the camera it is refused at once (`device_lock_timeout`) rather than waited for."""
+        JPEG-encoded (base64). Not logged (a screen asks often); refused (`busy`) rather than
+        waited for while a command holds or wants the camera (`live_frame`)."""
         frame = self.live_frame()
         return {
             "sequence": int(frame.sequence),

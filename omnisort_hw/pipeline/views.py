@@ -12,6 +12,7 @@ the views' mean brightness about the image centre (there is no lens model yet).
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from dataclasses import dataclass
@@ -61,8 +62,9 @@ class View:
     image_size: tuple[int, int]  # (width, height)
     taken: str
 
-    def outline_px(self, cols: int, rows: int) -> np.ndarray:
+    def outline_px(self) -> np.ndarray:
         """(2 (cols + rows) - 4, 2): the board's outer corners, around."""
+        cols, rows = (int(x) for x in self.board.split("x"))
         grid = self.corners_px.reshape(rows, cols, 2)
         ring = [grid[0, :], grid[1:, -1], grid[-1, -2::-1], grid[-2:0:-1, 0]]
         return np.concatenate(ring)
@@ -133,9 +135,10 @@ def add_view(folder: Path, image: np.ndarray, board: BoardSpec, taken: str) -> V
     fileio.atomic_write_bytes(
         folder / f"{name}.json", json.dumps(record).encode("utf-8"), keep_history=False
     )
-    view = _record(folder / f"{name}.json")
-    assert view is not None
-    return view
+    corners = np.asarray(record["corners_px"], float)  # as kept, so as listed later
+    return View(
+        name, folder / f"{name}.png", size, corners, record["circle_radius_px"], (w, h), taken
+    )
 
 
 def remove_views(folder: Path, name: str | None) -> list[str]:
@@ -154,6 +157,17 @@ def remove_views(folder: Path, name: str | None) -> list[str]:
     return removed
 
 
+@dataclass(frozen=True)
+class Coverage:
+    """The views' corners over the image circle's outer band (`band_coverage`)."""
+
+    centre: tuple[float, float]
+    radius: float
+    covered: np.ndarray  # (SECTORS,) bool: a view's corner reaches the sector
+    inside: np.ndarray  # (SECTORS,) bool: the sector's middle lies inside the frame
+    fraction: float  # of the sectors inside, those covered
+
+
 @dataclass
 class ViewsResult:
     """The views kept after a request, and what it added or removed."""
@@ -163,10 +177,10 @@ class ViewsResult:
     added: View | None = None
     removed: tuple[str, ...] = ()
 
-    def coverage(self) -> tuple[tuple[float, float], float, np.ndarray, np.ndarray] | None:
-        """(centre, radius, covered, inside) of the image circle's outer band: which of its
-        sectors hold a corner of some view, and which lie inside the frame; None without
-        views."""
+    @functools.cached_property
+    def coverage(self) -> Coverage | None:
+        """The image circle's outer band: which of its sectors hold a corner of some view,
+        and which lie inside the frame; None without views."""
         if not self.views:
             return None
         w, h = self.views[0].image_size
@@ -174,7 +188,7 @@ class ViewsResult:
         radius = float(np.median([v.circle_radius_px for v in self.views]))
         corners = np.concatenate([v.corners_px for v in self.views])
         covered, inside = band_coverage(corners, centre, radius, (w, h))
-        return centre, radius, covered, inside
+        return Coverage(centre, radius, covered, inside, covered_fraction(covered, inside))
 
     def verdict(self) -> Verdict:
         """Enough views for the intrinsics, and the rim covered as their report asks."""
@@ -187,15 +201,14 @@ class ViewsResult:
                 "add views: the whole board in the picture, at another place and angle",
             )
         ]
-        cov = self.coverage()
+        cov = self.coverage
         if cov is not None:
-            fraction = covered_fraction(cov[2], cov[3])
-            ok = fraction >= LOW_COVERAGE
+            ok = cov.fraction >= LOW_COVERAGE
             checks.append(
                 Check(
                     "outer band of the image circle covered",
                     "pass" if ok else "warn",
-                    f"{fraction:.0%}",
+                    f"{cov.fraction:.0%}",
                     f">= {LOW_COVERAGE:.0%}",
                     "" if ok else "add views with the board near the rim, where the band is red",
                 )
@@ -213,16 +226,15 @@ class ViewsResult:
         if self.views:
             w, h = self.views[0].image_size
             out["board"], out["image_width"], out["image_height"] = self.views[0].board, w, h
-        cov = self.coverage()
+        cov = self.coverage
         if cov is not None:
-            centre, radius, covered, inside = cov
             out["coverage"] = CoverageReply(
-                centre_px=[round(centre[0], 1), round(centre[1], 1)],
-                radius_px=round(radius, 1),
+                centre_px=[round(cov.centre[0], 1), round(cov.centre[1], 1)],
+                radius_px=round(cov.radius, 1),
                 outer_band=OUTER_BAND,
-                covered=covered.tolist(),
-                inside=inside.tolist(),
-                fraction=round(covered_fraction(covered, inside), 3),
+                covered=cov.covered.tolist(),
+                inside=cov.inside.tolist(),
+                fraction=round(cov.fraction, 3),
             )
         if self.added is not None:
             out["added"] = self.added.name
@@ -232,11 +244,10 @@ class ViewsResult:
 
 
 def _view_reply(view: View) -> KeptViewReply:
-    cols, rows = (int(x) for x in view.board.split("x"))
     return {
         "name": view.name,
         "taken": view.taken,
-        "outline_px": np.round(view.outline_px(cols, rows), 1).tolist(),
+        "outline_px": np.round(view.outline_px(), 1).tolist(),
     }
 
 

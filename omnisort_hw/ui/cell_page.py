@@ -88,7 +88,7 @@ class CellPage:
                 self._build_operator()
                 self._build_status()
             with ui.column().classes("gap-4 grow min-w-0"):
-                self.recovery = RecoveryPanel(self.ctx, self._token, self._start_job)
+                self.recovery = RecoveryPanel(self.ctx, self._token, self._start_job, self.laser)
                 self.recovery.build()
                 self._build_job()
                 with ui.tabs().classes("w-full") as tabs:
@@ -100,7 +100,7 @@ class CellPage:
                         self._build_sort()
                     with ui.tab_panel("Commission").classes("p-0"):
                         self.commissioning = CommissioningPanel(
-                            self.ctx, self._token, self._start_job, self._operator_send
+                            self.ctx, self._token, self._start_job, self._operator_send, self.laser
                         )
                         self.commissioning.build()
                 panels.on_value_change(lambda e: self.commissioning.show(e.value == "Commission"))

@@ -22,6 +22,7 @@ from typing import Any
 
 from nicegui import background_tasks, ui
 
+from omnisort_hw.pipeline.requests import DEFAULT_BOARD
 from omnisort_hw.pipeline.verdict import verdict_lines
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
@@ -80,10 +81,12 @@ class CommissioningPanel:
         token: Callable[[], str | None],
         start_job: Callable[[str, dict[str, Any]], bool],
         send: Send,
+        laser: Callable[[bool], Awaitable[None]],
     ) -> None:
         """`token`: this session's; `start_job`: the page's one way to start a job; `send`: its
-        one way to send a quick command (None with the refusal shown)."""
-        self.ctx, self.token, self.send = ctx, token, send
+        one way to send a quick command (None with the refusal shown); `laser`: its way to
+        switch the laser."""
+        self.ctx, self.token, self.send, self.laser = ctx, token, send, laser
         self.watch = JobWatch(ctx.jobs, start_job)
         self.views: dict[str, Any] = {}  # the last `views` reply
         self.results: dict[str, Mapping[str, Any]] = {}  # each step's last reply
@@ -120,7 +123,7 @@ class CommissioningPanel:
             "each view; reach the rim of the image circle (red sectors) as well as its centre."
         )
         with ui.row().classes("items-center gap-4"):
-            self.board = tag(ui.input("board (inner corners)", value="9x6"), "board")
+            self.board = tag(ui.input("board (inner corners)", value=DEFAULT_BOARD), "board")
             self.square = tag(ui.number("square (mm)", min=1.0, format="%.2f"), "square")
         self.board_detection.build()
         with ui.row().classes("items-center"):
@@ -194,8 +197,11 @@ class CommissioningPanel:
         ):
             button.set_visibility(passed(self.results.get(what)))
 
+    def _board_size(self) -> str:
+        return str(self.board.value or DEFAULT_BOARD)
+
     def _board_args(self) -> dict[str, Any]:
-        return {"what": "board", "board": str(self.board.value or "9x6")}
+        return {"what": "board", "board": self._board_size()}
 
     def _coverage(self, scale: float, unit: float) -> Overlay | None:
         return coverage_overlay(self.views, scale, unit) if self.views else None
@@ -213,8 +219,8 @@ class CommissioningPanel:
         schema = self.ctx.operators.schema(cmd)
         return problems(schema, args) if schema is not None else []
 
-    async def add_view(self) -> None:
-        args = {"action": "add", "board": str(self.board.value or "")}
+    async def _views(self, args: dict[str, Any]) -> None:
+        """One `views` request, checked against its schema first; its reply shown."""
         found = self._problems("views", args)
         if found:
             self.views_note.text = "not sent: " + "; ".join(found)
@@ -223,29 +229,20 @@ class CommissioningPanel:
         if reply is not None:
             self._show_views(reply)
 
+    async def add_view(self) -> None:
+        await self._views({"action": "add", "board": self._board_size()})
+
     async def remove_last(self) -> None:
-        if not self.views.get("views"):
-            return
-        name = self.views["views"][-1]["name"]
-        reply = await self.send("views", {"action": "remove", "name": name})
-        if reply is not None:
-            self._show_views(reply)
+        if self.views.get("views"):
+            await self._views({"action": "remove", "name": self.views["views"][-1]["name"]})
 
     async def clear_views(self) -> None:
-        reply = await self.send("views", {"action": "clear"})
-        if reply is not None:
-            self._show_views(reply)
+        await self._views({"action": "clear"})
 
     async def load_views(self) -> None:
         """The views already kept (a page opened after some were taken)."""
-        if self.token() is None or self.views:
-            return
-        reply = await self.send("views", {"action": "list"})
-        if reply is not None:
-            self._show_views(reply)
-
-    async def laser(self, on: bool) -> None:
-        await self.send("laser", {"on": on})
+        if self.token() is not None and not self.views:
+            await self._views({"action": "list"})
 
     # -- acting: the jobs -------------------------------------------------------------------
 
@@ -259,7 +256,7 @@ class CommissioningPanel:
         args = {
             "what": "intrinsics",
             "folder": str(self.views.get("folder", "")),
-            "board": str(self.board.value or ""),
+            "board": self._board_size(),
             "square_mm": self.square.value,
         }
         if found := self._problems("calibrate", args):
@@ -314,22 +311,20 @@ class CommissioningPanel:
     async def _show_end(self, what: str, end: JobEnd, note: Any) -> None:
         result = end.result or {}
         lines = [verdict_text(result)]
+        pictures: list[tuple[str, Any]] = []
         if what == "intrinsics":
             lines += intrinsics_lines(result)
-            await show_picture(self.ctx, self.token(), result.get("report"), self.intr_report, note)
-            await show_picture(
-                self.ctx, self.token(), result.get("uncertainty_png"), self.intr_uncertainty, note
-            )
+            pictures = [("report", self.intr_report), ("uncertainty_png", self.intr_uncertainty)]
         elif what == "extrinsics":
             self.extr_params.rows = parameter_rows(result)
             self.extr_params.update()
-            await show_picture(
-                self.ctx, self.token(), result.get("overlay_png"), self.extr_picture, note
-            )
+            pictures = [("overlay_png", self.extr_picture)]
         elif what == "map":
             lines.append(f"{result.get('points_on_plane', 0)} points on the laser plane")
         elif what == "locate":
             lines.append(f"{result.get('count', 0)} cubes located")
         note.text = "\n".join(line for line in lines if line)
+        for key, image in pictures:  # after the note: a picture not sent says so in it
+            await show_picture(self.ctx, self.token(), result.get(key), image, note)
         if all(passed(self.results.get(k)) for k in ("map", "locate")):
             self.commissioned.text = "Commissioned: every step passed; the cell may sort."

@@ -7,16 +7,15 @@ replies. Started from the drift banner; open to a signed-in operator."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
-from nicegui import run, ui
+from nicegui import ui
 
 from omnisort_hw.pipeline.verdict import verdict_lines
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.job_runner import JobWatch
-from omnisort_hw.ui.link import ClientError, CommandError
 from omnisort_hw.ui.pictures import show_picture
 from omnisort_hw.ui.widgets import tag
 
@@ -57,10 +56,12 @@ class RecoveryPanel:
         ctx: UiContext,
         token: Callable[[], str | None],
         start_job: Callable[[str, dict[str, Any]], bool],
+        laser: Callable[[bool], Awaitable[None]],
     ) -> None:
         """`token`: this session's, for the residual picture; `start_job`: the page's one way
-        to start a job (signed in, service reachable, no job of this interface running)."""
-        self.ctx, self.token = ctx, token
+        to start a job (signed in, service reachable, no job of this interface running);
+        `laser`: its way to switch the laser."""
+        self.ctx, self.token, self.laser = ctx, token, laser
         self.watch = JobWatch(ctx.jobs, start_job)
         self.active = False  # opened from the drift banner, until the operator closes it
         self.detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "recovery-target")
@@ -79,7 +80,10 @@ class RecoveryPanel:
                     )
                     self.detection.build()
                     with ui.stepper_navigation():
-                        tag(ui.button("Laser on", on_click=self.laser_on), "recovery-laser")
+                        tag(
+                            ui.button("Laser on", on_click=lambda: self.laser(True)),
+                            "recovery-laser",
+                        )
                         tag(ui.button("Target placed", on_click=self.placed), "placed")
                 with ui.step(STEPS[1]):
                     self.calib_note = tag(ui.label(""), "calib-note")
@@ -130,16 +134,6 @@ class RecoveryPanel:
         """On to the calibration; the live detection stops asking."""
         self.detection.active = False
         self.stepper.next()
-
-    async def laser_on(self) -> None:
-        """The stripe is part of the target's detection: the laser switched on for it."""
-        token = self.token()
-        if token is None:
-            return
-        try:
-            await run.io_bound(self.ctx.link.execute, "laser", {"on": True}, token)
-        except (CommandError, ClientError) as exc:
-            self.detection.summary.text = f"laser: not switched: {exc}"
 
     def calibrate(self) -> None:
         self.accept.set_visibility(False)

@@ -42,7 +42,8 @@ def _views(width: int, height: int, fov_deg: float, circle_deg: float, model: st
 def held_board_scene(cell_scene: Scene, view: int) -> Scene:
     """The calibration screen with the board at pose `view`, seen through `cell_scene`'s
     camera (its size, field of view and model file)."""
+    if check_view(view) is None:
+        raise ValueError("held_board_scene needs a pose, not None (no board held)")
     cam = cell_scene.camera
-    return _views(cam.width, cam.height, cam.fov_deg, cam.image_circle_fov_deg, cam.model_file)[
-        check_view(view) or 0
-    ]
+    scenes = _views(cam.width, cam.height, cam.fov_deg, cam.image_circle_fov_deg, cam.model_file)
+    return scenes[view]
