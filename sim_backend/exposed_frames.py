@@ -21,8 +21,12 @@ from sim_backend.world import SimWorld
 
 def world_state_key(world: SimWorld) -> bytes:
     """What a render depends on that can change: the camera's rotation on its mount (a knock),
-    the arm's and fingers' joints, the cubes' poses."""
-    parts = [np.asarray(world.R_SC, float).ravel() * 1e4]
+    the laser plane, the arm's and fingers' joints, the cubes and their poses."""
+    parts = [
+        np.asarray(world.R_SC, float).ravel() * 1e4,
+        np.asarray(world.laser_normal, float) * 1e4,
+        np.array([world.laser_distance, len(world.info.cubes)], float),
+    ]
     if world.arm is not None:
         arm = world.arm
         moving = [*arm.joints, *arm.fingers]

@@ -10,15 +10,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pybullet as p
 from scipy.spatial.transform import Rotation
 
 from drivers.errors import (
     DeviceConfigError,
     DeviceDisconnectedError,
 )
-from omnisort_hw.core.frames import camera_rotation
+from omnisort_hw.core.frames import camera_rotation, laser_normal, rot_z
 from sim_backend.hostile_light import Lighting, apply_to_scene, lighting
-from sim_backend.scene import Scene, load_scene, sized
+from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, Scene, load_scene, sized
 from sim_backend.scene_images import camera_model_for, render_world
 from sim_backend.world import SimWorld
 
@@ -103,6 +104,87 @@ class SimCell:
         with self.lock:
             self.world.R_SC = camera_rotation(*np.radians(angles))
             return self.world.R_SC.copy()
+
+    def set_laser_plane(
+        self, roll_deg: float | None, pitch_deg: float | None, distance_mm: float | None
+    ) -> np.ndarray:
+        """Turn and move the laser's emitter (docs/frames.md's angles; None keeps one as it
+        is), as the simulator's panel sets it; returns the new plane (n, d). Renders and truth
+        follow."""
+        with self.lock:
+            world = self.world
+            roll = world.laser_angles_deg[0] if roll_deg is None else float(roll_deg)
+            pitch = world.laser_angles_deg[1] if pitch_deg is None else float(pitch_deg)
+            d = world.laser_distance if distance_mm is None else float(distance_mm)
+            if not all(np.isfinite([roll, pitch, d])) or abs(roll) > 60 or abs(pitch) > 60:
+                raise ValueError(
+                    f"laser: roll and pitch must be within +-60 deg, got {roll}, {pitch}"
+                )
+            if not 50.0 <= d <= 3000.0:
+                raise ValueError(f"laser: distance_mm must be within [50, 3000], got {d}")
+            world.laser_angles_deg = (roll, pitch)
+            world.laser_normal = laser_normal(*np.radians([roll, pitch]))
+            world.laser_distance = d
+            return np.array([*world.laser_normal, d])
+
+    def _cube_spot(self, x_mm: float, y_mm: float, size_mm: float, skip: int | None) -> None:
+        """Refuse a spot off the floor's work area or on another cube."""
+        x0, x1, y0, y1 = self.scene.floor.work_area_mm
+        if not (np.isfinite([x_mm, y_mm]).all() and x0 <= x_mm <= x1 and y0 <= y_mm <= y1):
+            raise ValueError(
+                f"cube: x_mm, y_mm must be on the work area [{x0:g}, {x1:g}] x [{y0:g}, {y1:g}]"
+                f" mm, got ({x_mm:g}, {y_mm:g})"
+            )
+        for i, (spec, body) in enumerate(self.world.info.cubes):
+            centre = self.world.body_pose(body)[:3, 3]
+            clear = (spec.size_mm + size_mm) / np.sqrt(2.0)  # any yaw of both
+            if i != skip and np.hypot(centre[0] - x_mm, centre[1] - y_mm) < clear:
+                raise ValueError(f"cube: ({x_mm:g}, {y_mm:g}) is on cube {i} ({spec.color.name})")
+
+    def place_cube(self, index: object, x_mm: float, y_mm: float, yaw_deg: float) -> None:
+        """Put cube `index` down at (x, y) of S on the floor, turned by `yaw_deg`."""
+        with self.lock:
+            i, spec, body = self._cube(index)
+            self._cube_spot(x_mm, y_mm, spec.size_mm, skip=i)
+            z = self.world.floor_z + spec.size_mm / 2.0
+            quat = Rotation.from_matrix(rot_z(np.radians(yaw_deg))).as_quat()
+            p.resetBasePositionAndOrientation(
+                body, [x_mm * 1e-3, y_mm * 1e-3, z * 1e-3], quat, physicsClientId=self.world.client
+            )
+            p.resetBaseVelocity(body, [0, 0, 0], [0, 0, 0], physicsClientId=self.world.client)
+            self.world.version += 1
+
+    def add_cube(self, color: str, x_mm: float, y_mm: float, yaw_deg: float) -> int:
+        """A new cube of a named colour (the size and mass of the scene's first cube, or a
+        100 mm cube) on the floor at (x, y) of S; its index."""
+        if color not in NAMED_COLORS:
+            raise ValueError(f"cube: unknown colour {color!r} (known: {sorted(NAMED_COLORS)})")
+        like = (
+            self.scene.cubes[0]
+            if self.scene.cubes
+            else CubeSpec(Color("red", (1, 0, 0)), 100.0, (0, 0))
+        )
+        spec = CubeSpec(
+            Color(color, NAMED_COLORS[color]), like.size_mm, (x_mm, y_mm), yaw_deg, like.mass_kg
+        )
+        with self.lock:
+            self._cube_spot(x_mm, y_mm, spec.size_mm, skip=None)
+            return self.world.add_cube(spec)
+
+    def remove_cube(self, index: object, held: int | None = None) -> None:
+        """Take cube `index` away (not the one the gripper holds, `held`)."""
+        with self.lock:
+            i, _, body = self._cube(index)
+            if body == held:
+                raise ValueError(f"cube: cube {i} is in the gripper; open it first")
+            self.world.remove_cube(i)
+
+    def _cube(self, index: object) -> tuple[int, CubeSpec, int]:
+        """(index, spec, body) of cube `index`; ValueError when there is no such cube."""
+        cubes = self.world.info.cubes
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(cubes):
+            raise ValueError(f"cube: index must be 0..{len(cubes) - 1}, got {index!r}")
+        return (index, *cubes[index])
 
     def release_stops(self) -> None:
         """Clear protective and emergency stops (the pendant's job on a real cell)."""

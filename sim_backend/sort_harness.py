@@ -58,8 +58,12 @@ class SimVerifier:
         self._orig_step: Callable[..., None] | None = None
         names = self.world.info.names
         self._floor = next(b for b, n in names.items() if n == "floor")
-        self._cubes = {body for _, body in self.world.info.cubes}
         self._links = p.getNumJoints(self.world.arm.body, physicsClientId=self.world.client)
+
+    @property
+    def _cubes(self) -> set[int]:
+        """The cubes' bodies as they are now (the simulator's panel adds and removes cubes)."""
+        return {body for _, body in self.world.info.cubes}
 
     # -- truth ----------------------------------------------------------------------------
 
@@ -125,7 +129,8 @@ class SimVerifier:
         floor = self._floor
         grip_xy = np.asarray(p.getLinkState(arm_body, 6, physicsClientId=cid)[4][:2]) / 1e-3
         nearest_cube, best = None, 60.0
-        for body in self._cubes:
+        cubes = self._cubes
+        for body in cubes:
             xy = np.asarray(p.getBasePositionAndOrientation(body, physicsClientId=cid)[0][:2])
             d = float(np.linalg.norm(xy / 1e-3 - grip_xy))
             if d < best:
@@ -144,7 +149,7 @@ class SimVerifier:
                 if body == floor and link in (-1, 0):
                     continue
                 exempt = body in (held, nearest_cube) and link in self.GRIPPER_LINKS
-                if body in self._cubes and exempt:
+                if body in cubes and exempt:
                     continue
                 now.add((link, body))
         if held is not None:

@@ -96,9 +96,9 @@ def mounting_truth(world: SimWorld, laser_on: bool) -> dict[str, Any]:
             "yaw_deg": round(float(yaw), 9),
             "matrix": _r(world.R_SC, 12),
         },
-        "laser_plane": {
-            "roll_deg": las.roll_deg,
-            "pitch_deg": las.pitch_deg,
+        "laser_plane": {  # as it is now: the scene's, or as the simulator's panel set it
+            "roll_deg": float(world.laser_angles_deg[0]),
+            "pitch_deg": float(world.laser_angles_deg[1]),
             "distance_mm": world.laser_distance,
             "normal": _r(world.laser_normal, 12),
             "on": bool(laser_on),

@@ -137,7 +137,8 @@ class SimWorld:
         self.R_SC = camera_rotation(
             *np.radians([scene.camera.roll_deg, scene.camera.pitch_deg, scene.camera.yaw_deg])
         )
-        self.laser_normal = laser_normal(*np.radians([scene.laser.roll_deg, scene.laser.pitch_deg]))
+        self.laser_angles_deg = (scene.laser.roll_deg, scene.laser.pitch_deg)
+        self.laser_normal = laser_normal(*np.radians(self.laser_angles_deg))
         self.laser_distance = scene.laser.distance_mm
         self.laser_on = scene.laser.on
         self.floor = FloorPattern(
@@ -460,6 +461,18 @@ class SimWorld:
         )
         p.changeDynamics(body, -1, lateralFriction=0.8, physicsClientId=self.client)
         self.info.cubes.append((c, body))
+
+    def add_cube(self, c: CubeSpec) -> int:
+        """A cube put on the floor after the world was built; its index."""
+        self._build_cube(len(self.info.cubes), c)
+        return len(self.info.cubes) - 1
+
+    def remove_cube(self, index: int) -> None:
+        """Take cube `index` out of the world (the later cubes' indices move down by one)."""
+        _, body = self.info.cubes.pop(index)
+        self.info.boxes = [b for b in self.info.boxes if b.body != body]
+        self.info.names.pop(body, None)
+        p.removeBody(body, physicsClientId=self.client)
 
     def _build_bin(self, i: int, b: BinSpec) -> None:
         sx, sy, sz = b.size_mm

@@ -35,12 +35,13 @@ CAMERA_PORT = 8080
 
 
 def world_state(cell: Any) -> dict[str, Any]:
-    """What the picture depends on: joints, fingers, cube poses, laser, the camera's rotation
-    (under the cell lock)."""
+    """What the picture depends on: joints, fingers, the cubes (colour, size, pose), the laser
+    (switch and plane), the camera's rotation (under the cell lock)."""
     world = cell.world
     with cell.lock:
         state: dict[str, Any] = {
             "laser": bool(world.laser_on),
+            "laser_plane": [*world.laser_angles_deg, float(world.laser_distance)],
             "R_SC": np.asarray(world.R_SC, float).tolist(),
             "cubes": [],
         }
@@ -50,20 +51,22 @@ def world_state(cell: Any) -> dict[str, Any]:
                 world.arm.body, list(world.arm.fingers), physicsClientId=world.client
             )
             state["fingers_mm"] = float(fingers[0][0]) * 1000.0
-        for _, body in world.info.cubes:
+        for spec, body in world.info.cubes:
             pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=world.client)
-            state["cubes"].append([list(pos), list(orn)])
+            state["cubes"].append([list(pos), list(orn), spec.color.name, spec.size_mm])
     return state
 
 
 def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
     """True when states a and b look the same to the camera: the same board held (or none),
-    the camera not turned, the laser alike, joints within 0.01 deg, fingers within 0.1 mm,
-    every cube within 0.5 mm and 0.15 deg (tolerances, not rounding, so a cube's physics
-    jitter never makes the picture out of date)."""
+    the camera not turned, the laser alike (switch and plane), the same cubes, joints within
+    0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm and 0.15 deg (tolerances, not
+    rounding, so a cube's physics jitter never makes the picture out of date)."""
     if a is None or a.get("board") != b.get("board"):
         return False
-    if a["laser"] != b["laser"] or len(a["cubes"]) != len(b["cubes"]):
+    if a["laser"] != b["laser"] or a["laser_plane"] != b["laser_plane"]:
+        return False
+    if [c[2:] for c in a["cubes"]] != [c[2:] for c in b["cubes"]]:  # added or taken away
         return False
     if np.max(np.abs(np.subtract(a["R_SC"], b["R_SC"]))) >= 1e-7:  # the camera turned
         return False
@@ -71,7 +74,7 @@ def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
         return False
     if abs(a.get("fingers_mm", 0.0) - b.get("fingers_mm", 0.0)) >= 0.1:
         return False
-    for (pa, oa), (pb, ob) in zip(a["cubes"], b["cubes"], strict=True):
+    for (pa, oa, *_), (pb, ob, *_) in zip(a["cubes"], b["cubes"], strict=True):
         if np.max(np.abs(np.subtract(pa, pb))) >= 0.5e-3:  # pybullet metres
             return False
         if 1.0 - abs(float(np.dot(oa, ob))) >= 1e-6:  # about 0.16 deg
@@ -79,14 +82,32 @@ def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
     return True
 
 
+def _sync_cubes(cell: Any, cubes: list[list[Any]]) -> None:
+    """Make the renderer's cubes those of the state: the same colours and sizes (rebuilt when
+    the simulator's panel added or took one away), at the state's poses."""
+    from sim_backend.scene import NAMED_COLORS, Color, CubeSpec
+
+    world = cell.world
+    have = [[spec.color.name, spec.size_mm] for spec, _ in world.info.cubes]
+    if have != [c[2:] for c in cubes]:
+        while world.info.cubes:
+            world.remove_cube(len(world.info.cubes) - 1)
+        for pos, _, color, size in cubes:
+            rgb = NAMED_COLORS.get(color, (0.5, 0.5, 0.5))
+            world.add_cube(CubeSpec(Color(color, rgb), size, (pos[0] * 1e3, pos[1] * 1e3)))
+    for (_, body), (pos, orn, *_) in zip(world.info.cubes, cubes, strict=True):
+        p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=world.client)
+
+
 def _render_worker(
     scene: str, width: int, height: int, seed: int, degraded: bool, conn: Any
 ) -> None:
-    """Renderer process: apply each state to its own world, send back the BGR image. With
-    `degraded`, the camera's sensor model (`sim_backend.sensor`: shot and read noise, flicker,
-    clipping, the same fixed parameters as the in-process camera) exposes each state's frame
-    at the nominal 10 ms, uncompressed (the stream encodes it); the noise is drawn once per
-    rendered state, not per served frame."""
+    """Renderer process: apply each state to its own world, send back the BGR image (and, when
+    the state asks for `truth`, the renderer's truth of it). With `degraded`, the camera's
+    sensor model (`sim_backend.sensor`: shot and read noise, flicker, clipping, the same fixed
+    parameters as the in-process camera) exposes each state's frame at the nominal 10 ms,
+    uncompressed (the stream encodes it); the noise is drawn once per rendered state, not per
+    served frame."""
     from sim_backend.devices import SimCell
     from sim_backend.exposed_frames import ExposedFrames
     from sim_backend.scene_images import render_scene
@@ -96,8 +117,9 @@ def _render_worker(
     cell = SimCell.from_scene(scene, seed=seed, width=width, height=height)
     world = cell.world
     sensor = ExposedFrames(world, cell.model, seed, cell.lighting) if degraded else None
-    held: dict[int, np.ndarray] = {}  # the held board's pictures, by pose (each rendered once)
-    conn.send(("ready", None))
+    # The held board's pictures and truths, by pose (each rendered once).
+    held: dict[int, tuple[np.ndarray, dict[str, Any]]] = {}
+    conn.send(("ready", None, None))
     n = 0
     while True:
         try:
@@ -110,17 +132,19 @@ def _render_worker(
         if view is not None:
             if view not in held:
                 board = held_board_scene(cell.scene, view)
-                held[view], _ = render_scene(board, seed=seed + view, degraded=degraded)
-            conn.send(("image", held[view]))
+                held[view] = render_scene(board, seed=seed + view, degraded=degraded)
+            board_image, board_truth = held[view]
+            conn.send(("image", board_image, board_truth if state.get("truth") else None))
             continue
         if world.arm is not None and "q" in state:
             world.set_joints(np.asarray(state["q"]))
             world.set_fingers(state["fingers_mm"])
-        for (_, body), (pos, orn) in zip(world.info.cubes, state["cubes"], strict=True):
-            p.resetBasePositionAndOrientation(body, pos, orn, physicsClientId=world.client)
+        _sync_cubes(cell, state["cubes"])
         world.laser_on = state["laser"]
+        cell.set_laser_plane(*state["laser_plane"])
         world.R_SC = np.asarray(state["R_SC"], float)
         n += 1
+        truth: dict[str, Any] | None = None
         if sensor is not None:
             settings = Exposure(
                 laser_on=bool(state["laser"]),
@@ -128,9 +152,11 @@ def _render_worker(
                 pixel_format="BGR3",
             )
             image, _ = sensor.frame(settings, n)
+            if state.get("truth"):
+                _, truth = cell.render(seed + n, False, with_truth=True)
         else:
-            image, _ = cell.render(seed + n, False)
-        conn.send(("image", image))
+            image, truth = cell.render(seed + n, False, with_truth=bool(state.get("truth")))
+        conn.send(("image", image, truth))
 
 
 class FrameSource:
@@ -156,6 +182,7 @@ class FrameSource:
         self.renders = 0
         self.clients = 0
         self.cond = threading.Condition()
+        self._pipe = threading.Lock()  # one request to the renderer at a time
         self.stop = threading.Event()
         self._encoded: dict[tuple, bytes] = {}
         self.board: int | None = None  # the pose of the board held in front of the camera
@@ -169,22 +196,39 @@ class FrameSource:
         self._render(timeout_s)  # the first frame is there before the cell says ready
         self._thread.start()
 
-    def _render(self, timeout_s: float) -> bool:
-        """Render the world's current state; False if stopped or the renderer died."""
+    def _render(
+        self, timeout_s: float, truth: bool = False
+    ) -> tuple[np.ndarray, dict[str, Any]] | None:
+        """Render the world's current state: (image, the renderer's truth of it when `truth`
+        is asked, else {}); None if stopped or the renderer died."""
         state = self.state()
-        self._conn.send(state)
-        deadline = time.monotonic() + timeout_s
-        while not self._conn.poll(0.5):
-            if self.stop.is_set() or not self._proc.is_alive() or time.monotonic() > deadline:
-                return False
-        _, image = self._conn.recv()
+        with self._pipe:
+            self._conn.send({**state, "truth": truth})
+            deadline = time.monotonic() + timeout_s
+            while not self._conn.poll(0.5):
+                if self.stop.is_set() or not self._proc.is_alive() or time.monotonic() > deadline:
+                    return None
+            _, image, found = self._conn.recv()
         with self.cond:
             self.image, self.shown = image, state
             self.key += 1
             self._encoded.clear()
             self.renders += 1
             self.cond.notify_all()
-        return True
+        return image, found or {}
+
+    def snapshot(self, timeout_s: float = 120.0) -> tuple[np.ndarray, dict[str, Any]]:
+        """A picture of the world as it is now, with the renderer's truth of it (the arm at
+        rest: a picture is never taken mid-move); RuntimeError when none can be made."""
+        deadline = time.monotonic() + timeout_s
+        while self.controller is not None and self.controller.moving:
+            if time.monotonic() > deadline:
+                raise RuntimeError("render: the arm did not come to rest")
+            time.sleep(0.02)
+        made = self._render(max(1.0, deadline - time.monotonic()), truth=True)
+        if made is None:
+            raise RuntimeError("render: the renderer did not answer")
+        return made
 
     def current(self) -> bool:
         """True when the latest frame shows the world as it is now (never while the arm
@@ -222,7 +266,7 @@ class FrameSource:
             if moving or same_picture(self.shown, self.state()):
                 time.sleep(0.02)
                 continue
-            if not self._render(600.0):
+            if self._render(600.0) is None:
                 return
 
     def encoded(self, quality: int, sampling: str) -> tuple[int, bytes | None]:

@@ -7,13 +7,9 @@
 
 Faces on `host` (the ports are a UR controller's, so parallel cells need distinct loopback
 addresses): RTDE 30004, dashboard 29999, script port 30003, the laser's Modbus TCP 5020, the
-camera's MJPEG stream 8080 and the control channel 30111 (one JSON object per line:
-`{"cmd": "status"}`, "truth", "protective_stop", "emergency_stop", "release_emergency_stop",
-`{"cmd": "drop", "what": "arm"}`, `{"cmd": "stall", "what": "arm", "seconds": 5}`, "unstall",
-`{"cmd": "board", "view": 3}` / `{"cmd": "board", "view": null}`: a checkerboard held in
-front of the camera for the intrinsics' views, `held_board.py`; `{"cmd": "camera", "roll_deg":
-5, "pitch_deg": 0, "yaw_deg": 0}`: the camera mounted at those angles; `{"cmd": "knock",
-"angle_deg": 0.5, "axis": "x"}`: the camera turned from where it is, as a knock turns it).
+camera's MJPEG stream 8080 and the control channel 30111 (one JSON object per line; its
+commands are `control.COMMANDS`: faults, the board held for the intrinsics, the camera's
+mounting and knocks, the laser, the cubes, the arm from the pendant, renders with truth).
 """
 
 from __future__ import annotations
@@ -32,8 +28,8 @@ from sim_backend.devices import SimArm, SimCell
 from sim_backend.sort_harness import SimVerifier
 from sim_backend.truth import mounting_truth
 from sim_backend.virtual_cell.camera_stream import CAMERA_PORT, CameraStreamServer, FrameSource
+from sim_backend.virtual_cell.control import ControlChannel
 from sim_backend.virtual_cell.controller import RATE_HZ, URController
-from sim_backend.virtual_cell.held_board import HELD_VIEWS, check_view
 from sim_backend.virtual_cell.laser_modbus import MODBUS_PORT, LaserModbusServer
 from sim_backend.virtual_cell.servers import (
     DASHBOARD_PORT,
@@ -44,14 +40,12 @@ from sim_backend.virtual_cell.servers import (
     Listener,
     RTDEServer,
     ScriptServer,
-    all_status,
     serve_lines,
 )
 
 log = logging.getLogger("virtual_cell")
 
 CONTROL_PORT = 30111
-FACES = ("arm", "dashboard", "laser", "camera")
 
 
 class VirtualCell:
@@ -89,6 +83,7 @@ class VirtualCell:
         self.frames = FrameSource(self.cell, self.ctl, scene, seed, degraded)
         self.camera = CameraStreamServer(host, self.frames, self.faults, fps=fps)
         self.control = Listener(host, CONTROL_PORT, self._control, "control")
+        self.channel = ControlChannel(self)
         self._stop = threading.Event()
         self._tick = threading.Thread(target=self._run_tick, name="controller-tick", daemon=True)
         self.late_ticks = 0
@@ -168,69 +163,15 @@ class VirtualCell:
             "collisions": list(self.verifier.collisions),
             "T_S_B": np.asarray(T).tolist() if T is not None else None,
             "held": self.arm.gripper.held_body is not None,
+            "gripper_closed": self.arm.gripper.is_closed,
+            "joints_deg": np.rad2deg(self.ctl.q).tolist(),
+            "tcp_B_mm": world.tcp_pose_B()[:3, 3].tolist(),
             "laser_on": bool(self.cell.world.laser_on),
         }
 
     def command(self, req: dict[str, Any]) -> dict[str, Any]:
         """One control-channel request -> its result (raises ValueError on a bad request)."""
-        cmd = req.get("cmd")
-        what = req.get("what", "arm")
-        if cmd in ("drop", "stall", "unstall") and what not in (*FACES, "all"):
-            raise ValueError(f"what must be one of {', '.join(FACES)} or all")
-        faces = FACES if what == "all" else (what,)
-        if cmd == "status":
-            return {
-                **all_status(self.ctl),
-                "laser_on": bool(self.cell.world.laser_on),
-                "camera_renders": self.frames.renders,
-                "late_ticks": self.late_ticks,
-                "rtde_packages_sent": self.rtde.sent,
-            }
-        if cmd == "truth":
-            return self.truth()
-        if cmd == "protective_stop":
-            self.ctl.protective_stop()
-        elif cmd == "emergency_stop":
-            self.ctl.emergency_stop()
-        elif cmd == "release_emergency_stop":
-            self.ctl.release_emergency_stop()
-        elif cmd == "drop":
-            closed = 0
-            for face in faces:
-                if face == "arm":
-                    for srv in (self.rtde, self.script):
-                        closed += srv.listener.drop()
-                elif face == "dashboard":
-                    closed += self.dashboard.listener.drop()
-                elif face == "camera":
-                    closed += self.camera.listener.drop()
-                else:
-                    self.laser.drop()
-            return {"closed": closed}
-        elif cmd == "stall":
-            seconds = float(req.get("seconds", 3600.0))
-            for face in faces:
-                self.faults.stall(face, seconds)
-        elif cmd == "unstall":
-            for face in faces:
-                self.faults.clear(face)
-        elif cmd == "camera":
-            R = self.cell.mount_camera(
-                float(req.get("roll_deg", 0.0)),
-                float(req.get("pitch_deg", 0.0)),
-                float(req.get("yaw_deg", 0.0)),
-            )
-            return {"R_SC": R.tolist(), "shown": self.frames.wait_shown()}
-        elif cmd == "knock":
-            R = self.cell.bump_camera(float(req.get("angle_deg", 0.5)), req.get("axis", "x"))
-            return {"R_SC": R.tolist(), "shown": self.frames.wait_shown()}
-        elif cmd == "board":
-            view = check_view(req.get("view"))
-            shown = self.frames.hold_board(view)
-            return {"view": view, "views": HELD_VIEWS, "shown": shown}
-        else:
-            raise ValueError(f"unknown command {cmd!r}")
-        return {}
+        return self.channel.execute(req)
 
     def _control(self, sock: socket.socket) -> None:
         def reply(line: str) -> str:

@@ -533,6 +533,36 @@ class URController:
             q[-1] = target
         self._play(q, is_async, "movej" if cmd < 3 else "movel")
 
+    def pendant_move(
+        self, q_deg: np.ndarray | None = None, xyz_mm: np.ndarray | None = None
+    ) -> dict[str, Any]:
+        """A joint move started from the pendant (the simulator's panel), to joints `q_deg` or
+        with the tool kept as it is to the base-frame point `xyz_mm` through the core's
+        inverse kinematics; at a pendant's jog speed (30 deg/s, 60 deg/s^2). Refused while the
+        arm moves, a script command runs or a stop holds it (MotionRefusedError)."""
+        with self.lock:
+            if self.safety_mode != NORMAL or self.robot_mode != RUNNING:
+                raise MotionRefusedError(
+                    f"the arm is not ready ({SAFETY_MODE_NAMES.get(self.safety_mode)},"
+                    f" {ROBOT_MODE_NAMES.get(self.robot_mode)})"
+                )
+            if self._motion is not None or self._executing:
+                raise MotionRefusedError("the arm is moving: wait for it to stop")
+            q0 = np.rad2deg(self.q)
+            tool = self.tool_matrix()
+            if xyz_mm is not None:
+                T = forward(self.model, q0, tool)
+                T[:3, 3] = np.asarray(xyz_mm, float)
+                q1 = nearest_solution(self.model, T, q0, tool=tool)
+            else:
+                q1 = np.asarray(q_deg, float)
+            limits = MotionLimits(joint_speed_deg_s=30.0, joint_acc_deg_s2=60.0, rate_hz=RATE_HZ)
+            traj = plan_joint_move(q0, q1, limits, model=self.model)
+            self._motion = _Motion(np.deg2rad(traj.q), time.monotonic(), False, "pendant")
+            self.events.motions += 1
+            self.events.last_motion_s = (len(traj.q) - 1) / RATE_HZ
+            return {"q_deg": [float(v) for v in q1], "seconds": self.events.last_motion_s}
+
     def _start_path(self, is_async: bool) -> None:
         """Play the injected path as one blended motion (exec_move_path of the script)."""
         self._stop_async_move()

@@ -1,0 +1,142 @@
+"""The simulator's controls on the virtual cell's control channel (`control.COMMANDS`): the
+laser turned and moved, cubes moved, added and taken away, the arm jogged by joints and by XYZ
+through the core's inverse kinematics, the gripper, and pictures rendered with their truth.
+Each is checked against the truth the renderer process reports and the picture the camera
+streams, so the renderer follows what the main world was told."""
+
+from __future__ import annotations
+
+import json
+import urllib.request
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from omnisort_hw.core.frames import laser_normal
+from sim_backend.virtual_cell.launcher import VirtualCellError
+from tests.sim.virtual_cell_fixture import virtual_cell
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
+WIDTH = 256
+
+
+@pytest.fixture(scope="module")
+def vc():
+    with virtual_cell(width=WIDTH) as cell:
+        yield cell
+
+
+def frame(vc) -> np.ndarray:
+    """One lossless frame of the camera as it streams (the world as it is now)."""
+    with urllib.request.urlopen(f"http://{vc.host}:8080/frame.png", timeout=60) as r:
+        return cv2.imdecode(np.frombuffer(r.read(), np.uint8), cv2.IMREAD_COLOR)
+
+
+def stripe_at(image: np.ndarray, polylines_px: list[dict]) -> float:
+    """Mean redness (R minus the larger of G and B) of the image on a truth's laser lines."""
+    pts = np.vstack([np.asarray(p["points_px"], float) for p in polylines_px])
+    h, w = image.shape[:2]
+    x = np.clip(np.round(pts[:, 0]).astype(int), 0, w - 1)
+    y = np.clip(np.round(pts[:, 1]).astype(int), 0, h - 1)
+    px = image[y, x].astype(float)
+    return float(np.mean(px[:, 2] - np.maximum(px[:, 0], px[:, 1])))
+
+
+def rendered(vc, tmp: Path, name: str) -> tuple[np.ndarray, dict]:
+    """A picture and the renderer's truth, through the `render` control."""
+    out = vc.control("render", timeout_s=120.0, folder=str(tmp), name=name)
+    assert out["images"] == [str(tmp / f"{name}.png")]
+    truth = json.loads((tmp / f"{name}.truth.json").read_text())
+    return cv2.imread(str(tmp / f"{name}.png")), truth
+
+
+def test_the_laser_turned_and_moved_is_rendered_there(vc, tmp_path: Path) -> None:
+    _, before = rendered(vc, tmp_path, "before")
+    reply = vc.control(
+        "laser", timeout_s=60.0, on=True, roll_deg=4.0, pitch_deg=-6.0, distance_mm=700.0
+    )
+    image, after = rendered(vc, tmp_path, "after")
+    streamed = frame(vc)
+    vc.control("laser", timeout_s=60.0, roll_deg=0.0, pitch_deg=0.0, distance_mm=800.0)
+    assert reply["shown"]
+    # The main world's truth and the renderer's: the plane asked, exactly.
+    for truth in (reply, after):
+        plane = truth["laser_plane"]
+        assert plane["distance_mm"] == 700.0
+        assert np.allclose(plane["normal"], laser_normal(*np.radians([4.0, -6.0])), atol=1e-12)
+    # The stripe is where the new plane meets the scene, not where the old one did.
+    lit_new = stripe_at(streamed, after["laser_polylines_px"])
+    lit_old = stripe_at(streamed, before["laser_polylines_px"])
+    assert lit_new > 3 * max(lit_old, 5.0), (lit_new, lit_old)
+    assert np.abs(image.astype(int) - streamed).max() <= 1  # the stream shows that picture
+    with pytest.raises(VirtualCellError, match="distance_mm"):
+        vc.control("laser", distance_mm=10.0)
+
+
+def test_cubes_moved_added_and_taken_away(vc, tmp_path: Path) -> None:
+    start = vc.truth()["cubes"]
+    moved = vc.control(
+        "cube", timeout_s=60.0, action="move", index=0, x_mm=0.0, y_mm=1000.0, yaw_deg=30.0
+    )
+    added = vc.control("cube", timeout_s=60.0, action="add", color="blue", x_mm=-650.0, y_mm=900.0)
+    _, truth = rendered(vc, tmp_path, "cubes")
+    removed = vc.control("cube", timeout_s=60.0, action="remove", index=added["index"])
+    refusals = []
+    for bad, field in (
+        ({"action": "move", "index": 1, "x_mm": 0.0, "y_mm": 1000.0}, "on cube 0"),
+        ({"action": "move", "index": 1, "x_mm": 5000.0, "y_mm": 0.0}, "work area"),
+        ({"action": "add", "color": "mauve", "x_mm": 0.0, "y_mm": 0.0}, "unknown colour"),
+        ({"action": "remove", "index": 9}, "index must be"),
+        ({"action": "spin"}, "action must be"),
+    ):
+        with pytest.raises(VirtualCellError, match=field):
+            vc.control("cube", **bad)
+        refusals.append(field)
+    vc.control(
+        "cube",
+        timeout_s=60.0,
+        action="move",
+        index=0,
+        x_mm=start[0]["center_S_mm"][0],
+        y_mm=start[0]["center_S_mm"][1],
+        yaw_deg=15.0,
+    )
+    assert moved["shown"] and added["shown"] and removed["shown"]
+    # Put down on the floor where asked: the centre half a cube above it (physics may settle
+    # it by a fraction of a millimetre).
+    floor_z = truth["floor_z_mm"]
+    c0 = np.asarray(moved["cubes"][0]["center_S_mm"])
+    assert np.allclose(c0, [0.0, 1000.0, floor_z + 50.0], atol=0.5), c0
+    assert len(added["cubes"]) == len(start) + 1 and added["cubes"][-1]["color"] == "blue"
+    # The renderer's world has the same cubes: the moved one, and the one added.
+    new = truth["cubes"][-1]
+    assert len(truth["cubes"]) == len(start) + 1 and new["colour"] == "blue"
+    assert np.allclose(new["center_S_mm"][:2], [-650.0, 900.0], atol=0.5), new
+    assert np.allclose(truth["cubes"][0]["center_S_mm"], c0, atol=0.5)
+    assert abs(truth["cubes"][0]["yaw_deg"] - 30.0) < 0.2
+    assert len(removed["cubes"]) == len(start)
+
+
+def test_the_arm_jogged_by_joints_and_by_xyz_and_the_gripper(vc) -> None:
+    home = vc.truth()["joints_deg"]
+    target = [float(q) for q in np.add(home, [10.0, -5.0, 5.0, 0.0, 0.0, 0.0])]
+    by_joints = vc.control("joints", timeout_s=120.0, q_deg=target)
+    at_joints = vc.truth()
+    by_xyz = vc.control("move_to", timeout_s=120.0, x_mm=-300.0, y_mm=-350.0, z_mm=300.0)
+    at_xyz = vc.truth()
+    with pytest.raises(VirtualCellError, match="out of reach"):
+        vc.control("move_to", x_mm=3000.0, y_mm=0.0, z_mm=0.0)
+    with pytest.raises(VirtualCellError, match="q_deg must be"):
+        vc.control("joints", q_deg=[0.0] * 5)
+    closed = vc.control("gripper", timeout_s=30.0, closed=True)
+    gripping = vc.truth()
+    vc.control("gripper", timeout_s=30.0, closed=False)
+    vc.control("joints", timeout_s=120.0, q_deg=home)
+    # Moves end exactly on their targets (the planner's last sample is the target), and the
+    # simulated world's arm stands there.
+    assert by_joints["shown"] and by_xyz["shown"]
+    assert np.allclose(at_joints["joints_deg"], target, atol=1e-9)
+    assert np.allclose(at_xyz["tcp_B_mm"], [-300.0, -350.0, 300.0], atol=1e-6), at_xyz["tcp_B_mm"]
+    assert closed["closed"] and gripping["gripper_closed"] and not gripping["held"]
