@@ -1,9 +1,10 @@
-"""Commissioning the virtual cell from nothing through the operator interface's Commission tab,
-against the same steps through `omnisort ctl` (`tests/ui/commissioning_flow.py`): 10 views of
-the held board, the intrinsics, the camera and laser plane from the two-sided target, the
-robot registration, the verification (map and locate). Each door on a fresh virtual cell
-(960 px) and a fresh `omnisort serve` on the real drivers, no calibration at the start; the
-wall time of each step, and the calibration against the virtual cell's truth.
+"""Commissioning the virtual cell from nothing through the operator interface's pages (the board
+held from the Simulator tab, the steps in the Commission tab), against the same steps through
+`omnisort ctl` (`tests/ui/commissioning_flow.py`): 10 views of the held board, the intrinsics,
+the camera and laser plane from the two-sided target, the robot registration, the verification
+(map and locate). Each door on a fresh virtual cell (960 px) and a fresh `omnisort serve` on
+the real drivers, no calibration at the start; the wall time of each step, and the
+calibration against the virtual cell's truth.
 
 The page's time includes what a person's clicks cannot skip (the live detection that shows
 the target before it is calibrated, the pictures a step shows); a person adds their own
@@ -23,7 +24,7 @@ def _rounded(errors: dict[str, float]) -> dict[str, float]:
     return {k: round(v, 4) for k, v in errors.items()}
 
 
-def _in_page(vc: Any, config: Path, port: int, tmp: Path) -> dict[str, float]:
+def _in_page(config: Path, port: int, tmp: Path) -> dict[str, float]:
     """The page's steps: `omnisort ui` for the service at `port`, Chromium signed in on it."""
     from tests.ui import commissioning_flow as flow
     from tests.ui.browser_page import open_cell_page, wait_for
@@ -34,7 +35,7 @@ def _in_page(vc: Any, config: Path, port: int, tmp: Path) -> dict[str, float]:
         driver, page = open_cell_page(url)
         try:
             wait_for("the idle cell", lambda: page.text("state") == "idle", 30)
-            return flow.in_page(vc, page, shots=False)
+            return flow.in_page(page, shots=False)
         finally:
             quit_chromium(driver)
     finally:
@@ -56,7 +57,7 @@ def run(shared: Path) -> dict[str, Any]:
                     if door == "ctl":
                         out["ctl_s"] = flow.with_ctl(vc, svc.port)
                     else:
-                        out["page_s"] = _in_page(vc, config, svc.port, tmp)
+                        out["page_s"] = _in_page(config, svc.port, tmp)
                 truth = vc.truth()
             errors = flow.calibration_errors(tmp / "state" / "system.json", truth)
             out[f"{door}_calibration_error"] = _rounded(errors)

@@ -14,7 +14,15 @@ from omnisort_hw.config.watchdog import _bool, _num, _unknown
 from omnisort_hw.errors import ConfigError
 
 UI_KEYS = frozenset(
-    {"host", "port", "allow_operator", "status_period_s", "view_period_s", "view_width_px"}
+    {
+        "host",
+        "port",
+        "allow_operator",
+        "status_period_s",
+        "view_period_s",
+        "view_width_px",
+        "sim_control",
+    }
 )
 DEFAULT_UI_PORT = 29180
 
@@ -23,7 +31,9 @@ DEFAULT_UI_PORT = 29180
 class UiConfig:
     """Where the interface listens (loopback unless set), whether it offers operator actions
     at all (`allow_operator = false`: a view-only screen), how often it reads the service's
-    status and grabs the live view, and the live view's width in pixels."""
+    status and grabs the live view, and the live view's width in pixels. `sim_control`
+    ("HOST:PORT") is the virtual cell's control channel: set, the page has a Simulator tab
+    (docs/virtual_cell.md); the service never learns of it."""
 
     host: str = "127.0.0.1"
     port: int = DEFAULT_UI_PORT
@@ -31,6 +41,7 @@ class UiConfig:
     status_period_s: float = 0.5
     view_period_s: float = 0.5
     view_width_px: int = 960
+    sim_control: tuple[str, int] | None = None
 
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any]) -> UiConfig:
@@ -52,7 +63,18 @@ class UiConfig:
             status_period_s=_num(section, n, "status_period_s", 0.5, 0.05, 60.0),
             view_period_s=_num(section, n, "view_period_s", 0.5, 0.05, 60.0),
             view_width_px=width,
+            sim_control=_address(section.get("sim_control")),
         )
+
+
+def _address(value: object) -> tuple[str, int] | None:
+    """`[ui] sim_control` as (host, port); None when unset."""
+    if value is None:
+        return None
+    host, _, port = str(value).rpartition(":") if isinstance(value, str) else ("", "", "")
+    if not host or not port.isdigit() or not 0 < int(port) <= 65535:
+        raise ConfigError(f'[ui] sim_control must be "HOST:PORT", got {value!r}')
+    return host, int(port)
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from omnisort_hw.ui.operators import SignInError
 from omnisort_hw.ui.overlay_svg import cubes_overlay, map_overlay
 from omnisort_hw.ui.recovery import RecoveryPanel
 from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields, problems
+from omnisort_hw.ui.sim_panel import SimulatorPanel
 from omnisort_hw.ui.widgets import confirm, tag
 
 STATE_COLORS = {
@@ -63,6 +64,7 @@ class CellPage:
         self.sort_fields: list[FormField] = []
         self.sort_inputs: dict[str, Any] = {}
         self._picks_shown: list[dict[str, Any]] = []
+        self.simulator: SimulatorPanel | None = None
 
     # -- building -------------------------------------------------------------------------
 
@@ -94,6 +96,8 @@ class CellPage:
                 with ui.tabs().classes("w-full") as tabs:
                     tag(ui.tab("Cell"), "tab-cell")
                     tag(ui.tab("Commission"), "tab-commission")
+                    if self.ctx.sim is not None:
+                        tag(ui.tab("Simulator"), "tab-simulator")
                 with ui.tab_panels(tabs, value="Cell").classes("w-full") as panels:
                     with ui.tab_panel("Cell").classes("gap-4 p-0"):
                         self._build_view()
@@ -103,7 +107,16 @@ class CellPage:
                             self.ctx, self._token, self._start_job, self._operator_send, self.laser
                         )
                         self.commissioning.build()
-                panels.on_value_change(lambda e: self.commissioning.show(e.value == "Commission"))
+                    if self.ctx.sim is not None:
+                        with ui.tab_panel("Simulator").classes("p-0"):
+                            self.simulator = SimulatorPanel(self.ctx, self.ctx.sim, self._token)
+                            self.simulator.build()
+                panels.on_value_change(self._tab_shown)
+
+    def _tab_shown(self, event: Any) -> None:
+        self.commissioning.show(event.value == "Commission")
+        if self.simulator is not None:
+            self.simulator.show(event.value == "Simulator")
 
     def _build_operator(self) -> None:
         with ui.card().classes("w-[30rem]"):
@@ -440,5 +453,7 @@ def cell_page(ctx: UiContext) -> None:
     ui.timer(min(ctx.config.view_period_s, 0.5), page.refresh_view)
     ui.timer(0.5, page.recovery.refresh)
     ui.timer(0.5, page.commissioning.refresh)
+    if page.simulator is not None:
+        ui.timer(0.5, page.simulator.refresh)
     ctx.feed.watch()
     ui.context.client.on_delete(ctx.feed.unwatch)

@@ -11,7 +11,6 @@ and waits, then kills. Every wait has a timeout.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import queue
 import random
@@ -25,6 +24,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.sim_link import SimControlError, SimLink
 from sim_backend.virtual_cell.camera_stream import CAMERA_PORT
 from sim_backend.virtual_cell.cell import CONTROL_PORT
 from sim_backend.virtual_cell.laser_modbus import MODBUS_PORT
@@ -92,8 +92,7 @@ class VirtualCellProcess:
         self.proc: subprocess.Popen[str] | None = None
         self.log_path = Path(tempfile.mkstemp(prefix="virtual-cell-", suffix=".log")[1])
         self._lines: queue.Queue[str] = queue.Queue()
-        self._sock: socket.socket | None = None
-        self._rfile: Any = None
+        self.link = SimLink(self.host, CONTROL_PORT)
 
     def start(self) -> VirtualCellProcess:
         root = Path(__file__).resolve().parents[2]
@@ -134,22 +133,9 @@ class VirtualCellProcess:
     def control(self, cmd: str, timeout_s: float = 10.0, **args: Any) -> dict[str, Any]:
         """One control-channel request; its result (VirtualCellError on failure)."""
         try:
-            if self._sock is None:
-                self._sock = socket.create_connection((self.host, CONTROL_PORT), timeout_s)
-                self._rfile = self._sock.makefile("rb")
-            self._sock.settimeout(timeout_s)
-            self._sock.sendall(json.dumps({"cmd": cmd, **args}).encode() + b"\n")
-            line = self._rfile.readline()
-        except OSError as exc:
-            self._close_control()
-            raise VirtualCellError(f"control channel of {self.host}: {exc}") from exc
-        if not line:
-            self._close_control()
-            raise VirtualCellError(f"control channel of {self.host} closed")
-        reply = json.loads(line)
-        if not reply["ok"]:
-            raise VirtualCellError(reply["error"])
-        return reply["result"]
+            return self.link.control(cmd, timeout_s, **args)
+        except SimControlError as exc:
+            raise VirtualCellError(exc.message) from exc
 
     def truth(self) -> dict[str, Any]:
         return self.control("truth")
@@ -166,23 +152,16 @@ class VirtualCellProcess:
                 replies.append(f.readline().decode().strip())
             return replies
 
-    def _close_control(self) -> None:
-        for f in (self._rfile, self._sock):
-            if f is not None:
-                with contextlib.suppress(OSError):
-                    f.close()
-        self._sock = self._rfile = None
-
     def kill(self) -> None:
         """Pull the plug: SIGKILL, no clean shutdown."""
-        self._close_control()
+        self.link.close()
         if self.proc is not None and self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait(10.0)
 
     def stop(self, timeout_s: float = 15.0) -> int | None:
         """SIGTERM, wait up to timeout_s, then SIGKILL; the exit code."""
-        self._close_control()
+        self.link.close()
         if self.proc is None:
             return None
         if self.proc.poll() is None:

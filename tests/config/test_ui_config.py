@@ -13,6 +13,11 @@ from omnisort_hw.errors import ConfigError
 def test_defaults_are_loopback_with_operators_allowed() -> None:
     ui = UiConfig.from_mapping({})
     assert (ui.host, ui.allow_operator, ui.view_width_px) == ("127.0.0.1", True, 960)
+    assert ui.sim_control is None  # no Simulator tab unless the cell is a virtual cell
+    assert UiConfig.from_mapping({"sim_control": "127.0.0.2:30111"}).sim_control == (
+        "127.0.0.2",
+        30111,
+    )
 
 
 @pytest.mark.parametrize(
@@ -24,6 +29,9 @@ def test_defaults_are_loopback_with_operators_allowed() -> None:
         ({"status_period_s": 0.0}, "status_period_s"),
         ({"view_width_px": 10}, "view_width_px"),
         ({"colour": "red"}, "colour"),
+        ({"sim_control": "127.0.0.2"}, "sim_control"),
+        ({"sim_control": "127.0.0.2:http"}, "sim_control"),
+        ({"sim_control": 30111}, "sim_control"),
     ],
 )
 def test_a_wrong_value_names_its_key(section: dict, key: str) -> None:

@@ -55,9 +55,12 @@ class Page:
 
     def click(self, name: str, timeout_s: float = 10.0) -> None:
         """Click the element once it is shown (a step's content appears after its
-        transition)."""
+        transition), scrolled to the window's middle first."""
         wait_for(f"{name} to be shown", lambda: self.visible(name), timeout_s, 0.1)
-        self.el(name).click()
+        el = self.el(name)
+        # In the middle of the window: not under the fixed header, wherever the page scrolled.
+        self.d.execute_script("arguments[0].scrollIntoView({block: 'center'})", el)
+        el.click()
 
     def type(self, name: str, value: str) -> None:
         from selenium.webdriver.common.keys import Keys

@@ -1,8 +1,8 @@
 """The virtual cell commissioned from nothing, two ways, for the browser test and the
-benchmark: through the page's Commission tab (`in_page`), and through `omnisort ctl` for the
-same steps (`with_ctl`). The hand that holds the board for the intrinsics' views is the
-virtual cell's control channel (`{"cmd": "board", "view": k}`); everything else is the
-operator's. Each returns the wall time of each step."""
+benchmark: through the pages alone (`in_page`: the board for the intrinsics' views held from
+the Simulator tab, every step in the Commission tab), and through `omnisort ctl` for the same
+steps (`with_ctl`, the board held through the virtual cell's control channel). Each returns
+the wall time of each step."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.core.frames import rotation_angle_deg
+from sim_backend.virtual_cell.cell import CONTROL_PORT
 from sim_backend.virtual_cell.cell_file import cell_file_text
 from sim_backend.virtual_cell.held_board import HELD_SQUARE_MM
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
@@ -26,13 +27,15 @@ VIEWS = 10  # of the held board's poses: the demo's number of intrinsics views
 STEP_TIMEOUT_S = 300.0
 
 
-def virtual_cell_file(vc: VirtualCellProcess, tmp: Path) -> Path:
-    """The cell file of `vc` with no calibration yet, the tests' token and a brisk page."""
+def virtual_cell_file(vc: VirtualCellProcess, tmp: Path, watchdog_period_s: float = 0.0) -> Path:
+    """The cell file of `vc` with no calibration yet, the tests' token, a brisk page with the
+    Simulator tab on the cell's control channel, and the drift watchdog's period (0: off)."""
     config = tmp / "cell.toml"
     config.write_text(
         cell_file_text(vc.host, state_dir="state", log_dir="logs")
         + f'\n[service]\ntoken = "{TOKEN}"\n\n[ui]\nstatus_period_s = 0.25\n'
-        "view_period_s = 0.5\n"
+        f'view_period_s = 0.5\nsim_control = "{vc.host}:{CONTROL_PORT}"\n'
+        f"\n[watchdog]\nperiod_s = {watchdog_period_s}\n"
     )
     return config
 
@@ -69,9 +72,20 @@ def _step_passed(page: Page, note: str, timeout_s: float = STEP_TIMEOUT_S) -> st
     return str(text)
 
 
-def in_page(
-    vc: VirtualCellProcess, page: Page, shots: bool = True, views: int = VIEWS
-) -> dict[str, float]:
+def sim_note_after(page: Page, button: str, starts: str, timeout_s: float = 60.0) -> str:
+    """Click a button of the Simulator tab; the panel's note once it says `starts`."""
+    page.click(button)
+    return str(
+        wait_for(
+            f"the note after {button}",
+            lambda: (t := page.text("sim-note")).startswith(starts) and t,
+            timeout_s,
+            0.1,
+        )
+    )
+
+
+def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, float]:
     """Commission through the Commission tab, from the tab's opening to the verification's
     verdict; the wall time of each step (s). `shots`: a screenshot of each step."""
 
@@ -83,7 +97,9 @@ def in_page(
     page.click("tab-commission")
     page.type("square", f"{HELD_SQUARE_MM:g}")
     for k in range(views):
-        vc.control("board", timeout_s=60.0, view=k)
+        page.click("tab-simulator")  # the board walked on to its next pose
+        sim_note_after(page, "sim-board-next", f"board held at pose {k}")
+        page.click("tab-commission")
         page.click("add-view")
         name = f"view_{k + 1:03d}"
         wait_for(name, lambda name=name: name in page.text("views-note"), 30, 0.1)
@@ -106,7 +122,9 @@ def in_page(
         )
         time.sleep(1.0)  # the pictures fade in
         shot("commission_intrinsics", "intr-note")
-    vc.control("board", timeout_s=60.0, view=None)
+    page.click("tab-simulator")
+    sim_note_after(page, "sim-board-down", "board put down")
+    page.click("tab-commission")
     page.click("intr-next")
     laps.restart()
 

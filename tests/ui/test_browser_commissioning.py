@@ -1,7 +1,8 @@
 """The virtual cell commissioned from nothing through the page alone, in a real headless
 browser: `omnisort serve` on the real drivers (the virtual cell's MJPEG camera, Modbus laser
 and UR controller), no calibration at all, and the operator takes the commissioning steps
-(`commissioning_flow.in_page`): views of a board held in front of the camera, the intrinsics,
+(`commissioning_flow.in_page`): views of a board held in front of the camera (walked through
+the field from the Simulator tab), the intrinsics,
 the camera and the laser plane from the two-sided target, the robot registration from the
 floor board, the verification (map and locate), then a sort of the four cubes from the cell
 tab. The calibration is checked against the virtual cell's truth and every cube must end in
@@ -29,7 +30,7 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
     with virtual_cell("sorting", width=WIDTH, unlock_delay_s=5.0) as vc:
         config = flow.virtual_cell_file(vc, tmp_path)
         with served_page(config, tmp_path) as (svc, page):
-            times = flow.in_page(vc, page)
+            times = flow.in_page(page)
             page.click("tab-cell")
             page.click("start-sort")
             page.confirm()

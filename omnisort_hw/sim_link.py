@@ -1,0 +1,72 @@
+"""The client of a virtual cell's control channel: one JSON object per line out, one per line
+back, each request bounded by a timeout. The Simulator tab and the test harness
+(`sim_backend.virtual_cell.launcher`) speak it; the service never does, so it never learns
+that its cell is simulated. It imports nothing of the simulator: the channel is the contract
+(docs/virtual_cell.md lists its commands)."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import socket
+import threading
+from typing import Any
+
+DEFAULT_TIMEOUT_S = 10.0
+
+
+class SimControlError(Exception):
+    """The control channel at `address` refused a request (its reason) or cannot be reached."""
+
+    def __init__(self, address: str, message: str) -> None:
+        super().__init__(f"{address}: {message}")
+        self.address, self.message = address, message
+
+
+class SimLink:
+    """One connection to the control channel at host:port, opened on first use and again after
+    a failure; requests are serialised (one line in flight)."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.host, self.port = host, port
+        self.address = f"{host}:{port}"
+        self._sock: socket.socket | None = None
+        self._rfile: Any = None
+        self._lock = threading.Lock()
+
+    def control(
+        self, cmd: str, timeout_s: float = DEFAULT_TIMEOUT_S, **args: Any
+    ) -> dict[str, Any]:
+        """Send `{"cmd": cmd, **args}`; the reply's result (SimControlError otherwise)."""
+        with self._lock:
+            try:
+                if self._sock is None:
+                    self._sock = socket.create_connection((self.host, self.port), timeout_s)
+                    self._rfile = self._sock.makefile("rb")
+                self._sock.settimeout(timeout_s)
+                self._sock.sendall(json.dumps({"cmd": cmd, **args}).encode() + b"\n")
+                line = self._rfile.readline()
+            except OSError as exc:
+                self._drop()
+                raise SimControlError(self.address, f"control channel: {exc}") from exc
+            if not line:
+                self._drop()
+                raise SimControlError(self.address, "control channel closed")
+        try:
+            reply = json.loads(line)
+        except ValueError as exc:
+            raise SimControlError(self.address, f"not a control-channel reply: {exc}") from exc
+        if not reply.get("ok"):
+            raise SimControlError(self.address, str(reply.get("error")))
+        return dict(reply.get("result") or {})
+
+    def _drop(self) -> None:
+        for closing in (self._rfile, self._sock):
+            if closing is not None:
+                with contextlib.suppress(OSError):
+                    closing.close()
+        self._sock = self._rfile = None
+
+    def close(self) -> None:
+        with self._lock:
+            self._drop()
