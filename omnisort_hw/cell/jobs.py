@@ -47,6 +47,7 @@ if TYPE_CHECKING:
     from omnisort_hw.cell.compute_worker import ComputeWorker
     from omnisort_hw.cell.devices import Devices
     from omnisort_hw.cell.journal import JobJournal
+    from omnisort_hw.cell.status_reply import CellStatus
     from omnisort_hw.cell.watchdog import DriftWatchdog
     from omnisort_hw.config.capture import CaptureSettings
     from omnisort_hw.config.sorting import RegistrationConfig
@@ -90,6 +91,8 @@ class CellHost(Protocol):
     def measuring(self) -> AbstractContextManager[tuple[Any, Any]]: ...
 
     def prune_captures(self) -> None: ...
+
+    def status(self) -> CellStatus: ...
 
 
 class CellJobs:
@@ -193,6 +196,13 @@ class CellJobs:
     @property
     def system_path(self) -> Path:
         return self.store.path("system")
+
+    def arm_joints(self) -> list[float] | None:
+        """The arm's last joint reading (deg) from the cell's status snapshot (no device
+        traffic), None when it has none."""
+        arm = self.cell.status()["devices"].get("arm") or {}
+        joints = arm.get("joints_deg")
+        return [float(q) for q in joints] if isinstance(joints, list) else None
 
     def system_calibration(self) -> SystemCalibration:
         """The verified system.json as the core's SystemCalibration."""

@@ -18,6 +18,7 @@ rig's interface, the calibration store and gate, the capture, the verdict, the s
     detection      a live frame -> a calibration pattern's pixels, for a screen placing it
     views          live frames with the full board -> the intrinsics' views and their coverage
     calibration_history  the store's kept versions of a calibration file, verified
+    cell_geometry  system.json, [sorting] and the arm's joints -> the cell in 3D, in S
 
 Each calls the pure core (`omnisort_hw.core`) and the devices' interfaces (`drivers.base`);
 none imports the simulator.
@@ -35,4 +36,5 @@ USE_CASES = (
     "detection",
     "views",
     "calibration_history",
+    "cell_geometry",
 )

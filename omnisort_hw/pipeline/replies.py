@@ -199,6 +199,37 @@ class VersionReply(TypedDict):
     problem: NotRequired[str]
 
 
+class LaserPlaneReply(TypedDict):
+    normal: list[float]
+    distance_mm: float
+    corners_S_mm: list[list[float]]  # a patch of the plane around the emitter, for a picture
+
+
+class BinReply(TypedDict):
+    color: str
+    corners_S_mm: list[list[float]]  # the rim's four corners, in order
+    floor_S_mm: list[list[float]]  # the same corners on the floor
+
+
+class ArmReply(TypedDict):
+    model: str
+    joints_deg: list[float]
+    points_S_mm: list[list[float]]  # the base, then each DH frame's origin to the flange
+
+
+class GeometryReply(TypedDict):
+    """The cell in 3D, in S (mm): what is calibrated, each part None until it is."""
+
+    camera_R_SC: list[list[float]] | None
+    laser_plane: LaserPlaneReply | None
+    robot_base_T_SB: list[list[float]] | None
+    arm: ArmReply | None
+    bins: list[BinReply]
+    cube_size_mm: float  # of `[sorting]`: the cubes a locate finds
+    floor_z_mm: float | None  # the robot base's plane (the floor it stands on)
+    problems: list[str]  # why a part is missing
+
+
 class HistoryReply(TypedDict):
     """A calibration file's current version and the ones kept before it, newest first."""
 

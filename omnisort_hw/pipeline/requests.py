@@ -325,6 +325,13 @@ class HistoryRequest:
 
 
 @dataclass(frozen=True)
+class GeometryRequest:
+    """The cell in 3D, in S (mm), for a picture of it: the camera, the laser plane, the robot
+    base, the arm's links as it stands, the bins and the floor. Read-only: nothing is grabbed,
+    moved or written."""
+
+
+@dataclass(frozen=True)
 class PictureRequest:
     """A picture the service wrote (a reply's `overlay_png`), scaled down and JPEG-encoded
     (base64), for a client on another machine or under another user."""

@@ -17,6 +17,7 @@ from omnisort_hw.pipeline.replies import (
     AdoptReply,
     DetectReply,
     DriftReply,
+    GeometryReply,
     HistoryReply,
     LocateReply,
     MapReply,
@@ -31,6 +32,7 @@ from omnisort_hw.pipeline.requests import (
     CaptureRequest,
     CheckRequest,
     DetectRequest,
+    GeometryRequest,
     HistoryRequest,
     LaserRequest,
     LocateRequest,
@@ -89,6 +91,9 @@ class CellCommands:
 
     def history(self, request: HistoryRequest | None = None) -> HistoryReply:
         return cast(HistoryReply, self.execute("history", wire_args(request)))
+
+    def geometry(self, request: GeometryRequest | None = None) -> GeometryReply:
+        return cast(GeometryReply, self.execute("geometry", wire_args(request)))
 
     def capture(self, request: CaptureRequest | None = None) -> Result:
         return self.execute("capture", wire_args(request))

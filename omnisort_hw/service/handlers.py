@@ -21,6 +21,7 @@ from omnisort_hw.pipeline.requests import (
     CaptureRequest,
     CheckRequest,
     DetectRequest,
+    GeometryRequest,
     HistoryRequest,
     LaserRequest,
     LocateRequest,
@@ -80,6 +81,12 @@ def history(ctx: Context, request: HistoryRequest) -> Reply:
     from omnisort_hw.pipeline import calibration_history
 
     return calibration_history.run(ctx.cell.jobs, request).reply()
+
+
+def geometry(ctx: Context, request: GeometryRequest) -> Reply:
+    from omnisort_hw.pipeline import cell_geometry
+
+    return cell_geometry.run(ctx.cell.jobs, request).reply()
 
 
 def picture(ctx: Context, request: PictureRequest) -> Reply:
@@ -150,6 +157,7 @@ HANDLERS: dict[str, Handler] = {
     "detect": detect,
     "views": views,
     "history": history,
+    "geometry": geometry,
     "capture": capture,
     "laser": laser,
     "calibrate": calibrate,

@@ -169,6 +169,7 @@ COMMANDS: dict[str, Command] = {
         Command("detect", "quick", requests.DetectRequest),
         Command("views", "quick", requests.ViewsRequest),
         Command("history", "quick", requests.HistoryRequest),
+        Command("geometry", "quick", requests.GeometryRequest, needs_token=False),
         Command("capture", "quick", requests.CaptureRequest),
         Command("laser", "quick", requests.LaserRequest),
         Command("calibrate", "job", requests.CalibrateRequest, job_state="calibrating"),

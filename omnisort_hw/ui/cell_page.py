@@ -24,6 +24,7 @@ from omnisort_hw.service.status_reading import (
     sort_progress,
     status_rows,
 )
+from omnisort_hw.ui.cell_3d import Cell3D
 from omnisort_hw.ui.commissioning import CommissioningPanel
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import ClientError, CommandError
@@ -96,6 +97,7 @@ class CellPage:
                 with ui.tabs().classes("w-full") as tabs:
                     tag(ui.tab("Cell"), "tab-cell")
                     tag(ui.tab("Commission"), "tab-commission")
+                    tag(ui.tab("3D"), "tab-3d")
                     if self.ctx.sim is not None:
                         tag(ui.tab("Simulator"), "tab-simulator")
                 with ui.tab_panels(tabs, value="Cell").classes("w-full") as panels:
@@ -107,6 +109,9 @@ class CellPage:
                             self.ctx, self._token, self._start_job, self._operator_send, self.laser
                         )
                         self.commissioning.build()
+                    with ui.tab_panel("3D").classes("p-0"):
+                        self.cell_3d = Cell3D(self.ctx)
+                        self.cell_3d.build()
                     if self.ctx.sim is not None:
                         with ui.tab_panel("Simulator").classes("p-0"):
                             self.simulator = SimulatorPanel(self.ctx, self.ctx.sim, self._token)
@@ -115,6 +120,7 @@ class CellPage:
 
     def _tab_shown(self, event: Any) -> None:
         self.commissioning.show(event.value == "Commission")
+        self.cell_3d.show(event.value == "3D")
         if self.simulator is not None:
             self.simulator.show(event.value == "Simulator")
 
@@ -453,6 +459,7 @@ def cell_page(ctx: UiContext) -> None:
     ui.timer(min(ctx.config.view_period_s, 0.5), page.refresh_view)
     ui.timer(0.5, page.recovery.refresh)
     ui.timer(0.5, page.commissioning.refresh)
+    ui.timer(0.5, page.cell_3d.refresh)
     if page.simulator is not None:
         ui.timer(0.5, page.simulator.refresh)
     ctx.feed.watch()

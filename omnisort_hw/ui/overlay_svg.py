@@ -21,11 +21,16 @@ class Overlay:
     legend: str
 
 
-def sigma_colour(sigma: float, lo: float, hi: float) -> str:
-    """Green at `lo`, through yellow, to red at `hi` and beyond."""
+def sigma_rgb(sigma: float, lo: float, hi: float) -> tuple[float, float, float]:
+    """Green at `lo`, through yellow, to red at `hi` and beyond: (r, g, b) in [0, 1]."""
     t = 0.0 if hi <= lo else min(1.0, max(0.0, (sigma - lo) / (hi - lo)))
-    red, green = (round(510 * t), 255) if t < 0.5 else (255, round(510 * (1.0 - t)))
-    return f"#{min(red, 255):02x}{min(green, 255):02x}00"
+    return (min(1.0, 2.0 * t), min(1.0, 2.0 * (1.0 - t)), 0.0)
+
+
+def sigma_colour(sigma: float, lo: float, hi: float) -> str:
+    """`sigma_rgb` as a CSS colour."""
+    red, green, _ = sigma_rgb(sigma, lo, hi)
+    return f"#{round(255 * red):02x}{round(255 * green):02x}00"
 
 
 def map_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:

@@ -66,6 +66,7 @@ SERVICE_ONLY = {
     "detect": "a live frame's pattern for a screen placing it (each calibration detects its own)",
     "views": "the cell's camera's views kept in its store (the CLI calibrates from any folder)",
     "history": "the service's calibration store (the CLI's files are wherever it was told)",
+    "geometry": "the cell in 3D for a client's screen, from the service's store and its arm",
     "picture": "a picture the service wrote, for a client elsewhere (the CLI's are files)",
     "laser": "the cell's laser, held by the service",
     "move": "the arm, held by the service",

@@ -149,9 +149,10 @@ def test_encode_is_one_line_and_json_safe() -> None:
 
 
 def test_every_command_declares_token_policy() -> None:
-    """Without the token: what reads (the status, a live picture) and what stops."""
+    """Without the token: what reads (the status, a live picture, the cell in 3D) and what
+    stops."""
     free = {name for name, c in proto.COMMANDS.items() if not c.needs_token}
-    assert free == {"status", "view", "stop", "estop"} == set(proto.OPEN_COMMANDS)
+    assert free == {"status", "view", "geometry", "stop", "estop"} == set(proto.OPEN_COMMANDS)
 
 
 def test_loopback_and_token_config() -> None:

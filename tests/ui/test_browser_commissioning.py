@@ -10,6 +10,7 @@ its bin. Each step's screenshot goes to docs/images."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -31,6 +32,16 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
         config = flow.virtual_cell_file(vc, tmp_path)
         with served_page(config, tmp_path) as (svc, page):
             times = flow.in_page(page)
+            # The commissioned cell in 3D: the geometry, the map's points, the cubes located.
+            page.click("tab-3d")
+            drawn = wait_for(
+                "the cell in 3D",
+                lambda: "cubes: 4" in (t := page.text("scene-legend")) and t,
+                20,
+                0.25,
+            )
+            time.sleep(1.0)  # three.js draws on its next frame
+            page.shot("commission_3d", at="scene-3d")
             page.click("tab-cell")
             page.click("start-sort")
             page.confirm()
@@ -68,6 +79,9 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
             status = service_status(svc.port)
 
     assert "4 sorted, 0 skipped, 0 failed" in end, end
+    # The camera, the laser plane, the base and its 7 joint origins, the 4 bins, the map.
+    for part in ("camera: 1", "laser plane: 1", "arm joints: 8", "bins: 4", "map points: "):
+        assert part in drawn, drawn
     assert check_truth(truth) == [], check_truth(truth)
     errors = flow.calibration_errors(tmp_path / "state" / "system.json", truth)
     print(f"commissioning {times}; {errors}")
