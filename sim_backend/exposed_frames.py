@@ -5,6 +5,7 @@ noise and flicker draw, the camera's exposure, gain and pixel format)."""
 
 from __future__ import annotations
 
+import zlib
 from typing import Any
 
 import numpy as np
@@ -21,11 +22,12 @@ from sim_backend.world import SimWorld
 
 def world_state_key(world: SimWorld) -> bytes:
     """What a render depends on that can change: the camera's rotation on its mount (a knock),
-    the laser plane, the arm's and fingers' joints, the cubes and their poses."""
+    the laser plane, the target, the arm's and fingers' joints, the cubes and their poses."""
     parts = [
         np.asarray(world.R_SC, float).ravel() * 1e4,
         np.asarray(world.laser_normal, float) * 1e4,
         np.array([world.laser_distance, len(world.info.cubes)], float),
+        np.array([zlib.crc32(repr(world.target_spec).encode())], float),
     ]
     if world.arm is not None:
         arm = world.arm

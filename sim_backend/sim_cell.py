@@ -18,8 +18,17 @@ from drivers.errors import (
     DeviceDisconnectedError,
 )
 from omnisort_hw.core.frames import camera_rotation, laser_normal, rot_z
+from omnisort_hw.errors import ConfigError
 from sim_backend.hostile_light import Lighting, apply_to_scene, lighting
-from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, Scene, load_scene, sized
+from sim_backend.scene import (
+    NAMED_COLORS,
+    Color,
+    CubeSpec,
+    Scene,
+    TargetSpec,
+    load_scene,
+    sized,
+)
 from sim_backend.scene_images import camera_model_for, render_world
 from sim_backend.world import SimWorld
 
@@ -126,6 +135,44 @@ class SimCell:
             world.laser_normal = laser_normal(*np.radians([roll, pitch]))
             world.laser_distance = d
             return np.array([*world.laser_normal, d])
+
+    def set_target(
+        self,
+        on: bool,
+        kind: str | None = None,
+        center_mm: tuple[float, float] | None = None,
+        yaw_deg: float | None = None,
+    ) -> TargetSpec | None:
+        """Put the calibration target in the cell (`on`: of `kind`, centred at `center_mm` of
+        S on the floor, turned by `yaw_deg`; each None keeps the target's own) or take it away,
+        as the simulator's panel does; the target as it stands now. Renders and truth follow;
+        a target on a cube or a bin, or of an unknown kind, is refused (ValueError)."""
+        with self.lock:
+            world = self.world
+            if not on:
+                world.set_target(None)
+                return None
+            last = world.target_spec or self.scene.target
+            changes: dict[str, Any] = {
+                k: v
+                for k, v in (
+                    ("kind", kind),
+                    ("center_mm", list(center_mm) if center_mm is not None else None),
+                    ("yaw_deg", yaw_deg),
+                )
+                if v is not None
+            }
+            try:
+                base = self.scene if last is None else self.scene.replace(target=last)
+                scene = (
+                    base.replace(target=changes)
+                    if last is not None
+                    else base.replace(target=TargetSpec(**{"kind": "two_sided", **changes}))
+                )
+            except (ConfigError, TypeError) as exc:
+                raise ValueError(f"target: {exc}") from None
+            world.set_target(scene.target)
+            return scene.target
 
     def _cube_spot(self, x_mm: float, y_mm: float, size_mm: float, skip: int | None) -> None:
         """Refuse a spot off the floor's work area or on another cube."""

@@ -201,7 +201,7 @@ def build_truth(
 
 
 def _target_truth(world: SimWorld) -> dict[str, Any] | None:
-    t = world.scene.target
+    t = world.target_spec
     if t is None:
         return None
     return {

@@ -236,8 +236,10 @@ class SimWorld:
         )
         if s.boom.enabled:
             self._build_boom()
+        self._target_bodies: set[int] = set()
+        self.target_spec: TargetSpec | None = None  # as it stands now (None: taken away)
         if s.target is not None:
-            self._build_target(s.target)
+            self.set_target(s.target)
         for board in s.checkerboards:
             self._build_board(board)
         for i, cube in enumerate(s.cubes):
@@ -307,6 +309,26 @@ class SimWorld:
         self.info.cylinders.append(
             AnalyticCylinder("boom_rod", rod, start, end, b.rod_radius_mm, b.color.rgb)
         )
+
+    def set_target(self, t: TargetSpec | None) -> None:
+        """Take the target away and, with `t`, build `t` in its place (the simulator's panel
+        sets its kind and pose); the renderer's cached static geometry is dropped."""
+        gone = self._target_bodies
+        for body in gone:
+            p.removeBody(body, physicsClientId=self.client)
+            self.info.panels.pop(body, None)
+            self.info.names.pop(body, None)
+        info = self.info
+        info.static_rects = [r for r in info.static_rects if r[1] not in gone]
+        info.boxes = [b for b in info.boxes if b.body not in gone]
+        info.markers.clear()
+        info.walls.clear()
+        before = set(info.names)
+        if t is not None:
+            self._build_target(t)
+        self._target_bodies = set(info.names) - before
+        self.target_spec = t
+        self.render_cache.clear()
 
     def _build_target(self, t: TargetSpec) -> None:
         cx, cy = t.center_mm

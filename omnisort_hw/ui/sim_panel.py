@@ -5,6 +5,7 @@ simulator's panels did with the mouse, and what a person does to a real cell.
 - the camera's mounting (roll, pitch, yaw) and a knock, to rehearse the recovery;
 - the board held in front of the camera for the intrinsics' views;
 - the laser: switched, turned and moved;
+- the calibration target: its kind, where it stands, or taken away;
 - the cubes: moved, added, taken away;
 - the arm jogged by joints or to an XYZ of its base through the core's inverse kinematics,
   and the gripper (each asked to be confirmed: the simulated arm moves);
@@ -28,6 +29,7 @@ from omnisort_hw.ui.widgets import confirm, tag
 
 BOARD_POSES = 12  # the virtual cell's held-board poses (`{"cmd": "board", "view": k}`)
 COLOURS = ("red", "green", "blue", "yellow")
+TARGET_KINDS = ("two_sided", "three_sided")
 CUBE_COLUMNS = [
     {"name": k, "label": label, "field": k, "align": "left"}
     for k, label in (
@@ -55,6 +57,14 @@ def truth_lines(truth: dict[str, Any]) -> list[str]:
             laser.get("distance_mm", 0.0),
         ),
     ]
+    target = truth.get("target")
+    lines.append(
+        "target: away"
+        if not target
+        else "target: {}, centre {:.0f}, {:.0f} mm, yaw {:.1f} deg".format(
+            target["kind"], *target["center_mm"], target["yaw_deg"]
+        )
+    )
     if truth.get("joints_deg"):
         lines.append("arm joints: " + ", ".join(f"{q:.1f}" for q in truth["joints_deg"]) + " deg")
     if truth.get("tcp_B_mm"):
@@ -106,6 +116,7 @@ class SimulatorPanel:
             with ui.column().classes("gap-2 w-[34rem]"):
                 self._build_camera()
                 self._build_laser()
+                self._build_target()
                 self._build_cubes()
                 self._build_arm()
                 self._build_render()
@@ -163,6 +174,20 @@ class SimulatorPanel:
                 self.laser_pitch = _number("pitch, deg", 0.0, "sim-laser-pitch")
                 self.laser_distance = _number("distance, mm", 800.0, "sim-laser-distance")
                 tag(ui.button("Set", on_click=self.set_laser), "sim-laser")
+
+    def _build_target(self) -> None:
+        with ui.card().classes("w-full"):
+            ui.label("Calibration target").classes("text-lg")
+            with ui.row().classes("items-center"):
+                self.target_on = tag(ui.checkbox("in the cell", value=True), "sim-target-on")
+                self.target_kind = tag(
+                    ui.select(list(TARGET_KINDS), value="two_sided", label="kind").classes("w-32"),
+                    "sim-target-kind",
+                )
+                self.target_x = _number("x, mm", 0.0, "sim-target-x")
+                self.target_y = _number("y, mm", 650.0, "sim-target-y")
+                self.target_yaw = _number("yaw, deg", 0.0, "sim-target-yaw")
+                tag(ui.button("Set", on_click=self.set_target), "sim-target")
 
     def _build_cubes(self) -> None:
         with ui.card().classes("w-full"):
@@ -258,6 +283,12 @@ class SimulatorPanel:
             if value is not None:
                 field.value = round(float(value), 3)
         self.laser_on.value = bool(truth.get("laser_on"))
+        target = truth.get("target")
+        self.target_on.value = target is not None
+        if target is not None:
+            self.target_kind.value = target["kind"]
+            self.target_x.value, self.target_y.value = target["center_mm"]
+            self.target_yaw.value = target["yaw_deg"]
 
     # -- acting ---------------------------------------------------------------------------
 
@@ -358,6 +389,17 @@ class SimulatorPanel:
                 on=on,
                 **args,
             )
+
+    async def set_target(self) -> None:
+        if not self.target_on.value:
+            await self._act("target", "target taken away", on=False)
+            return
+        place = await self._numbers(
+            "target", {"x_mm": self.target_x, "y_mm": self.target_y, "yaw_deg": self.target_yaw}
+        )
+        if place is not None:
+            kind = str(self.target_kind.value)
+            await self._act("target", f"target {kind} set", kind=kind, **place)
 
     async def cube(self, action: str) -> None:
         index = self._value(self.cube_index)

@@ -42,6 +42,7 @@ def world_state(cell: Any) -> dict[str, Any]:
         state: dict[str, Any] = {
             "laser": bool(world.laser_on),
             "laser_plane": [*world.laser_angles_deg, float(world.laser_distance)],
+            "target": target_pose(world.target_spec),
             "R_SC": np.asarray(world.R_SC, float).tolist(),
             "cubes": [],
         }
@@ -57,14 +58,24 @@ def world_state(cell: Any) -> dict[str, Any]:
     return state
 
 
+def target_pose(spec: Any) -> dict[str, Any] | None:
+    """The target's kind and pose (what the simulator's panel changes), None when away."""
+    if spec is None:
+        return None
+    return {"kind": spec.kind, "center_mm": list(spec.center_mm), "yaw_deg": spec.yaw_deg}
+
+
 def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
     """True when states a and b look the same to the camera: the same board held (or none),
-    the camera not turned, the laser alike (switch and plane), the same cubes, joints within
+    the camera not turned, the laser alike (switch and plane), the target alike, the same
+    cubes, joints within
     0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm and 0.15 deg (tolerances, not
     rounding, so a cube's physics jitter never makes the picture out of date)."""
     if a is None or a.get("board") != b.get("board"):
         return False
     if a["laser"] != b["laser"] or a["laser_plane"] != b["laser_plane"]:
+        return False
+    if a["target"] != b["target"]:
         return False
     if [c[2:] for c in a["cubes"]] != [c[2:] for c in b["cubes"]]:  # added or taken away
         return False
@@ -140,6 +151,12 @@ def _render_worker(
             world.set_joints(np.asarray(state["q"]))
             world.set_fingers(state["fingers_mm"])
         _sync_cubes(cell, state["cubes"])
+        target = state["target"]
+        if target != target_pose(world.target_spec):
+            if target is None:
+                cell.set_target(False)
+            else:
+                cell.set_target(True, target["kind"], tuple(target["center_mm"]), target["yaw_deg"])
         world.laser_on = state["laser"]
         cell.set_laser_plane(*state["laser_plane"])
         world.R_SC = np.asarray(state["R_SC"], float)

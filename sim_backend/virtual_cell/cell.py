@@ -27,7 +27,12 @@ import numpy as np
 from sim_backend.devices import SimArm, SimCell
 from sim_backend.sort_harness import SimVerifier
 from sim_backend.truth import mounting_truth
-from sim_backend.virtual_cell.camera_stream import CAMERA_PORT, CameraStreamServer, FrameSource
+from sim_backend.virtual_cell.camera_stream import (
+    CAMERA_PORT,
+    CameraStreamServer,
+    FrameSource,
+    target_pose,
+)
 from sim_backend.virtual_cell.control import ControlChannel
 from sim_backend.virtual_cell.controller import RATE_HZ, URController
 from sim_backend.virtual_cell.laser_modbus import MODBUS_PORT, LaserModbusServer
@@ -166,6 +171,7 @@ class VirtualCell:
             "gripper_closed": self.arm.gripper.is_closed,
             "joints_deg": np.rad2deg(self.ctl.q).tolist(),
             "tcp_B_mm": world.tcp_pose_B()[:3, 3].tolist(),
+            "target": target_pose(world.target_spec),
             "laser_on": bool(self.cell.world.laser_on),
         }
 

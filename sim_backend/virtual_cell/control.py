@@ -41,6 +41,9 @@ COMMANDS: dict[str, str] = {
     "knock": "`angle_deg`, `axis` (x, y, z or a vector of S): the camera turned from where it is",
     "laser": "`on`, `roll_deg`, `pitch_deg`, `distance_mm` (each optional): the emitter "
     "switched, turned and moved",
+    "target": "`on` (default true), `kind` (two_sided or three_sided), `x_mm`, `y_mm`, "
+    "`yaw_deg` (its centre on the floor, in S; each optional): the calibration target put "
+    "in the cell, changed, moved, or taken away",
     "cube": "`action` = move (`index`, `x_mm`, `y_mm`, `yaw_deg`: put down there, in S), add "
     "(`color`, `x_mm`, `y_mm`, `yaw_deg`) or remove (`index`)",
     "joints": "`q_deg` (6): the arm jogged there from the pendant; returns once it stands",
@@ -188,6 +191,19 @@ class ControlChannel:
             with cell.lock:
                 cell.world.laser_on = on
         return {"laser_plane": self.vc.truth()["laser_plane"], "shown": self._shown()}
+
+    def _target(self, req: dict[str, Any]) -> dict[str, Any]:
+        on = req.get("on", True)
+        kind = req.get("kind")
+        if not isinstance(on, bool) or (kind is not None and not isinstance(kind, str)):
+            raise ValueError(f"on must be true or false and kind a name, got {on!r}, {kind!r}")
+        x, y = _number(req, "x_mm"), _number(req, "y_mm")
+        if (x is None) != (y is None):
+            raise ValueError("x_mm and y_mm go together: the target's centre on the floor")
+        self.vc.cell.set_target(
+            on, kind, None if x is None or y is None else (x, y), _number(req, "yaw_deg")
+        )
+        return {"target": self.vc.truth()["target"], "shown": self._shown()}
 
     def _cube(self, req: dict[str, Any]) -> dict[str, Any]:
         cell, action = self.vc.cell, req.get("action")

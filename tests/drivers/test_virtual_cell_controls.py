@@ -140,3 +140,37 @@ def test_the_arm_jogged_by_joints_and_by_xyz_and_the_gripper(vc) -> None:
     assert np.allclose(at_joints["joints_deg"], target, atol=1e-9)
     assert np.allclose(at_xyz["tcp_B_mm"], [-300.0, -350.0, 300.0], atol=1e-6), at_xyz["tcp_B_mm"]
     assert closed["closed"] and gripping["gripper_closed"] and not gripping["held"]
+
+
+def blue_at(image: np.ndarray, markers_px: list[dict]) -> float:
+    """Mean blueness (B minus the larger of G and R) of the image at the visible markers'
+    centres of a truth."""
+    pts = np.array([m["center_px"] for m in markers_px if m["visible"]], float)
+    h, w = image.shape[:2]
+    x = np.clip(np.round(pts[:, 0]).astype(int), 0, w - 1)
+    y = np.clip(np.round(pts[:, 1]).astype(int), 0, h - 1)
+    px = image[y, x].astype(float)
+    return float(np.mean(px[:, 0] - np.maximum(px[:, 1], px[:, 2])))
+
+
+def test_the_target_taken_away_moved_and_changed(vc, tmp_path: Path) -> None:
+    _, before = rendered(vc, tmp_path, "target_before")
+    away = vc.control("target", timeout_s=60.0, on=False)
+    _, gone = rendered(vc, tmp_path, "target_away")
+    moved = vc.control("target", timeout_s=60.0, x_mm=40.0, y_mm=680.0, yaw_deg=3.0)
+    image, after = rendered(vc, tmp_path, "target_moved")
+    three = vc.control("target", timeout_s=60.0, kind="three_sided")
+    with pytest.raises(VirtualCellError, match="target"):
+        vc.control("target", kind="round")
+    with pytest.raises(VirtualCellError, match="x_mm and y_mm"):
+        vc.control("target", x_mm=10.0)
+    back = vc.control("target", timeout_s=60.0, kind="two_sided", x_mm=0.0, y_mm=650.0, yaw_deg=0.0)
+    assert away["target"] is None and gone["target"] is None and gone["markers_px"] == []
+    # The renderer's truth: the pose asked, its walls and markers there.
+    assert after["target"]["center_mm"] == [40.0, 680.0] and after["target"]["yaw_deg"] == 3.0
+    assert moved["target"]["center_mm"] == [40.0, 680.0]
+    assert len(after["markers_px"]) == 8 and len(after["target"]["walls"]) == 2
+    # The picture shows the markers where the moved target has them, not where they were.
+    assert blue_at(image, after["markers_px"]) > 3 * max(blue_at(image, before["markers_px"]), 5)
+    assert three["target"]["kind"] == "three_sided"
+    assert back["target"] == {"kind": "two_sided", "center_mm": [0.0, 650.0], "yaw_deg": 0.0}

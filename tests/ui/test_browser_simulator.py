@@ -6,7 +6,8 @@
   drift banner says so, and motion is refused;
 - the camera mounted at 5 deg of roll from the page is rendered at 5 deg (the virtual cell's
   truth, and its streamed frame against the scene rendered so);
-- a cube moved and the tool moved to an XYZ of the base from the page land where asked (the
+- a cube moved, the target moved and the tool moved to an XYZ of the base from the page land
+  where asked (the
   arm's move only after the confirmation, and nothing at all when signed out)."""
 
 from __future__ import annotations
@@ -78,6 +79,10 @@ def test_the_simulator_panel_moves_the_scene_and_a_knock_is_caught(tmp_path: Pat
             page.type("sim-cube-yaw", "10")
             flow.sim_note_after(page, "sim-cube-move", "cube move: done")
             cubes = vc.truth()["cubes"]
+            page.type("sim-target-x", "40")
+            page.type("sim-target-y", "680")
+            flow.sim_note_after(page, "sim-target", "target two_sided set")
+            target = vc.truth()["target"]
             page.click("sim-move-to")
             page.confirm()
             wait_for(
@@ -109,4 +114,5 @@ def test_the_simulator_panel_moves_the_scene_and_a_knock_is_caught(tmp_path: Pat
     assert near < far / 4, (near, far)
 
     assert np.allclose(cubes[1]["center_S_mm"][:2], [0.0, 1000.0], atol=0.5), cubes[1]
+    assert target == {"kind": "two_sided", "center_mm": [40.0, 680.0], "yaw_deg": 0.0}, target
     assert np.allclose(tool, [-300.0, -350.0, 300.0], atol=1e-6), tool
