@@ -143,7 +143,7 @@ class Cell:
         self.drift = DriftWatchdog(
             WatchdogPorts(
                 store,
-                lambda: self.jobs.grab_frame(laser=False),
+                self.jobs.dark_frame,
                 lambda: self.registration_config,
                 lambda: self.runlog,
             ),

@@ -10,6 +10,7 @@ use cases and the rest of the cell is devices, status and motion; it sees the ce
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -59,6 +60,7 @@ if TYPE_CHECKING:
 
 
 T = TypeVar("T")
+log = logging.getLogger(__name__)
 
 
 class CellHost(Protocol):
@@ -87,6 +89,8 @@ class CellHost(Protocol):
     def live_frame(self) -> Any: ...
 
     def set_laser(self, on: bool) -> bool: ...
+
+    def laser(self, on: bool | None = None) -> dict[str, Any]: ...
 
     def measuring(self) -> AbstractContextManager[tuple[Any, Any]]: ...
 
@@ -238,6 +242,20 @@ class CellJobs:
         finally:
             if laser and self.cell.devices.laser is not None:
                 self.cell.set_laser(False)
+
+    def dark_frame(self) -> np.ndarray:
+        """A laser-off frame for the drift watchdog, the laser left as it was: a periodic
+        check must not switch off a laser an operator switched on (unless the cell now refuses
+        to switch it on: then it stays off, and why is logged)."""
+        was_on = self.cell.devices.laser is not None and bool(self.cell.laser()["on"])
+        try:
+            return self.grab_frame(laser=False)
+        finally:
+            if was_on:
+                try:
+                    self.cell.set_laser(True)
+                except Exception as exc:  # a refusal or a device error: leave it off, say why
+                    log.warning("the laser stays off after the drift check: %s", exc)
 
     @property
     def views_dir(self) -> Path:

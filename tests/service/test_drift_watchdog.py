@@ -31,8 +31,11 @@ def test_bump_is_detected_refuses_motion_until_acknowledged_or_recalibrated(
         with Client(running.host, running.port, timeout_s=240) as c:
             # No reference image yet (calibrated from the truth file): the board alone says
             # the camera did not move, and this capture becomes the reference.
+            assert c.call("laser", {"on": True})["result"]["on"] is True
             first = c.call("check")
             assert first["ok"], first
+            # The check's dark frame leaves the laser as the operator set it.
+            assert c.call("laser")["result"]["on"] is True
             assert first["result"]["drift"] is False
             assert first["result"]["source"] == "board"
             assert first["result"]["reference_adopted"] is True

@@ -6,7 +6,10 @@ the field from the Simulator tab), the intrinsics,
 the camera and the laser plane from the two-sided target, the robot registration from the
 floor board, the verification (map and locate), then a sort of the four cubes from the cell
 tab. The calibration is checked against the virtual cell's truth and every cube must end in
-its bin. Each step's screenshot goes to docs/images."""
+its bin; the 3D tab shows the commissioned cell. Then the Simulator tab's checks
+(`simulator_flow`: a knock caught by the drift watchdog within its period, which this cell
+file sets, the camera mounted at 5 deg, a cube, the target and the tool moved), and going
+back to a kept calibration. Each step's screenshot goes to docs/images."""
 
 from __future__ import annotations
 
@@ -19,17 +22,19 @@ from omnisort_hw.pipeline.extrinsics import ANGLE_STD_DEG, DISTANCE_STD_MM
 from omnisort_hw.service.virtual_cell_demo import check_truth
 from tests.sim.virtual_cell_fixture import virtual_cell
 from tests.ui import commissioning_flow as flow
+from tests.ui import simulator_flow
 from tests.ui.browser_page import served_page, service_status, wait_for
 
 pytest.importorskip("pybullet", reason="the virtual cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
 WIDTH = 960  # the demo's size: the target's markers and the floor board need it
+PERIOD_S = 10.0  # the drift watchdog's period in this cell file
 
 
 def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: Path) -> None:
     with virtual_cell("sorting", width=WIDTH, unlock_delay_s=5.0) as vc:
-        config = flow.virtual_cell_file(vc, tmp_path)
+        config = flow.virtual_cell_file(vc, tmp_path, watchdog_period_s=PERIOD_S)
         with served_page(config, tmp_path) as (svc, page):
             times = flow.in_page(page)
             # The commissioned cell in 3D: the geometry, the map's points, the cubes located.
@@ -53,6 +58,10 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
             )
             page.shot("commission_sorted")
             truth = vc.truth()
+
+            # The Simulator tab on the commissioned cell: a knock caught by the watchdog, the
+            # camera mounted at 5 deg, a cube, the target and the tool moved.
+            simulated = simulator_flow.in_simulator_tab(vc, page, svc.port, PERIOD_S, tmp_path)
 
             # Going back to the kept system calibration (the one before the registration).
             page.click("tab-commission")
@@ -95,3 +104,4 @@ def test_the_virtual_cell_is_commissioned_from_nothing_in_the_browser(tmp_path: 
     assert back.startswith("system.json is now") and "/history/system.json." in back, back
     assert status["calibration"]["files"]["system"]["health"] == "ok", status["calibration"]
     assert not status["calibration"]["robot_registered"]
+    simulator_flow.check(simulated)
