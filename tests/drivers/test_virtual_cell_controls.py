@@ -34,14 +34,25 @@ def frame(vc) -> np.ndarray:
         return cv2.imdecode(np.frombuffer(r.read(), np.uint8), cv2.IMREAD_COLOR)
 
 
-def stripe_at(image: np.ndarray, polylines_px: list[dict]) -> float:
-    """Mean redness (R minus the larger of G and B) of the image on a truth's laser lines."""
-    pts = np.vstack([np.asarray(p["points_px"], float) for p in polylines_px])
+def colour_at(image: np.ndarray, pts_px: np.ndarray, channel: int) -> float:
+    """Mean lead of BGR `channel` over the larger other one, in the image at pixels (N, 2):
+    redness (2) on a laser line, blueness (0) on a marker."""
     h, w = image.shape[:2]
-    x = np.clip(np.round(pts[:, 0]).astype(int), 0, w - 1)
-    y = np.clip(np.round(pts[:, 1]).astype(int), 0, h - 1)
+    x = np.clip(np.round(pts_px[:, 0]).astype(int), 0, w - 1)
+    y = np.clip(np.round(pts_px[:, 1]).astype(int), 0, h - 1)
     px = image[y, x].astype(float)
-    return float(np.mean(px[:, 2] - np.maximum(px[:, 0], px[:, 1])))
+    others = np.delete(px, channel, axis=1)
+    return float(np.mean(px[:, channel] - others.max(axis=1)))
+
+
+def stripe_at(image: np.ndarray, polylines_px: list[dict]) -> float:
+    """Redness of the image on a truth's laser lines."""
+    return colour_at(image, np.vstack([np.asarray(p["points_px"], float) for p in polylines_px]), 2)
+
+
+def blue_at(image: np.ndarray, markers_px: list[dict]) -> float:
+    """Blueness of the image at a truth's visible markers' centres."""
+    return colour_at(image, np.array([m["center_px"] for m in markers_px if m["visible"]]), 0)
 
 
 def rendered(vc, tmp: Path, name: str) -> tuple[np.ndarray, dict]:
@@ -140,17 +151,6 @@ def test_the_arm_jogged_by_joints_and_by_xyz_and_the_gripper(vc) -> None:
     assert np.allclose(at_joints["joints_deg"], target, atol=1e-9)
     assert np.allclose(at_xyz["tcp_B_mm"], [-300.0, -350.0, 300.0], atol=1e-6), at_xyz["tcp_B_mm"]
     assert closed["closed"] and gripping["gripper_closed"] and not gripping["held"]
-
-
-def blue_at(image: np.ndarray, markers_px: list[dict]) -> float:
-    """Mean blueness (B minus the larger of G and R) of the image at the visible markers'
-    centres of a truth."""
-    pts = np.array([m["center_px"] for m in markers_px if m["visible"]], float)
-    h, w = image.shape[:2]
-    x = np.clip(np.round(pts[:, 0]).astype(int), 0, w - 1)
-    y = np.clip(np.round(pts[:, 1]).astype(int), 0, h - 1)
-    px = image[y, x].astype(float)
-    return float(np.mean(px[:, 0] - np.maximum(px[:, 1], px[:, 2])))
 
 
 def test_the_target_taken_away_moved_and_changed(vc, tmp_path: Path) -> None:

@@ -52,6 +52,10 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     ], "a cube was picked on the knocked calibration"
     page.shot("ui_drift")
 
+    # The simulated cell's laser is on from the start (the drift check leaves it so): off,
+    # to see the page say why the target is not found.
+    page.click("laser-off")
+    wait_for("the laser off", lambda: page.text("message") == "laser off", 10, 0.2)
     page.click("recover")
     wait_for("the recovery", lambda: page.visible("placed"), 10)
     # The target's detection, drawn live: without the laser, why not and the markers seen;
