@@ -327,7 +327,7 @@ class SimulatorPanel:
         value = field.value
         return None if value is None or value == "" else float(value)
 
-    async def _numbers(self, cmd: str, fields: dict[str, Any]) -> dict[str, float] | None:
+    def _numbers(self, cmd: str, fields: dict[str, Any]) -> dict[str, float] | None:
         values = {k: self._value(f) for k, f in fields.items()}
         missing = [k for k, v in values.items() if v is None]
         if missing:
@@ -336,7 +336,7 @@ class SimulatorPanel:
         return {k: float(v) for k, v in values.items() if v is not None}
 
     async def mount(self) -> None:
-        args = await self._numbers(
+        args = self._numbers(
             "camera", {"roll_deg": self.roll, "pitch_deg": self.pitch, "yaw_deg": self.yaw}
         )
         if args is not None:
@@ -344,7 +344,7 @@ class SimulatorPanel:
             await self._act("camera", f"camera mounted at {said} deg", **args)
 
     async def knock(self) -> None:
-        args = await self._numbers("knock", {"angle_deg": self.knock_angle})
+        args = self._numbers("knock", {"angle_deg": self.knock_angle})
         if args is not None:
             axis = str(self.knock_axis.value)
             await self._act(
@@ -372,7 +372,7 @@ class SimulatorPanel:
         await self.hold_board()
 
     async def set_laser(self) -> None:
-        args = await self._numbers(
+        args = self._numbers(
             "laser",
             {
                 "roll_deg": self.laser_roll,
@@ -394,7 +394,7 @@ class SimulatorPanel:
         if not self.target_on.value:
             await self._act("target", "target taken away", on=False)
             return
-        place = await self._numbers(
+        place = self._numbers(
             "target", {"x_mm": self.target_x, "y_mm": self.target_y, "yaw_deg": self.target_yaw}
         )
         if place is not None:
@@ -402,16 +402,19 @@ class SimulatorPanel:
             await self._act("target", f"target {kind} set", kind=kind, **place)
 
     async def cube(self, action: str) -> None:
-        index = self._value(self.cube_index)
-        place = await self._numbers(
-            "cube", {"x_mm": self.cube_x, "y_mm": self.cube_y, "yaw_deg": self.cube_yaw}
-        )
-        if place is None or (action != "add" and index is None):
-            return
         args: dict[str, Any] = {"action": action}
         if action != "add":
-            args["index"] = int(index or 0)
+            index = self._value(self.cube_index)
+            if index is None:
+                self.note.text = "cube: not sent: the cube's index must be a number"
+                return
+            args["index"] = int(index)
         if action != "remove":
+            place = self._numbers(
+                "cube", {"x_mm": self.cube_x, "y_mm": self.cube_y, "yaw_deg": self.cube_yaw}
+            )
+            if place is None:
+                return
             args.update(place)
         if action == "add":
             args["color"] = str(self.cube_color.value)
@@ -442,7 +445,7 @@ class SimulatorPanel:
             await self._act("joints", "arm at the joints asked ({seconds:.1f} s)", q_deg=q)
 
     async def move_to(self) -> None:
-        xyz = await self._numbers(
+        xyz = self._numbers(
             "move_to", {"x_mm": self.xyz[0], "y_mm": self.xyz[1], "z_mm": self.xyz[2]}
         )
         if xyz is not None and await self._confirmed("Move the tool to this point"):
