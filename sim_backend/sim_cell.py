@@ -152,7 +152,7 @@ class SimCell:
             if not on:
                 world.set_target(None)
                 return None
-            last = world.target_spec or self.scene.target
+            last = world.target_spec or self.scene.target or TargetSpec("two_sided")
             changes: dict[str, Any] = {
                 k: v
                 for k, v in (
@@ -162,14 +162,9 @@ class SimCell:
                 )
                 if v is not None
             }
-            try:
-                base = self.scene if last is None else self.scene.replace(target=last)
-                scene = (
-                    base.replace(target=changes)
-                    if last is not None
-                    else base.replace(target=TargetSpec(**{"kind": "two_sided", **changes}))
-                )
-            except (ConfigError, TypeError) as exc:
+            try:  # the scene's checks: a known kind, clear of the cubes and the bins
+                scene = self.scene.replace(target=last).replace(target=changes)
+            except ConfigError as exc:
                 raise ValueError(f"target: {exc}") from None
             world.set_target(scene.target)
             return scene.target

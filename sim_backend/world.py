@@ -313,14 +313,8 @@ class SimWorld:
     def set_target(self, t: TargetSpec | None) -> None:
         """Take the target away and, with `t`, build `t` in its place (the simulator's panel
         sets its kind and pose); the renderer's cached static geometry is dropped."""
-        gone = self._target_bodies
-        for body in gone:
-            p.removeBody(body, physicsClientId=self.client)
-            self.info.panels.pop(body, None)
-            self.info.names.pop(body, None)
         info = self.info
-        info.static_rects = [r for r in info.static_rects if r[1] not in gone]
-        info.boxes = [b for b in info.boxes if b.body not in gone]
+        self._remove_bodies(self._target_bodies)
         info.markers.clear()
         info.walls.clear()
         before = set(info.names)
@@ -492,9 +486,17 @@ class SimWorld:
     def remove_cube(self, index: int) -> None:
         """Take cube `index` out of the world (the later cubes' indices move down by one)."""
         _, body = self.info.cubes.pop(index)
-        self.info.boxes = [b for b in self.info.boxes if b.body != body]
-        self.info.names.pop(body, None)
-        p.removeBody(body, physicsClientId=self.client)
+        self._remove_bodies({body})
+
+    def _remove_bodies(self, bodies: set[int]) -> None:
+        """Take bodies out of pybullet and out of the records the renderer and truth read."""
+        info = self.info
+        for body in bodies:
+            p.removeBody(body, physicsClientId=self.client)
+            info.panels.pop(body, None)
+            info.names.pop(body, None)
+        info.static_rects = [r for r in info.static_rects if r[1] not in bodies]
+        info.boxes = [b for b in info.boxes if b.body not in bodies]
 
     def _build_bin(self, i: int, b: BinSpec) -> None:
         sx, sy, sz = b.size_mm

@@ -68,9 +68,9 @@ def target_pose(spec: Any) -> dict[str, Any] | None:
 def same_picture(a: dict[str, Any] | None, b: dict[str, Any]) -> bool:
     """True when states a and b look the same to the camera: the same board held (or none),
     the camera not turned, the laser alike (switch and plane), the target alike, the same
-    cubes, joints within
-    0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm and 0.15 deg (tolerances, not
-    rounding, so a cube's physics jitter never makes the picture out of date)."""
+    cubes, joints within 0.01 deg, fingers within 0.1 mm, every cube within 0.5 mm and
+    0.15 deg (tolerances, not rounding, so a cube's physics jitter never makes the picture out
+    of date)."""
     if a is None or a.get("board") != b.get("board"):
         return False
     if a["laser"] != b["laser"] or a["laser_plane"] != b["laser_plane"]:

@@ -59,13 +59,20 @@ COMMANDS: dict[str, str] = {
 SHOWN_TIMEOUT_S = 60.0
 
 
-def _number(req: dict[str, Any], key: str, default: float | None = None) -> float | None:
-    value = req.get(key, default)
+def _number(req: dict[str, Any], key: str) -> float | None:
+    """The request's number `key`, None when it is not given."""
+    value = req.get(key)
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
         raise ValueError(f"{key} must be a number, got {value!r}")
     return float(value)
+
+
+def _number_or(req: dict[str, Any], key: str, default: float) -> float:
+    """The request's number `key`, `default` when it is not given."""
+    value = _number(req, key)
+    return default if value is None else value
 
 
 def _required(req: dict[str, Any], key: str) -> float:
@@ -145,9 +152,9 @@ class ControlChannel:
         return {"closed": closed}
 
     def _stall(self, req: dict[str, Any]) -> dict[str, Any]:
-        seconds = _number(req, "seconds", 3600.0)
+        seconds = _number_or(req, "seconds", 3600.0)
         for face in self._faces(req):
-            self.vc.faults.stall(face, float(seconds or 0.0))
+            self.vc.faults.stall(face, seconds)
         return {}
 
     def _unstall(self, req: dict[str, Any]) -> dict[str, Any]:
@@ -167,16 +174,14 @@ class ControlChannel:
 
     def _camera(self, req: dict[str, Any]) -> dict[str, Any]:
         R = self.vc.cell.mount_camera(
-            float(_number(req, "roll_deg", 0.0) or 0.0),
-            float(_number(req, "pitch_deg", 0.0) or 0.0),
-            float(_number(req, "yaw_deg", 0.0) or 0.0),
+            _number_or(req, "roll_deg", 0.0),
+            _number_or(req, "pitch_deg", 0.0),
+            _number_or(req, "yaw_deg", 0.0),
         )
         return {"R_SC": R.tolist(), "shown": self._shown()}
 
     def _knock(self, req: dict[str, Any]) -> dict[str, Any]:
-        R = self.vc.cell.bump_camera(
-            float(_number(req, "angle_deg", 0.5) or 0.0), req.get("axis", "x")
-        )
+        R = self.vc.cell.bump_camera(_number_or(req, "angle_deg", 0.5), req.get("axis", "x"))
         return {"R_SC": R.tolist(), "shown": self._shown()}
 
     def _laser(self, req: dict[str, Any]) -> dict[str, Any]:
@@ -213,14 +218,14 @@ class ControlChannel:
                 index,
                 _required(req, "x_mm"),
                 _required(req, "y_mm"),
-                _number(req, "yaw_deg", 0.0) or 0.0,
+                _number_or(req, "yaw_deg", 0.0),
             )
         elif action == "add":
             index = cell.add_cube(
                 str(req.get("color", "")),
                 _required(req, "x_mm"),
                 _required(req, "y_mm"),
-                _number(req, "yaw_deg", 0.0) or 0.0,
+                _number_or(req, "yaw_deg", 0.0),
             )
         elif action == "remove":
             cell.remove_cube(index, held=self.vc.arm.gripper.held_body)

@@ -7,7 +7,6 @@ streams, so the renderer follows what the main world was told."""
 from __future__ import annotations
 
 import json
-import urllib.request
 from pathlib import Path
 
 import cv2
@@ -16,7 +15,7 @@ import pytest
 
 from omnisort_hw.core.frames import laser_normal
 from sim_backend.virtual_cell.launcher import VirtualCellError
-from tests.sim.virtual_cell_fixture import virtual_cell
+from tests.sim.virtual_cell_fixture import streamed_frame, virtual_cell
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 WIDTH = 256
@@ -26,12 +25,6 @@ WIDTH = 256
 def vc():
     with virtual_cell(width=WIDTH) as cell:
         yield cell
-
-
-def frame(vc) -> np.ndarray:
-    """One lossless frame of the camera as it streams (the world as it is now)."""
-    with urllib.request.urlopen(f"http://{vc.host}:8080/frame.png", timeout=60) as r:
-        return cv2.imdecode(np.frombuffer(r.read(), np.uint8), cv2.IMREAD_COLOR)
 
 
 def colour_at(image: np.ndarray, pts_px: np.ndarray, channel: int) -> float:
@@ -69,7 +62,7 @@ def test_the_laser_turned_and_moved_is_rendered_there(vc, tmp_path: Path) -> Non
         "laser", timeout_s=60.0, on=True, roll_deg=4.0, pitch_deg=-6.0, distance_mm=700.0
     )
     image, after = rendered(vc, tmp_path, "after")
-    streamed = frame(vc)
+    streamed = streamed_frame(vc.host)
     vc.control("laser", timeout_s=60.0, roll_deg=0.0, pitch_deg=0.0, distance_mm=800.0)
     assert reply["shown"]
     # The main world's truth and the renderer's: the plane asked, exactly.

@@ -6,11 +6,14 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
 
 from sim_backend.virtual_cell.launcher import VirtualCellError, VirtualCellProcess
@@ -30,6 +33,12 @@ def virtual_cell(
     finally:
         code = vc.stop()
         assert code in (0, None, -9), f"virtual cell exited with {code}: {vc.log_tail()}"
+
+
+def streamed_frame(host: str) -> np.ndarray:
+    """One lossless frame of the virtual cell's camera as it streams (the world as it is now)."""
+    with urllib.request.urlopen(f"http://{host}:8080/frame.png", timeout=60) as r:
+        return np.asarray(cv2.imdecode(np.frombuffer(r.read(), np.uint8), cv2.IMREAD_COLOR))
 
 
 def run_client(module: str, *args: str, timeout_s: float = 90.0) -> Any:

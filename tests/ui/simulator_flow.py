@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import time
-import urllib.request
 from pathlib import Path
 from typing import Any
 
@@ -21,16 +20,11 @@ import cv2
 import numpy as np
 
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
+from tests.sim.virtual_cell_fixture import streamed_frame
 from tests.ui.browser_page import Page, service_status, wait_for
 from tests.ui.commissioning_flow import ctl, sim_note_after
 
 KNOCK_DEG = 0.3
-
-
-def frame(host: str) -> np.ndarray:
-    """The camera's frame as it streams now, lossless."""
-    with urllib.request.urlopen(f"http://{host}:8080/frame.png", timeout=60) as r:
-        return np.asarray(cv2.imdecode(np.frombuffer(r.read(), np.uint8), cv2.IMREAD_COLOR))
 
 
 def in_simulator_tab(
@@ -55,11 +49,11 @@ def in_simulator_tab(
     out["caught_s"] = time.monotonic() - knocked_at
     out["drift"] = service_status(port)["drift"]
 
-    out["knocked"] = frame(vc.host)
+    out["knocked"] = streamed_frame(vc.host)
     page.type("sim-roll", "5")
     sim_note_after(page, "sim-mount", "camera mounted at roll 5")
     wait_for("the truth shown", lambda: "roll 5.000" in page.text("sim-truth"), 10)
-    out["streamed"] = frame(vc.host)
+    out["streamed"] = streamed_frame(vc.host)
     vc.control("render", timeout_s=120.0, folder=str(tmp / "renders"), name="rolled")
     out["rendered"] = cv2.imread(str(tmp / "renders" / "rolled.png"))
     out["rendered_truth"] = json.loads((tmp / "renders" / "rolled.truth.json").read_text())
