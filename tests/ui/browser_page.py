@@ -75,11 +75,16 @@ class Page:
             box.send_keys(value)
 
     def visible(self, name: str) -> bool:
-        from selenium.common.exceptions import NoSuchElementException
+        """Shown now; False when absent, or gone between finding and asking (a tab's panel
+        taken out of the page)."""
+        from selenium.common.exceptions import (
+            NoSuchElementException,
+            StaleElementReferenceException,
+        )
 
         try:
             return bool(self.el(name).is_displayed())
-        except NoSuchElementException:
+        except (NoSuchElementException, StaleElementReferenceException):
             return False
 
     def pick_rows(self) -> list[list[str]]:

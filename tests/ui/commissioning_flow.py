@@ -72,17 +72,28 @@ def _step_passed(page: Page, note: str, timeout_s: float = STEP_TIMEOUT_S) -> st
     return str(text)
 
 
+def show_tab(page: Page, tab: str, gone: str) -> None:
+    """Open a tab of the page, and wait until the one before has gone (an element of it,
+    `gone`, no longer shown): a click during the panels' transition can miss its button."""
+    page.click(tab)
+    wait_for(f"{gone} to go", lambda: not page.visible(gone), 10, 0.05)
+
+
 def sim_note_after(page: Page, button: str, starts: str, timeout_s: float = 60.0) -> str:
-    """Click a button of the Simulator tab; the panel's note once it says `starts`."""
+    """Click a button of the Simulator tab; the panel's note once it says `starts` (on a
+    time-out, the note as it stands)."""
     page.click(button)
-    return str(
-        wait_for(
-            f"the note after {button}",
-            lambda: (t := page.text("sim-note")).startswith(starts) and t,
-            timeout_s,
-            0.1,
+    try:
+        return str(
+            wait_for(
+                f"the note after {button}",
+                lambda: (t := page.text("sim-note")).startswith(starts) and t,
+                timeout_s,
+                0.1,
+            )
         )
-    )
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}: the note says {page.text('sim-note')!r}") from None
 
 
 def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, float]:
@@ -97,9 +108,9 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
     page.click("tab-commission")
     page.type("square", f"{HELD_SQUARE_MM:g}")
     for k in range(views):
-        page.click("tab-simulator")  # the board walked on to its next pose
+        show_tab(page, "tab-simulator", "add-view")  # the board walked on to its next pose
         sim_note_after(page, "sim-board-next", f"board held at pose {k}")
-        page.click("tab-commission")
+        show_tab(page, "tab-commission", "sim-board-next")
         page.click("add-view")
         name = f"view_{k + 1:03d}"
         wait_for(name, lambda name=name: name in page.text("views-note"), 30, 0.1)
@@ -122,9 +133,9 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
         )
         time.sleep(1.0)  # the pictures fade in
         shot("commission_intrinsics", "intr-note")
-    page.click("tab-simulator")
+    show_tab(page, "tab-simulator", "add-view")
     sim_note_after(page, "sim-board-down", "board put down")
-    page.click("tab-commission")
+    show_tab(page, "tab-commission", "sim-board-down")
     page.click("intr-next")
     laps.restart()
 
