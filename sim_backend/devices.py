@@ -49,6 +49,10 @@ __all__ = ["SimArm", "SimCamera", "SimCell", "SimGripper", "SimLaserSwitch", "op
 DEFAULT_SIM_GRAB_TIMEOUT_S = 60.0
 
 
+CLEAN_FRAMES_KEPT = 4
+"""Clean frames kept per camera: laser on and off, at two brightnesses (an exposure change)."""
+
+
 class SimCamera(_Connectable, Camera):
     """The fisheye on the boom: each grab shows the world as it is (laser as switched).
 
@@ -79,7 +83,9 @@ class SimCamera(_Connectable, Camera):
         if self._format not in PIXEL_FORMATS:
             raise _sim_device_error("[camera].pixel_format", f"one of {PIXEL_FORMATS}")
         self._frames: ExposedFrames | None = None
-        self._clean: tuple[Any, np.ndarray, dict | None] | None = None
+        # The last clean frames by what they depend on (state, laser, brightness), so that a
+        # measurement's alternating laser-on and laser-off grabs of one state render twice.
+        self._clean: dict[Any, tuple[np.ndarray, dict | None]] = {}
         self._draws = 0
         self._exposure_ms = float(exposure_ms)
         self._gain = float(gain)
@@ -184,16 +190,16 @@ class SimCamera(_Connectable, Camera):
         with self.cell.lock:
             # A clean frame depends only on the state: the same state renders the same bytes.
             key = (world_state_key(self.cell.world), self.cell.world.laser_on, brightness)
-            if (
-                self._clean is not None
-                and self._clean[0] == key
-                and (self._clean[2] or not with_truth)
-            ):
-                return self._clean[1], self._clean[2]
+            kept = self._clean.get(key)
+            if kept is not None and (kept[1] or not with_truth):
+                return kept
             image, truth = self.cell.render(
                 self.cell.seed + sequence, self.degraded, brightness, with_truth=with_truth
             )
-            self._clean = (key, image, truth)
+            if len(self._clean) >= CLEAN_FRAMES_KEPT:
+                self._clean.pop(next(iter(self._clean)))  # the oldest
+            image.setflags(write=False)  # one array serves every grab of this key
+            self._clean[key] = (image, truth)
             return image, truth
 
     def grab(self, timeout_s: float | None = None, with_truth: bool = False) -> Frame:

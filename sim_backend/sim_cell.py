@@ -184,11 +184,12 @@ class SimCell:
                 raise ValueError(f"cube: ({x_mm:g}, {y_mm:g}) is on cube {i} ({spec.color.name})")
 
     def place_cube(self, index: object, x_mm: float, y_mm: float, yaw_deg: float) -> None:
-        """Put cube `index` down at (x, y) of S on the floor, turned by `yaw_deg`."""
+        """Put cube `index` down at (x, y) of S on what is there (the floor, or the floor
+        board), turned by `yaw_deg`."""
         with self.lock:
             i, spec, body = self._cube(index)
             self._cube_spot(x_mm, y_mm, spec.size_mm, skip=i)
-            z = self.world.floor_z + spec.size_mm / 2.0
+            z = self.world.support_z(x_mm, y_mm, spec.size_mm, yaw_deg) + spec.size_mm / 2.0
             quat = Rotation.from_matrix(rot_z(np.radians(yaw_deg))).as_quat()
             p.resetBasePositionAndOrientation(
                 body, [x_mm * 1e-3, y_mm * 1e-3, z * 1e-3], quat, physicsClientId=self.world.client

@@ -464,9 +464,10 @@ class SimWorld:
         rect = self._board_rect(b.name, np.asarray(b.center_mm, float), n, r, pattern)
         self._add_board(b.name, rect, pattern, b.thickness_mm, on_floor=False)
 
-    def _build_cube(self, i: int, c: CubeSpec) -> None:
+    def _build_cube(self, i: int, c: CubeSpec, base_z: float | None = None) -> None:
         half = np.full(3, c.size_mm / 2.0)
-        centre = np.array([c.position_mm[0], c.position_mm[1], self.floor_z + c.size_mm / 2.0])
+        z = self.floor_z if base_z is None else base_z
+        centre = np.array([c.position_mm[0], c.position_mm[1], z + c.size_mm / 2.0])
         body = self._box(
             f"cube_{i}_{c.color.name}",
             centre,
@@ -479,9 +480,28 @@ class SimWorld:
         self.info.cubes.append((c, body))
 
     def add_cube(self, c: CubeSpec) -> int:
-        """A cube put on the floor after the world was built; its index."""
-        self._build_cube(len(self.info.cubes), c)
+        """A cube put down after the world was built, on what is under it; its index."""
+        x, y = c.position_mm
+        self._build_cube(len(self.info.cubes), c, self.support_z(x, y, c.size_mm, c.yaw_deg))
         return len(self.info.cubes) - 1
+
+    def support_z(self, x_mm: float, y_mm: float, size_mm: float, yaw_deg: float) -> float:
+        """The height (S, mm) a cube of `size_mm` put down at (x, y) turned by `yaw_deg` rests
+        at: the highest static surface under its footprint (its corners and centre), the floor
+        or a board lying on it. A cube set into a board would be pushed out by the contact
+        solver over the next steps, so what it reports would depend on when it is read."""
+        corners = 0.5 * size_mm * np.array([[0, 0], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
+        c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+        xy = corners @ np.array([[c, s], [-s, c]]) + [x_mm, y_mm]
+        top, bottom = self.floor_z + size_mm, self.floor_z - 1.0
+        hits = p.rayTestBatch(
+            [(px * 1e-3, py * 1e-3, top * 1e-3) for px, py in xy],
+            [(px * 1e-3, py * 1e-3, bottom * 1e-3) for px, py in xy],
+            physicsClientId=self.client,
+        )
+        static = self.static_bodies() | {self.floor_body}
+        heights = [h[3][2] * 1e3 for h in hits if h[0] in static]
+        return max([self.floor_z, *heights])
 
     def remove_cube(self, index: int) -> None:
         """Take cube `index` out of the world (the later cubes' indices move down by one)."""

@@ -59,11 +59,23 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+def _group(item: pytest.Item) -> str:
+    """The unit a worker takes whole: the module's `xdist_group` (modules that share what a
+    session fixture starts, such as one commissioned virtual cell), else the module."""
+    mark = item.get_closest_marker("xdist_group")
+    if mark is not None:
+        return str(mark.args[0] if mark.args else mark.kwargs.get("name", "default"))
+    return item.nodeid.split("::")[0]
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """`--quick` leaves the slow modules out; otherwise the modules run longest first (by
-    timings.json; an unrecorded module first), each module's tests in their own
-    order. With `--dist loadfile --no-loadscope-reorder` the workers take the modules in this
-    order, so the longest ones do not start last and leave the other cores idle at the end."""
+    """`--quick` leaves the slow modules out; otherwise the groups (`_group`) run longest first
+    (by timings.json, summed over a group's modules; an unrecorded module first), each group's
+    tests in their own order. With `--dist loadgroup --no-loadscope-reorder` a worker takes
+    each group whole, in this order, so the longest ones do not start last and leave the other
+    cores idle at the end, and the modules of a group share their session fixtures. Every
+    module without a group of its own is its own group (`xdist_group` added here)."""
     import json
 
     timings = json.loads(TIMINGS.read_text(encoding="utf-8")) if TIMINGS.is_file() else {}
@@ -71,8 +83,17 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     def seconds(item: pytest.Item, unrecorded: float) -> float:
         return float(timings.get(item.nodeid.split("::")[0], unrecorded))
 
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(_group(item)))
     if not config.getoption("--quick"):
-        items.sort(key=lambda i: -seconds(i, float("inf")))  # stable: modules stay together
+        modules: dict[str, set[str]] = {}
+        for item in items:
+            modules.setdefault(_group(item), set()).add(item.nodeid.split("::")[0])
+        group_s = {
+            g: sum(float(timings.get(m, float("inf"))) for m in ms) for g, ms in modules.items()
+        }
+        items.sort(key=lambda i: -group_s[_group(i)])  # stable: groups stay together
         return
     slow = [i for i in items if seconds(i, 0.0) > QUICK_MODULE_S]
     if slow:

@@ -32,6 +32,8 @@ from sim_backend.virtual_cell.servers import Listener
 log = logging.getLogger("virtual_cell.camera")
 
 CAMERA_PORT = 8080
+CLEAN_KEPT = 4
+"""Clean pictures the renderer keeps (laser on and off of a state, and of the state before)."""
 
 
 def world_state(cell: Any) -> dict[str, Any]:
@@ -130,6 +132,9 @@ def _render_worker(
     sensor = ExposedFrames(world, cell.model, seed, cell.lighting) if degraded else None
     # The held board's pictures and truths, by pose (each rendered once).
     held: dict[int, tuple[np.ndarray, dict[str, Any]]] = {}
+    # The last clean pictures (state, image): a measurement's laser-on and laser-off
+    # frames alternate between two states, each rendered once.
+    clean: list[tuple[dict[str, Any], np.ndarray]] = []
     conn.send(("ready", None, None))
     n = 0
     while True:
@@ -172,7 +177,16 @@ def _render_worker(
             if state.get("truth"):
                 _, truth = cell.render(seed + n, False, with_truth=True)
         else:
-            image, truth = cell.render(seed + n, False, with_truth=bool(state.get("truth")))
+            # A truth asked for is the renderer's own of this very state: never from the cache.
+            want_truth = bool(state.get("truth"))
+            kept = (
+                None if want_truth else next((k for k in clean if same_picture(k[0], state)), None)
+            )
+            if kept is None:
+                image, truth = cell.render(seed + n, False, with_truth=want_truth)
+                clean[:] = [*clean[-(CLEAN_KEPT - 1) :], (state, image)]
+            else:
+                image, truth = kept[1], None
         conn.send(("image", image, truth))
 
 

@@ -82,14 +82,14 @@ def test_the_laser_turned_and_moved_is_rendered_there(vc, tmp_path: Path) -> Non
 def test_cubes_moved_added_and_taken_away(vc, tmp_path: Path) -> None:
     start = vc.truth()["cubes"]
     moved = vc.control(
-        "cube", timeout_s=60.0, action="move", index=0, x_mm=0.0, y_mm=1000.0, yaw_deg=30.0
+        "cube", timeout_s=60.0, action="move", index=0, x_mm=0.0, y_mm=560.0, yaw_deg=30.0
     )
     added = vc.control("cube", timeout_s=60.0, action="add", color="blue", x_mm=-650.0, y_mm=900.0)
     _, truth = rendered(vc, tmp_path, "cubes")
     removed = vc.control("cube", timeout_s=60.0, action="remove", index=added["index"])
     refusals = []
     for bad, field in (
-        ({"action": "move", "index": 1, "x_mm": 0.0, "y_mm": 1000.0}, "on cube 0"),
+        ({"action": "move", "index": 1, "x_mm": 0.0, "y_mm": 560.0}, "on cube 0"),
         ({"action": "move", "index": 1, "x_mm": 5000.0, "y_mm": 0.0}, "work area"),
         ({"action": "add", "color": "mauve", "x_mm": 0.0, "y_mm": 0.0}, "unknown colour"),
         ({"action": "remove", "index": 9}, "index must be"),
@@ -108,17 +108,19 @@ def test_cubes_moved_added_and_taken_away(vc, tmp_path: Path) -> None:
         yaw_deg=15.0,
     )
     assert moved["shown"] and added["shown"] and removed["shown"]
-    # Put down on the floor where asked: the centre half a cube above it (physics may settle
-    # it by a fraction of a millimetre).
+    # Put down on the floor where asked: the centre half a cube above it. A cube resting on
+    # the floor sinks into it by the contact's slop, which pybullet's solver keeps under
+    # 0.07 mm (measured over 600 steps after a put-down at three spots); so 0.2 mm.
     floor_z = truth["floor_z_mm"]
     c0 = np.asarray(moved["cubes"][0]["center_S_mm"])
-    assert np.allclose(c0, [0.0, 1000.0, floor_z + 50.0], atol=0.5), c0
+    assert np.allclose(c0[:2], [0.0, 560.0], atol=0.05), c0
+    assert abs(c0[2] - (floor_z + 50.0)) < 0.2, c0
     assert len(added["cubes"]) == len(start) + 1 and added["cubes"][-1]["color"] == "blue"
     # The renderer's world has the same cubes: the moved one, and the one added.
     new = truth["cubes"][-1]
     assert len(truth["cubes"]) == len(start) + 1 and new["colour"] == "blue"
-    assert np.allclose(new["center_S_mm"][:2], [-650.0, 900.0], atol=0.5), new
-    assert np.allclose(truth["cubes"][0]["center_S_mm"], c0, atol=0.5)
+    assert np.allclose(new["center_S_mm"][:2], [-650.0, 900.0], atol=0.05), new
+    assert np.allclose(truth["cubes"][0]["center_S_mm"], c0, atol=0.2)
     assert abs(truth["cubes"][0]["yaw_deg"] - 30.0) < 0.2
     assert len(removed["cubes"]) == len(start)
 

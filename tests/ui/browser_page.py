@@ -3,6 +3,7 @@ their data-test names, waits with a deadline, and a page opened (and signed in).
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -13,7 +14,10 @@ from omnisort_hw.service.client import Client
 from omnisort_hw.service.launch import ServiceProcess, start_service
 from tests.ui.ui_procs import TOKEN, chromium, quit_chromium, start_ui, stop_process
 
-IMAGES = Path(__file__).resolve().parents[2] / "docs" / "images"
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
+IMAGES = Path(os.environ.get("OMNISORT_SCREENSHOTS", PROJECT_ROOT / "build" / "screenshots"))
+"""Where the screenshots go: build/screenshots, so a test run leaves the tracked tree as it
+was; `make screenshots` points this at docs/images to renew the documentation's pictures."""
 
 
 def wait_for(

@@ -1,8 +1,9 @@
 """The Simulator tab's checks on a commissioned virtual cell whose drift watchdog checks every
 `period_s` (run by the commissioning's browser test after its sort):
 
-- a knock from the page is caught by the watchdog within one period: the page's drift banner,
-  motion refused, the angle measured near the knock;
+- a knock from the page is caught by the watchdog within one period (by the first check that
+  takes its frame after the knock): the page's drift banner, motion refused, the angle
+  measured near the knock;
 - the camera mounted at 5 deg of roll from the page: the renderer's own truth says 5 deg and
   the streamed frame is its picture;
 - a cube, the target and the tool (to an XYZ of the base, after the confirmation) moved from
@@ -31,21 +32,31 @@ def in_simulator_tab(
     vc: VirtualCellProcess, page: Page, port: int, period_s: float, tmp: Path
 ) -> dict[str, Any]:
     """The checks' measurements (asserted by `check`)."""
-    t0 = time.monotonic()
     ctl(port, "check")
-    out: dict[str, Any] = {"period_s": period_s, "check_s": time.monotonic() - t0}
+    out: dict[str, Any] = {"period_s": period_s}
     page.click("tab-simulator")
     wait_for("the truth", lambda: page.text("sim-truth").startswith("camera:"), 20)
+
+    # Every check that ends from here on, in order (each periodic check's `last` is new: they
+    # are a period apart, so each `checked_at` differs), read while the watchdog runs.
+    before = service_status(port)["drift"]["last"]
+    checks: list[dict[str, Any]] = []
+
+    def note_check() -> None:
+        last = service_status(port)["drift"]["last"]
+        if last is not None and last != before and (not checks or last != checks[-1]):
+            checks.append(last)
+
+    def banner() -> str | bool:
+        note_check()
+        return (t := page.text("drift")).startswith("Calibration drift") and t
 
     page.type("sim-knock-angle", f"{KNOCK_DEG}")
     sim_note_after(page, "sim-knock", "camera knocked")
     knocked_at = time.monotonic()
-    out["alarm"] = wait_for(
-        "the drift banner",
-        lambda: (t := page.text("drift")).startswith("Calibration drift") and t,
-        period_s + out["check_s"] + 30.0,
-        0.1,
-    )
+    out["alarm"] = wait_for("the drift banner", banner, 3 * period_s + 120.0, 0.1)
+    note_check()
+    out["checks"] = checks
     out["caught_s"] = time.monotonic() - knocked_at
     out["drift"] = service_status(port)["drift"]
 
@@ -78,10 +89,12 @@ def in_simulator_tab(
 
 def check(out: dict[str, Any]) -> None:
     """The measurements against what the page asked."""
-    # Within one period: the watchdog's next check (at most period_s away, polled each
-    # second) and the check itself (timed through the CLI), plus the page's status reading.
-    bound = out["period_s"] + 1.0 + out["check_s"] + 1.0
-    assert out["caught_s"] < bound, (out["caught_s"], out["check_s"])
+    # Within one period: the first check that takes its frame after the knock finds it. At
+    # most one check ends after the knock without finding it, the one under way when the
+    # camera was knocked (its frame taken before), so at most two checks in all.
+    checks = out["checks"]
+    assert checks and checks[-1]["drift"], checks
+    assert len(checks) <= 2, [(c["checked_at"], c["drift"]) for c in checks]
     # The angle measured is the knock's: the image check resolves a few hundredths of a
     # degree; 0.1 deg bounds it, as the recovery's test does.
     drift = out["drift"]

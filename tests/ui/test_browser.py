@@ -5,7 +5,7 @@ one signs in; an out-of-range value is refused before anything is sent; a sort s
 its confirmation and its per-pick log fills; Stop ends it mid-sort and the service's status
 confirms the arm stopped; a resumed sort puts every remaining cube in its bin.
 
-The screenshots of docs/images/ui_*.png are written here."""
+The screenshots of docs/images/ui_*.png are written here (`make screenshots`)."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ tab. The calibration is checked against the virtual cell's truth and every cube 
 its bin; the 3D tab shows the commissioned cell. Then the Simulator tab's checks
 (`simulator_flow`: a knock caught by the drift watchdog within its period, which this cell
 file sets, the camera mounted at 5 deg, a cube, the target and the tool moved), and going
-back to a kept calibration. Each step's screenshot goes to docs/images."""
+back to a kept calibration. Each step's screenshot goes to docs/images (`make screenshots`)."""
 
 from __future__ import annotations
 
