@@ -24,7 +24,7 @@ demo: $(STAMP)
 # first by tests/timings.json, so no long one starts last while the other cores idle). The
 # 15 slowest tests close the run, so every run shows where the time goes.
 test: lint browser
-	$(BIN)/python -m pytest -q -ra -n auto --dist loadgroup --no-loadscope-reorder --durations=15
+	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder --durations=15
 
 # The operator interface's browser tests drive Debian's Chromium through its chromedriver
 # (tests/ui/ui_procs.py): installed here when missing (as root, or through sudo).
@@ -37,16 +37,16 @@ browser:
 # The edit loop: lint, types and the quick test modules (under 5 s each in tests/timings.json),
 # stopping at the first failure.
 check: lint
-	$(BIN)/python -m pytest -q -x -n auto --dist loadgroup --no-loadscope-reorder --quick
+	$(BIN)/python -m pytest -q -x -n auto --dist loadfile --no-loadscope-reorder --quick
 
 # Every test, recording each module's time in tests/timings.json (what `check` selects by).
 timings: lint browser
-	$(BIN)/python -m pytest -q -ra -n auto --dist loadgroup --no-loadscope-reorder --record-timings tests/timings.json
+	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder --record-timings tests/timings.json
 
 # The documentation's screenshots (docs/images) renewed by the browser tests, which otherwise
 # write them to build/screenshots.
 screenshots: lint browser
-	OMNISORT_SCREENSHOTS=docs/images $(BIN)/python -m pytest -q -n auto --dist loadgroup tests/ui
+	OMNISORT_SCREENSHOTS=docs/images $(BIN)/python -m pytest -q -n auto --dist loadfile tests/ui
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks --shared $(SHARED)

@@ -59,23 +59,37 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
-def _group(item: pytest.Item) -> str:
-    """The unit a worker takes whole: the module's `xdist_group` (modules that share what a
-    session fixture starts, such as one commissioned virtual cell), else the module."""
-    mark = item.get_closest_marker("xdist_group")
-    if mark is not None:
-        return str(mark.args[0] if mark.args else mark.kwargs.get("name", "default"))
-    return item.nodeid.split("::")[0]
+SHARED_GROUPS = ("tests/ui/commissioned/",)
+"""Test packages whose modules share what a session fixture starts (one commissioned virtual
+cell): a worker takes each whole, its modules in their order, so it is built once."""
 
 
-@pytest.hookimpl(tryfirst=True)
+def group_of(nodeid: str) -> str:
+    """The unit a worker takes whole: a shared package (`SHARED_GROUPS`), else the module."""
+    module = nodeid.split("::")[0]
+    return next((g for g in SHARED_GROUPS if module.startswith(g)), module)
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """The workers take whole groups (`group_of`) in the collection's order (longest first,
+    below): xdist's load-scope scheduling, split by group instead of by module. (Its own
+    `xdist_group` marks do not reach the scheduler under pytest 9.2, whose items no longer
+    take the `@group` suffix xdist writes into their node ids.)"""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(nodeid)
+
+    return GroupScheduling(config, log)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """`--quick` leaves the slow modules out; otherwise the groups (`_group`) run longest first
-    (by timings.json, summed over a group's modules; an unrecorded module first), each group's
-    tests in their own order. With `--dist loadgroup --no-loadscope-reorder` a worker takes
-    each group whole, in this order, so the longest ones do not start last and leave the other
-    cores idle at the end, and the modules of a group share their session fixtures. Every
-    module without a group of its own is its own group (`xdist_group` added here)."""
+    """`--quick` leaves the slow modules out; otherwise the groups (`group_of`) run longest
+    first (by timings.json, summed over a group's modules; an unrecorded module first), each
+    group's tests in their own order. With `--no-loadscope-reorder` the workers take the
+    groups in this order, so the longest ones do not start last and leave the other cores
+    idle at the end."""
     import json
 
     timings = json.loads(TIMINGS.read_text(encoding="utf-8")) if TIMINGS.is_file() else {}
@@ -83,17 +97,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     def seconds(item: pytest.Item, unrecorded: float) -> float:
         return float(timings.get(item.nodeid.split("::")[0], unrecorded))
 
-    for item in items:
-        if item.get_closest_marker("xdist_group") is None:
-            item.add_marker(pytest.mark.xdist_group(_group(item)))
     if not config.getoption("--quick"):
         modules: dict[str, set[str]] = {}
         for item in items:
-            modules.setdefault(_group(item), set()).add(item.nodeid.split("::")[0])
+            modules.setdefault(group_of(item.nodeid), set()).add(item.nodeid.split("::")[0])
         group_s = {
             g: sum(float(timings.get(m, float("inf"))) for m in ms) for g, ms in modules.items()
         }
-        items.sort(key=lambda i: -group_s[_group(i)])  # stable: groups stay together
+        items.sort(key=lambda i: -group_s[group_of(i.nodeid)])  # stable: groups stay together
         return
     slow = [i for i in items if seconds(i, 0.0) > QUICK_MODULE_S]
     if slow:

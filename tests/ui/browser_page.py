@@ -20,6 +20,12 @@ IMAGES = Path(os.environ.get("OMNISORT_SCREENSHOTS", PROJECT_ROOT / "build" / "s
 was; `make screenshots` points this at docs/images to renew the documentation's pictures."""
 
 
+UI_S = 60.0
+"""How long a page may take to show a state it is bound to reach (a dialog, a step's content, a
+note): a guard against a hang, not a bound on latency, which a loaded 2-core runner stretches
+to many seconds (Chromium, the interface's process and the service share the cores)."""
+
+
 def wait_for(
     what: str, predicate: Callable[[], Any], timeout_s: float, every_s: float = 0.1
 ) -> Any:
@@ -57,7 +63,7 @@ class Page:
         except (NoSuchElementException, StaleElementReferenceException):
             return ""
 
-    def click(self, name: str, timeout_s: float = 10.0) -> None:
+    def click(self, name: str, timeout_s: float = UI_S) -> None:
         """Click the element once it is shown (a step's content appears after its
         transition), scrolled to the window's middle first."""
         wait_for(f"{name} to be shown", lambda: self.visible(name), timeout_s, 0.1)
@@ -69,7 +75,7 @@ class Page:
     def type(self, name: str, value: str) -> None:
         from selenium.webdriver.common.keys import Keys
 
-        wait_for(f"{name} to be shown", lambda: self.visible(name), 10.0, 0.1)
+        wait_for(f"{name} to be shown", lambda: self.visible(name), UI_S, 0.1)
         box = self.el(name)  # Quasar puts the attribute on the <input> itself, or around it
         if box.tag_name != "input":
             box = self.el(name, "input")
@@ -104,7 +110,7 @@ class Page:
         return len(self.d.find_elements(By.CSS_SELECTOR, f"[data-test={name}] {inner}"))
 
     def confirm(self) -> None:
-        wait_for("the confirmation", lambda: self.visible("confirm"), 10)
+        wait_for("the confirmation", lambda: self.visible("confirm"), UI_S)
         self.click("confirm")
 
     def shot(self, name: str, at: str | None = None) -> None:
@@ -126,11 +132,11 @@ def open_cell_page(
     try:
         driver.get(url)
         page = Page(driver)
-        wait_for("the page", lambda: page.text("state") not in ("", "…"), 30)
+        wait_for("the page", lambda: page.text("state") not in ("", "…"), UI_S)
         if sign_in:
             page.type("token", TOKEN)
             page.click("sign-in")
-            wait_for("the sign-in", lambda: page.visible("start-sort"), 10)
+            wait_for("the sign-in", lambda: page.visible("start-sort"), UI_S)
     except BaseException:
         quit_chromium(driver)
         raise
@@ -148,7 +154,7 @@ def served_page(
         try:
             driver, page = open_cell_page(url, sign_in=sign_in)
             try:
-                wait_for("the idle cell", lambda: page.text("state") == "idle", 30)
+                wait_for("the idle cell", lambda: page.text("state") == "idle", UI_S)
                 yield svc, page
             finally:
                 quit_chromium(driver)

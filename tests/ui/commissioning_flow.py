@@ -20,7 +20,7 @@ from sim_backend.virtual_cell.cell import CONTROL_PORT
 from sim_backend.virtual_cell.cell_file import cell_file_text
 from sim_backend.virtual_cell.held_board import HELD_SQUARE_MM
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
-from tests.ui.browser_page import Page, wait_for
+from tests.ui.browser_page import UI_S, Page, wait_for
 from tests.ui.ui_procs import PROJECT_ROOT, TOKEN
 
 VIEWS = 10  # of the held board's poses: the demo's number of intrinsics views
@@ -76,7 +76,7 @@ def show_tab(page: Page, tab: str, gone: str) -> None:
     """Open a tab of the page, and wait until the one before has gone (an element of it,
     `gone`, no longer shown): a click during the panels' transition can miss its button."""
     page.click(tab)
-    wait_for(f"{gone} to go", lambda: not page.visible(gone), 10, 0.05)
+    wait_for(f"{gone} to go", lambda: not page.visible(gone), UI_S, 0.05)
 
 
 def sim_note_after(page: Page, button: str, starts: str, timeout_s: float = 60.0) -> str:
@@ -113,9 +113,9 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
         show_tab(page, "tab-commission", "sim-board-next")
         page.click("add-view")
         name = f"view_{k + 1:03d}"
-        wait_for(name, lambda name=name: name in page.text("views-note"), 30, 0.1)
+        wait_for(name, lambda name=name: name in page.text("views-note"), UI_S, 0.1)
         if k == views // 2:
-            wait_for("the coverage", lambda: page.count("intr-detect-image", "path"), 10)
+            wait_for("the coverage", lambda: page.count("intr-detect-image", "path"), UI_S)
             shot("commission_views", "intr-detect-image")
     laps.lap("views")
     page.click("calibrate-intr")
@@ -129,7 +129,7 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
                 "return document.querySelector('[data-test=intr-uncertainty] img')"
                 "?.naturalWidth || 0"
             ),
-            20,
+            UI_S,
         )
         time.sleep(1.0)  # the pictures fade in
         shot("commission_intrinsics", "intr-note")
@@ -175,7 +175,7 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
     page.click("verify-locate")
     located = _step_passed(page, "verify-locate-note")
     assert "4 cubes located" in located, located
-    wait_for("the verdict", lambda: page.text("commissioned").startswith("Commissioned"), 5)
+    wait_for("the verdict", lambda: page.text("commissioned").startswith("Commissioned"), UI_S)
     laps.lap("verification")
     shot("commission_verified", "verify-map-note")
     return laps.total()

@@ -22,7 +22,7 @@ import numpy as np
 
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
 from tests.sim.virtual_cell_fixture import streamed_frame
-from tests.ui.browser_page import Page, service_status, wait_for
+from tests.ui.browser_page import UI_S, Page, service_status, wait_for
 from tests.ui.commissioning_flow import ctl, sim_note_after
 
 KNOCK_DEG = 0.3
@@ -35,7 +35,7 @@ def in_simulator_tab(
     ctl(port, "check")
     out: dict[str, Any] = {"period_s": period_s}
     page.click("tab-simulator")
-    wait_for("the truth", lambda: page.text("sim-truth").startswith("camera:"), 20)
+    wait_for("the truth", lambda: page.text("sim-truth").startswith("camera:"), UI_S)
 
     # Every check that ends from here on, in order (each periodic check's `last` is new: they
     # are a period apart, so each `checked_at` differs), read while the watchdog runs.
@@ -63,7 +63,7 @@ def in_simulator_tab(
     out["knocked"] = streamed_frame(vc.host)
     page.type("sim-roll", "5")
     sim_note_after(page, "sim-mount", "camera mounted at roll 5")
-    wait_for("the truth shown", lambda: "roll 5.000" in page.text("sim-truth"), 10)
+    wait_for("the truth shown", lambda: "roll 5.000" in page.text("sim-truth"), UI_S)
     out["streamed"] = streamed_frame(vc.host)
     vc.control("render", timeout_s=120.0, folder=str(tmp / "renders"), name="rolled")
     out["rendered"] = cv2.imread(str(tmp / "renders" / "rolled.png"))

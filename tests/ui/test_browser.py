@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw.service.launch import ServiceProcess
-from tests.ui.browser_page import Page, served_page, service_status, wait_for
+from tests.ui.browser_page import UI_S, Page, served_page, service_status, wait_for
 from tests.ui.ui_procs import TOKEN, sim_cell_file
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
@@ -39,23 +39,25 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     # A wrong token: refused by the service, the session stays read-only.
     page.type("token", "not-the-token")
     page.click("sign-in")
-    wait_for("the refusal", lambda: "wrong token" in page.text("message"), 10)
+    wait_for("the refusal", lambda: "wrong token" in page.text("message"), UI_S)
     assert "Read-only" in page.text("signed")
 
     page.type("token", TOKEN)
     page.click("sign-in")
-    wait_for("the sign-in", lambda: page.text("signed") == "Signed in as operator", 10)
-    wait_for("the sort form", lambda: page.visible("start-sort"), 10)
+    wait_for("the sign-in", lambda: page.text("signed") == "Signed in as operator", UI_S)
+    wait_for("the sort form", lambda: page.visible("start-sort"), UI_S)
 
     # The live view, with the laser points of a map and the cubes of a location drawn on it.
-    wait_for("a live picture", lambda: page.text("view-note").startswith("picture"), 30)
-    wait_for("the operator's view controls", lambda: page.visible("map"), 10)
+    wait_for("a live picture", lambda: page.text("view-note").startswith("picture"), UI_S)
+    wait_for("the operator's view controls", lambda: page.visible("map"), UI_S)
     page.click("map")
     wait_for("the map", lambda: "map done" in page.text("job-end"), 60)
     page.click("locate")
     wait_for("the location", lambda: "locate done" in page.text("job-end"), 60)
     legend = wait_for(
-        "the overlays", lambda: "cubes" in page.text("view-legend") and page.text("view-legend"), 10
+        "the overlays",
+        lambda: "cubes" in page.text("view-legend") and page.text("view-legend"),
+        UI_S,
     )
     dots = page.count("live-view", "svg circle")
     rings = page.count("live-view", "svg polygon")
@@ -70,7 +72,7 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     before = service_status(svc.port)["service"]
     page.type("sort-max_objects", "0")
     page.click("start-sort")
-    wait_for("the schema's refusal", lambda: "minimum of 1" in page.text("sort-problems"), 10)
+    wait_for("the schema's refusal", lambda: "minimum of 1" in page.text("sort-problems"), UI_S)
     assert not page.visible("confirm"), "an invalid sort was offered for confirmation"
     st = service_status(svc.port)
     assert st["last_run"]["job"] == "locate", "an invalid sort reached the service"
@@ -81,10 +83,10 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     page.type("sort-max_objects", "")
     page.click("start-sort")
     page.confirm()
-    wait_for("the sort to start", lambda: service_status(svc.port)["state"] == "sorting", 30)
+    wait_for("the sort to start", lambda: service_status(svc.port)["state"] == "sorting", UI_S)
     rows = wait_for("the first pick in the log", page.pick_rows, 120, 0.25)
     assert rows[0][3] == "sorted", rows
-    wait_for("the picks per minute", lambda: "picks/min" in page.text("picks-per-min"), 10)
+    wait_for("the picks per minute", lambda: "picks/min" in page.text("picks-per-min"), UI_S)
     page.shot("ui_cell")
 
     # Stop mid-sort: the service says stopped, no job, and the arm stands still.
@@ -92,7 +94,7 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     st = wait_for(
         "the stopped state",
         lambda: (s := service_status(svc.port))["state"] == "stopped" and s["job"] is None and s,
-        15,
+        UI_S,
     )
     # The devices' part of a status is a snapshot (its age in `status_age_s`): compare two
     # read after the stop, a second apart, each younger than the wait before it.
@@ -104,12 +106,12 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     before, after = first["devices"]["arm"]["joints_deg"], again["devices"]["arm"]["joints_deg"]
     assert max(abs(a - b) for a, b in zip(before, after, strict=True)) < 1e-6, (before, after)
     assert again["state"] == "stopped" and again["job"] is None
-    wait_for("the job's end", lambda: "stopped" in page.text("job-end"), 10)
+    wait_for("the job's end", lambda: "stopped" in page.text("job-end"), UI_S)
     first_run = st["last_run"]
     sorted_first = sum(1 for ev in first_run["progress"] if ev.get("status") == "sorted")
     located = next(ev["to_pick"] for ev in first_run["progress"] if "to_pick" in ev)
     assert 1 <= sorted_first < located, (sorted_first, located)
-    wait_for("the state on the page", lambda: page.text("state") == "stopped", 10)
+    wait_for("the state on the page", lambda: page.text("state") == "stopped", UI_S)
     page.shot("ui_stopped")
 
     # Resume: the remaining cubes, each into its bin.

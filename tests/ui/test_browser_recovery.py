@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw.service.launch import ServiceProcess
-from tests.ui.browser_page import Page, served_page, service_status, wait_for
+from tests.ui.browser_page import UI_S, Page, served_page, service_status, wait_for
 from tests.ui.ui_procs import (
     knock_calibration,
     sim_cell_file,
@@ -44,7 +44,7 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
         0.5,
     )
     assert "turned" in refused, refused
-    alarm = wait_for("the drift banner", lambda: page.visible("drift") and page.text("drift"), 10)
+    alarm = wait_for("the drift banner", lambda: page.visible("drift") and page.text("drift"), UI_S)
     angle = float(alarm.split("camera turned ")[1].split(" deg")[0])
     assert abs(angle - KNOCK_DEG) < 0.1, alarm  # the board's measure of the knock
     assert service_status(svc.port)["last_run"]["job"] != "sort" or not [
@@ -55,18 +55,18 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     # The simulated cell's laser is on from the start (the drift check leaves it so): off,
     # to see the page say why the target is not found.
     page.click("laser-off")
-    wait_for("the laser off", lambda: page.text("message") == "laser off", 10, 0.2)
+    wait_for("the laser off", lambda: page.text("message") == "laser off", UI_S, 0.2)
     page.click("recover")
-    wait_for("the recovery", lambda: page.visible("placed"), 10)
+    wait_for("the recovery", lambda: page.visible("placed"), UI_S)
     # The target's detection, drawn live: without the laser, why not and the markers seen;
     # with it, the whole target.
-    dark = wait_for("a detection", lambda: page.text("recovery-target-summary"), 30, 0.5)
+    dark = wait_for("a detection", lambda: page.text("recovery-target-summary"), UI_S, 0.5)
     assert "not found" in dark and "laser" in dark, dark
     page.click("recovery-laser")
     wait_for(
         "the target found",
         lambda: page.text("recovery-target-summary").startswith("the two-sided target found"),
-        30,
+        UI_S,
         0.5,
     )
     # Eight markers ringed, and the borders, floor lines and stripe as dots.
@@ -74,7 +74,7 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     assert page.count("recovery-target-image", "svg circle") > 200
     page.shot("ui_recovery_target", at="recovery")
     page.click("placed")
-    wait_for("the calibration step", lambda: page.visible("calibrate"), 10)
+    wait_for("the calibration step", lambda: page.visible("calibrate"), UI_S)
     page.click("calibrate")
     note = wait_for(
         "the calibration",
@@ -91,24 +91,24 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
         lambda: page.d.execute_script(
             "return document.querySelector('[data-test=calib-picture] img')?.naturalWidth || 0"
         ),
-        20,
+        UI_S,
     )
     assert shown >= 400, shown
     page.shot("ui_recalibration")
     page.click("accept-calib")
 
-    wait_for("the registration step", lambda: page.visible("register"), 10)
+    wait_for("the registration step", lambda: page.visible("register"), UI_S)
     page.click("register")
     wait_for("the registration", lambda: page.visible("accept-register"), 120, 0.5)
     assert page.text("register-note").startswith("PASS"), page.text("register-note")
     page.click("accept-register")
-    wait_for("the check step", lambda: page.visible("check"), 10)
+    wait_for("the check step", lambda: page.visible("check"), UI_S)
     page.click("check")
     wait_for("the check", lambda: page.visible("recovery-done"), 120, 0.5)
     assert page.text("check-note").startswith("no drift"), page.text("check-note")
     st = service_status(svc.port)
     assert not st["drift"]["motion_refused"] and st["motion_allowed"], st["drift"]
-    wait_for("the banner gone", lambda: not page.visible("drift"), 10)
+    wait_for("the banner gone", lambda: not page.visible("drift"), UI_S)
     page.click("recovery-done")
 
     page.click("start-sort")

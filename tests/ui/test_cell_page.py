@@ -19,6 +19,7 @@ from omnisort_hw.service.client import Client
 from omnisort_hw.service.launch import start_service
 from omnisort_hw.ui.app import root
 from omnisort_hw.ui.context import UiContext
+from tests.ui.browser_page import UI_S
 from tests.ui.ui_procs import TOKEN, free_port, sim_cell_file
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
@@ -86,24 +87,26 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
 
         async def scenario(user: Any, new_user: Callable[[], Any]) -> None:
             await user.open("/")
-            await until("the state", lambda: label(user, "state") == "idle", 10)
+            await until("the state", lambda: label(user, "state") == "idle", UI_S)
             await user.should_see("Read-only: sign in for operator actions")
             await user.should_not_see(marker="start-sort")
             await user.should_not_see(marker="laser-off")
             # The live picture needs no sign-in (as `status`); the map and locate buttons do.
             await until(
-                "a live picture", lambda: label(user, "view-note").startswith("picture"), 30
+                "a live picture", lambda: label(user, "view-note").startswith("picture"), UI_S
             )
             await user.should_not_see(marker="map")
 
             set_value(user, "token", "wrong")
             user.find(marker="sign-in").click()
-            await until("wrong token", lambda: "wrong token" in label(user, "message"), 10)
+            await until("wrong token", lambda: "wrong token" in label(user, "message"), UI_S)
             await user.should_not_see(marker="start-sort")
 
             set_value(user, "token", TOKEN)
             user.find(marker="sign-in").click()
-            await until("the sign-in", lambda: label(user, "signed") == "Signed in as operator", 10)
+            await until(
+                "the sign-in", lambda: label(user, "signed") == "Signed in as operator", UI_S
+            )
             await user.should_see(marker="start-sort")
 
             # Bad values: each refused by the schema, nothing sent.
@@ -111,7 +114,7 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
             for value, expected in ((0, "minimum of 1"), (2.5, "not of type 'integer'")):
                 set_value(user, "sort-max_objects", value)
                 user.find(marker="start-sort").click()
-                await until(expected, lambda e=expected: e in label(user, "sort-problems"), 5)
+                await until(expected, lambda e=expected: e in label(user, "sort-problems"), UI_S)
                 await user.should_not_see(marker="confirm")
             after = status(svc.port)
             assert after["last_run"] is None and after["service"]["errors"] == before["errors"]
@@ -119,16 +122,16 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
             # A second browser: its own session, read-only until it signs in itself.
             other = new_user()
             await other.open("/")
-            await until("the state", lambda: label(other, "state") == "idle", 10)
+            await until("the state", lambda: label(other, "state") == "idle", UI_S)
             await other.should_not_see(marker="start-sort")
 
             # The laser: switched by the operator, seen by both pages through the status.
             user.find(marker="laser-off").click()
-            await until("laser off", lambda: "laser off" in label(user, "message"), 10)
+            await until("laser off", lambda: "laser off" in label(user, "message"), UI_S)
             await until(
                 "the laser off on the other page",
                 lambda: any("laser" in r["v"] and r["v"].endswith("off") for r in _rows(other)),
-                10,
+                UI_S,
             )
 
             # A sort started here, then a second one asked from the other browser: refused.
@@ -136,20 +139,20 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
             user.find(marker="start-sort").click()
             await user.should_see(marker="confirm")
             user.find(marker="cancel").click()
-            await until("the cancel", lambda: "cancelled" in label(user, "message"), 5)
+            await until("the cancel", lambda: "cancelled" in label(user, "message"), UI_S)
             assert status(svc.port)["last_run"] is None
             user.find(marker="start-sort").click()
             await user.should_see(marker="confirm")
             user.find(marker="confirm").click()
-            await until("sorting", lambda: label(other, "state") == "sorting", 30)
+            await until("sorting", lambda: label(other, "state") == "sorting", UI_S)
             set_value(other, "token", TOKEN)
             other.find(marker="sign-in").click()
-            await until("the sign-in", lambda: "Signed in" in label(other, "signed"), 10)
+            await until("the sign-in", lambda: "Signed in" in label(other, "signed"), UI_S)
             other.find(marker="start-sort").click()
-            await until("busy", lambda: "still running" in label(other, "message"), 10)
+            await until("busy", lambda: "still running" in label(other, "message"), UI_S)
             await other.should_not_see(marker="confirm")
             await until("the sort's end", lambda: "sort done" in label(user, "job-end"), 120)
-            await until("the log", lambda: len(_rows(other, "pick-log")) == 1, 10)
+            await until("the log", lambda: len(_rows(other, "pick-log")) == 1, UI_S)
             st = status(svc.port)
             assert [ev["status"] for ev in st["last_run"]["progress"] if "cube" in ev] == ["sorted"]
             assert st["last_run"]["request_id"] == 1, "the refused sort reached the service"
@@ -172,10 +175,10 @@ def test_page_outlives_a_service_restart_mid_sort_and_a_service_that_is_down(
     async def scenario(user: Any, new_user: Callable[[], Any]) -> None:
         nonlocal svc
         await user.open("/")
-        await until("the state", lambda: label(user, "state") == "idle", 10)
+        await until("the state", lambda: label(user, "state") == "idle", UI_S)
         set_value(user, "token", TOKEN)
         user.find(marker="sign-in").click()
-        await until("the sign-in", lambda: "Signed in" in label(user, "signed"), 10)
+        await until("the sign-in", lambda: "Signed in" in label(user, "signed"), UI_S)
         user.find(marker="start-sort").click()
         await user.should_see(marker="confirm")
         user.find(marker="confirm").click()
@@ -183,9 +186,9 @@ def test_page_outlives_a_service_restart_mid_sort_and_a_service_that_is_down(
 
         # The service restarts (systemd's SIGTERM, then a new process) mid-sort.
         await asyncio.to_thread(svc.stop)
-        await until("unreachable", lambda: label(user, "state") == "unreachable", 10)
+        await until("unreachable", lambda: label(user, "state") == "unreachable", UI_S)
         await user.should_see(marker="unreachable")
-        ended = await until("the job's end", lambda: label(user, "job-end"), 10)
+        ended = await until("the job's end", lambda: label(user, "job-end"), UI_S)
         assert ended.startswith("sort: ") and "Traceback" not in ended, ended
         # While it is down: nothing can be sent, and the page says so.
         user.find(marker="stop").click()
@@ -195,7 +198,7 @@ def test_page_outlives_a_service_restart_mid_sort_and_a_service_that_is_down(
         await user.should_not_see(marker="confirm")
 
         svc = await asyncio.to_thread(start_service, config, tmp_path / "second", 120.0, None, port)
-        await until("the service back", lambda: label(user, "state") != "unreachable", 30)
+        await until("the service back", lambda: label(user, "state") != "unreachable", UI_S)
         await user.should_not_see(marker="unreachable")
         print(f"\nthe page after the restart mid-sort: {ended}")
         st = status(port)
@@ -218,13 +221,13 @@ def test_view_only_screen_offers_no_sign_in_but_stop(tmp_path: Path) -> None:
 
         async def scenario(user: Any, new_user: Callable[[], Any]) -> None:
             await user.open("/")
-            await until("the state", lambda: label(user, "state") == "idle", 10)
+            await until("the state", lambda: label(user, "state") == "idle", UI_S)
             await user.should_see(marker="view-only")
             for hidden in ("token", "sign-in", "start-sort", "laser-on", "map"):
                 await user.should_not_see(marker=hidden)
-            await until("a picture", lambda: label(user, "view-note").startswith("picture"), 30)
+            await until("a picture", lambda: label(user, "view-note").startswith("picture"), UI_S)
             user.find(marker="stop").click()
-            await until("stopped", lambda: label(user, "state") == "stopped", 10)
+            await until("stopped", lambda: label(user, "state") == "stopped", UI_S)
             assert status(svc.port)["state"] == "stopped"
 
         simulate(ctx, scenario)

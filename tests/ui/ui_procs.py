@@ -149,8 +149,8 @@ def chromium(width: int = 1400, height: int = 1000):  # -> selenium WebDriver
     ):
         opts.add_argument(arg)
     driver = webdriver.Chrome(options=opts, service=Service(CHROMEDRIVER))
-    driver.set_page_load_timeout(30)
-    driver.set_script_timeout(30)
+    driver.set_page_load_timeout(60)  # a hang guard (see browser_page.UI_S)
+    driver.set_script_timeout(60)
     driver._omnisort_profile = profile  # type: ignore[attr-defined]
     return driver
 
