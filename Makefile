@@ -20,11 +20,14 @@ demo: $(STAMP)
 	$(BIN)/omnisort demo --out build/demo
 
 # Every test on every core (pytest-xdist; a module's tests stay on one worker, and so do the
-# modules of one xdist_group, so their fixtures are built once; the groups go out longest
-# first by tests/timings.json, so no long one starts last while the other cores idle). The
-# 15 slowest tests close the run, so every run shows where the time goes.
+# modules of a shared group in tests/conftest.py, so their fixtures are built once; the groups
+# go out longest first by tests/timings.json, so no long one starts last while the other cores
+# idle). One worker more than the 2 cores of a cell PC or a CI runner: about a fifth of the
+# suite waits on real time (the arm's motion paced to the clock, the watchdog's period, a
+# browser), which the third fills. The 15 slowest tests close the run.
+TEST_WORKERS ?= 3
 test: lint browser
-	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder --durations=15
+	$(BIN)/python -m pytest -q -ra -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
 # The operator interface's browser tests drive Debian's Chromium through its chromedriver
 # (tests/ui/ui_procs.py): installed here when missing (as root, or through sudo).
@@ -41,7 +44,7 @@ check: lint
 
 # Every test, recording each module's time in tests/timings.json (what `check` selects by).
 timings: lint browser
-	$(BIN)/python -m pytest -q -ra -n auto --dist loadfile --no-loadscope-reorder --record-timings tests/timings.json
+	$(BIN)/python -m pytest -q -ra -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --record-timings tests/timings.json
 
 # The documentation's screenshots (docs/images) renewed by the browser tests, which otherwise
 # write them to build/screenshots.

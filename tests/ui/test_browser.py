@@ -10,8 +10,9 @@ The screenshots of docs/images/ui_*.png are written here (`make screenshots`).""
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -97,12 +98,19 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
         UI_S,
     )
     # The devices' part of a status is a snapshot (its age in `status_age_s`): compare two
-    # read after the stop, a second apart, each younger than the wait before it.
-    time.sleep(0.5)
-    first = service_status(svc.port)
-    time.sleep(1.0)
-    again = service_status(svc.port)
-    assert max(first.get("status_age_s", 0), again.get("status_age_s", 0)) < 0.5, (first, again)
+    # taken after the stop, at least a second apart (each read until its snapshot is).
+    stopped_at = time.monotonic()
+
+    def taken_after(t0: float) -> Callable[[], dict[str, Any] | None]:
+        def read() -> dict[str, Any] | None:
+            asked = time.monotonic()
+            s = service_status(svc.port)
+            return s if s.get("status_age_s", 0.0) < asked - t0 else None
+
+        return read
+
+    first = wait_for("a snapshot taken after the stop", taken_after(stopped_at), UI_S)
+    again = wait_for("a snapshot a second later", taken_after(time.monotonic() + 1.0), UI_S)
     before, after = first["devices"]["arm"]["joints_deg"], again["devices"]["arm"]["joints_deg"]
     assert max(abs(a - b) for a, b in zip(before, after, strict=True)) < 1e-6, (before, after)
     assert again["state"] == "stopped" and again["job"] is None
