@@ -22,10 +22,10 @@ demo: $(STAMP)
 # Every test on every core (pytest-xdist; a module's tests stay on one worker, and so do the
 # modules of a shared group in tests/conftest.py, so their fixtures are built once; the groups
 # go out longest first by tests/timings.json, so no long one starts last while the other cores
-# idle). One worker more than the 2 cores of a cell PC or a CI runner: about a fifth of the
-# suite waits on real time (the arm's motion paced to the clock, the watchdog's period, a
-# browser), which the third fills. The 15 slowest tests close the run.
-TEST_WORKERS ?= 3
+# idle). One worker per core: a third on 2 cores (the cores were 79 % busy with 2) took the
+# fresh-clone run from 527 s to 505 s, too little for the load it adds to the real-time
+# processes (the virtual cell's controller, the browsers). The 15 slowest tests close the run.
+TEST_WORKERS ?= auto
 test: lint browser
 	$(BIN)/python -m pytest -q -ra -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=15
 
