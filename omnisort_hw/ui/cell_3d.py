@@ -26,6 +26,12 @@ CUBE_COLOURS = {
     "blue": "#1850d8",
     "yellow": "#e8cc18",
 }
+SHOWN_FPS = 20
+HIDDEN_FPS = 1
+"""Frames a second the scene draws while its tab is shown, and while hidden. Once its tab has
+been opened, three.js draws the scene for good (the tab panels keep it alive), in software
+where the PC has no GPU: at 20 fps a hidden scene kept a browser's renderer so busy, on a
+loaded 2-core PC, that it stopped answering for over 10 s."""
 LASER_COLOUR = "#ff2020"
 ARM_COLOUR = "#5a6470"
 
@@ -49,7 +55,13 @@ class Cell3D:
                 ui.label("The cell in 3D").classes("text-lg")
                 self.legend = tag(ui.label(""), "scene-legend").classes("text-sm")
             self.scene = tag(
-                ui.scene(width=800, height=540, grid=(8, 16), background_color="#f4f5f7"),
+                ui.scene(
+                    width=800,
+                    height=540,
+                    grid=(8, 16),
+                    background_color="#f4f5f7",
+                    fps=HIDDEN_FPS,
+                ),
                 "scene-3d",
             )
             ui.label(
@@ -61,6 +73,10 @@ class Cell3D:
         self.visible = visible
         if visible:
             self._ticks = 0
+        self.scene._props["fps"] = (
+            SHOWN_FPS if visible else HIDDEN_FPS
+        )  # a number, as it is declared
+        self.scene.update()
 
     async def refresh(self) -> None:
         """Every 4th tick while shown: the geometry, then a redraw if anything changed."""

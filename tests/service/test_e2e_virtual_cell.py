@@ -37,7 +37,9 @@ def test_serve_sorts_the_virtual_cell_with_the_real_drivers(
     """With a relative output folder, as `make demo` gives it: the client must send absolute
     paths (the protocol refuses relative ones)."""
     monkeypatch.chdir(tmp_path)
-    summary = run(Path("demo"), width=960, views=10)
+    # Six views of the demo's ten: the same calibration path, four renders and detections fewer
+    # (the door-agreement test calibrates from the same six and passes the verdict).
+    summary = run(Path("demo"), width=960, views=6)
     failed = [s for s in summary["steps"] if not s["ok"]]
     assert not failed, failed
     assert summary["exit_code"] == 0

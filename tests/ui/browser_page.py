@@ -66,7 +66,10 @@ class Page:
     def click(self, name: str, timeout_s: float = UI_S) -> None:
         """Click the element once it is shown (a step's content appears after its
         transition), scrolled to the window's middle first."""
-        wait_for(f"{name} to be shown", lambda: self.visible(name), timeout_s, 0.1)
+        try:
+            wait_for(f"{name} to be shown", lambda: self.visible(name), timeout_s, 0.1)
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}; the page: {self.state_for_a_failure(name)}") from None
         el = self.el(name)
         # In the middle of the window: not under the fixed header, wherever the page scrolled.
         self.d.execute_script("arguments[0].scrollIntoView({block: 'center'})", el)
@@ -110,8 +113,24 @@ class Page:
         return len(self.d.find_elements(By.CSS_SELECTOR, f"[data-test={name}] {inner}"))
 
     def confirm(self) -> None:
-        wait_for("the confirmation", lambda: self.visible("confirm"), UI_S)
+        try:
+            wait_for("the confirmation", lambda: self.visible("confirm"), UI_S)
+        except AssertionError as exc:
+            raise AssertionError(
+                f"{exc}; the page: {self.state_for_a_failure('confirm')}"
+            ) from None
         self.click("confirm")
+
+    def state_for_a_failure(self, name: str) -> str:
+        """What the page shows now, for a failure's message: its notes and tabs, and a
+        screenshot (`failed_NAME.png` beside the others)."""
+        notes = {n: self.text(n) for n in ("state", "message", "sim-note", "drift")}
+        tabs = [t for t in ("tab-cell", "tab-commission", "tab-simulator") if self.visible(t)]
+        try:
+            self.shot(f"failed_{name}")
+        except Exception as exc:  # the page may be gone: the message says so
+            notes["screenshot"] = repr(exc)
+        return f"notes {notes}, tabs shown {tabs}, url {self.d.current_url}"
 
     def shot(self, name: str, at: str | None = None) -> None:
         """The page from its top, or from the element named `at`."""

@@ -99,12 +99,20 @@ def sim_note_after(page: Page, button: str, starts: str, timeout_s: float = 60.0
 def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, float]:
     """Commission through the Commission tab, from the tab's opening to the verification's
     verdict; the wall time of each step (s). `shots`: a screenshot of each step."""
+    laps = Laps()
+    views_in_page(page, laps, shots, views)
+    rest_in_page(page, laps, shots)
+    return laps.total()
+
+
+def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS) -> None:
+    """The Commission tab's first step: the views of the board held from the Simulator tab,
+    the intrinsics calibrated from them, and on to the next step (laps: views, intrinsics)."""
 
     def shot(name: str, at: str) -> None:
         if shots:
             page.shot(name, at=at)
 
-    laps = Laps()
     page.click("tab-commission")
     page.type("square", f"{HELD_SQUARE_MM:g}")
     for k in range(views):
@@ -138,6 +146,16 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
     show_tab(page, "tab-commission", "sim-board-down")
     page.click("intr-next")
     laps.restart()
+
+
+def rest_in_page(page: Page, laps: Laps, shots: bool = True) -> None:
+    """The Commission tab's steps after the intrinsics: the camera and the laser plane from
+    the two-sided target, the robot registration, the verification's map and locate (laps:
+    extrinsics, registration, verification)."""
+
+    def shot(name: str, at: str) -> None:
+        if shots:
+            page.shot(name, at=at)
 
     page.click("commission-laser")
     wait_for(
@@ -178,7 +196,6 @@ def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, flo
     wait_for("the verdict", lambda: page.text("commissioned").startswith("Commissioned"), UI_S)
     laps.lap("verification")
     shot("commission_verified", "verify-map-note")
-    return laps.total()
 
 
 def ctl(port: int, *words: str, timeout_s: float = STEP_TIMEOUT_S) -> dict[str, Any]:

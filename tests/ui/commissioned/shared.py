@@ -11,9 +11,21 @@ from typing import Any
 from omnisort_hw.service.launch import ServiceProcess
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
 from tests.ui.browser_page import Page
+from tests.ui.commissioning_flow import Laps
 
 WIDTH = 960  # the demo's size: the target's markers and the floor board need it
 PERIOD_S = 10.0  # the drift watchdog's period in this cell file
+
+
+@dataclass
+class CellPage:
+    """The virtual cell, its service, the page, the folder, and the steps' wall times."""
+
+    vc: VirtualCellProcess
+    svc: ServiceProcess
+    page: Page
+    tmp: Path
+    laps: Laps
 
 
 @dataclass
