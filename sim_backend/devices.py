@@ -196,6 +196,7 @@ class SimCamera(_Connectable, Camera):
             image, truth = self.cell.render(
                 self.cell.seed + sequence, self.degraded, brightness, with_truth=with_truth
             )
+            self._clean.pop(key, None)  # a frame rendered again for its truth: kept anew
             if len(self._clean) >= CLEAN_FRAMES_KEPT:
                 self._clean.pop(next(iter(self._clean)))  # the oldest
             image.setflags(write=False)  # one array serves every grab of this key

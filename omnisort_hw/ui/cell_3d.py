@@ -73,9 +73,8 @@ class Cell3D:
         self.visible = visible
         if visible:
             self._ticks = 0
-        self.scene._props["fps"] = (
-            SHOWN_FPS if visible else HIDDEN_FPS
-        )  # a number, as it is declared
+        # Set as a number, as the prop is declared (`props("fps=1")` would send a string).
+        self.scene._props["fps"] = SHOWN_FPS if visible else HIDDEN_FPS
         self.scene.update()
 
     async def refresh(self) -> None:
