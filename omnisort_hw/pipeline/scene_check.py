@@ -24,6 +24,7 @@ leaves a fraction 1 - margin / (2 size) of the box covered.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -44,6 +45,14 @@ ARM_MARGIN_PX = 6
 CAPTURE_TIMEOUT_S = 60.0
 # Points per capsule axis (and its radius offsets) projected to find what the arm covers.
 ARM_SAMPLES = 12
+# The arm's joints are read this often while a check frame is taken: the frame shows the arm
+# at some instant of the grab, unknown to the camera, so every pose it went through counts.
+JOINT_SAMPLE_S = 0.005
+# Poses between two reads are filled in, joint-space linear, so that no joint turns more than
+# this between two poses: 1 deg moves a point 1 m from the base by 17 mm, under half the
+# thinnest capsule's diameter (the wrist's, 2 x 35 mm on a UR3e), so the poses' union covers
+# what the arm swept.
+MAX_STEP_DEG = 1.0
 # Slack (px) within which a colour pixel of a check image counts as seen in the first one, and
 # the smallest new blob looked at (the location's own smallest blob).
 SEEN_SLACK_PX = 4
@@ -136,6 +145,24 @@ def arm_pixels(
     p_S = p_B @ T_SB[:3, :3].T + T_SB[:3, 3]
     p_C = p_S @ calib.R_SC
     return np.asarray(calib.model.ray_to_pixel(p_C), float).reshape(-1, 2)
+
+
+def swept_joints(q_deg: Iterable[np.ndarray]) -> list[np.ndarray]:
+    """The joints `q_deg` (n, 6) read in order, with poses filled in between consecutive reads
+    (joint-space linear) so that no joint turns more than MAX_STEP_DEG between two poses; a
+    read equal to the one before is dropped."""
+    qs = [np.asarray(q, float) for q in q_deg]
+    if not qs:
+        return []
+    out = [qs[0]]
+    for q in qs[1:]:
+        step = float(np.max(np.abs(q - out[-1])))
+        if step == 0.0:
+            continue
+        n = int(np.ceil(step / MAX_STEP_DEG))
+        t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+        out.extend(out[-1] + t * (q - out[-1]))
+    return out
 
 
 def _boxes_hit(boxes: dict[int, tuple[int, int, int, int]], px: np.ndarray) -> set[int]:
@@ -325,10 +352,26 @@ class ChangeWatch:
         self._pending: Future[_Check] | None = None
 
     def _capture(self) -> _Check:
-        q0 = np.asarray(self.arm.joint_positions(), float)
-        image = self.camera.grab().image
-        q1 = np.asarray(self.arm.joint_positions(), float)
-        return image, [q0, q1], colour_masks(self.check.cfg, image)
+        """A check frame and every pose the arm went through while it was taken (read every
+        JOINT_SAMPLE_S from before the grab to after it, and filled in by `swept_joints`):
+        the arm moves during the grab, and a box it covered at the frame's instant cannot be
+        judged."""
+        qs = [np.asarray(self.arm.joint_positions(), float)]
+        grabbed = threading.Event()
+
+        def read_joints() -> None:
+            while not grabbed.wait(JOINT_SAMPLE_S):
+                qs.append(np.asarray(self.arm.joint_positions(), float))
+
+        reader = threading.Thread(target=read_joints, name="check-joints", daemon=True)
+        reader.start()
+        try:
+            image = self.camera.grab().image
+        finally:
+            grabbed.set()
+            reader.join(CAPTURE_TIMEOUT_S)
+        qs.append(np.asarray(self.arm.joint_positions(), float))
+        return image, swept_joints(qs), colour_masks(self.check.cfg, image)
 
     def capture_now(self) -> None:
         """Start the check capture on the helper thread (it overlaps the arm's motion)."""

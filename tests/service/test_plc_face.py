@@ -130,7 +130,9 @@ def test_plc_reads_a_running_sort_and_starts_and_stops_it(tmp_path: Path) -> Non
     pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
     from tests.service.sim_cell import calibrated_sim_cell
 
-    cell = calibrated_sim_cell(tmp_path)
+    # The arm paced to the wall clock: a pick takes seconds, so the sort still runs when the
+    # PLC reads it, starts a second one and stops it (unpaced, four picks take under a second).
+    cell = calibrated_sim_cell(tmp_path, realtime=True)
     running, face, plc = _start(cell, allow=True)
     try:
         first = plc.regs()
@@ -149,8 +151,7 @@ def test_plc_reads_a_running_sort_and_starts_and_stops_it(tmp_path: Path) -> Non
         now = seen[-1]
         assert STATES[now["state"]] == "sorting"
         assert now["progress_total"] >= 2 and now["sorted"] >= 1
-        # The heartbeat goes on during the sort (it ticks each second: the first cube may be
-        # done within one, so it is waited for, not taken from the reads so far).
+        # The heartbeat goes on during the sort (it ticks each second).
         _wait(
             lambda: (
                 (r := plc.regs())["heartbeat"] != seen[0]["heartbeat"]

@@ -15,6 +15,7 @@ import urllib.request
 from pathlib import Path
 
 from omnisort_hw.service.demo import calibrate_from_truth, write_config
+from tests.service.sim_cell import pace_the_arm
 
 TOKEN = "ui-test-token-7f3a"
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
@@ -29,13 +30,10 @@ def sim_cell_file(
     an arm paced to the wall clock, so a sort lasts long enough to watch and stop."""
     config = write_config(tmp, width)
     calibrate_from_truth(config)
-    text = config.read_text()
-    arm = '[arm]\nbackend = "sim"\nscene = "sorting"\n'
-    assert arm in text, "the simulated cell file changed its [arm] section"
     if realtime:
-        text = text.replace(arm, arm + "realtime = true\n")
+        pace_the_arm(config)
     config.write_text(
-        text + f'\n[service]\ntoken = "{TOKEN}"\n\n[ui]\nstatus_period_s = 0.25\n'
+        config.read_text() + f'\n[service]\ntoken = "{TOKEN}"\n\n[ui]\nstatus_period_s = 0.25\n'
         f"view_period_s = {view_period_s}\n"
     )
     return config
