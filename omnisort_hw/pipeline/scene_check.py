@@ -125,9 +125,10 @@ def _grown(mask: np.ndarray) -> np.ndarray:
 def arm_pixels(
     planner: Planner, calib: SystemCalibration, T_SB: np.ndarray, q_deg: Iterable[np.ndarray]
 ) -> np.ndarray:
-    """Image points (n, 2) that the arm and its gripper cover at each of the joints `q_deg`:
-    points along each capsule's axis and at its radius around it, projected."""
-    caps = (*arm_capsules(planner.model), *planner.gripper)
+    """Image points (n, 2) that the arm, its gripper and the cube it may hold cover at each of
+    the joints `q_deg`: points along each capsule's axis and at its radius around it, projected.
+    A check frame is taken while a picked cube is carried, and the carried cube is no new cube."""
+    caps = (*arm_capsules(planner.model), *planner.gripper, planner.held)
     s = np.linspace(0.0, 1.0, ARM_SAMPLES)[:, None]
     pts_B = []
     for q in q_deg:

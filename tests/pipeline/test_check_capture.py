@@ -91,3 +91,40 @@ def test_the_check_capture_holds_the_pose_its_frame_shows() -> None:
     assert nearest <= MAX_STEP_DEG / 2 + 1e-9, nearest
     # The ends of the grab alone, as the check had them, miss it by tens of degrees.
     assert min(float(np.abs(q - shown).max()) for q in (qs[0], qs[-1])) > 10 * MAX_STEP_DEG
+
+
+OBLIQUE = np.array([[1.0, 0.0], [0.0, 1.0], [0.5, 0.3]])  # (x, y, z) mm -> "pixels"
+
+
+class _Flat:
+    """A camera model that images points by a parallel oblique projection: enough to compare
+    points, and no arm axis is along its direction."""
+
+    @staticmethod
+    def ray_to_pixel(p: np.ndarray) -> np.ndarray:
+        return np.asarray(p, float) @ OBLIQUE
+
+
+class _Calib:
+    model = _Flat()
+    R_SC = np.eye(3)
+
+
+def test_the_cube_the_arm_carries_is_part_of_what_it_covers() -> None:
+    """The check frame is taken while the picked cube is carried: its pixels are the arm's, so
+    its blob is neither a cube put down nor a reason to judge a box."""
+    from omnisort_hw.core.kinematics import joint_frames
+    from omnisort_hw.core.pick_planning import Planner
+    from omnisort_hw.pipeline.scene_check import arm_pixels
+    from sim_backend.sort_harness import sim_sort_config
+    from tests.pipeline.sorting_scene import sorting_scene
+
+    scene = sorting_scene()
+    planner = Planner(sim_sort_config(scene), np.eye(4))
+    px = arm_pixels(planner, _Calib(), np.eye(4), [Q1])  # type: ignore[arg-type]
+    held = planner.held
+    flange = joint_frames(planner.model, Q1)[held.frame]
+    centre = flange[:3, :3] @ np.asarray(held.start_mm) + flange[:3, 3]
+    below = centre + flange[:3, :3] @ [0.0, 0.0, held.radius_mm]  # the cube's far side
+    for point in (centre, below):
+        assert float(np.min(np.linalg.norm(px - point @ OBLIQUE, axis=1))) < 1e-6, point
