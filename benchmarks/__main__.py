@@ -1,12 +1,16 @@
 """`make bench`: run every benchmark module, print its figures, save them to results.json.
 
-Usage: python -m benchmarks [--shared DIR] [--only NAME ...]
+Usage: python -m benchmarks [--shared DIR] [--only NAME ...] [--photos DIR]
+
+`--photos DIR`: the real photographs that `real_light` measures on (kept outside the project:
+see docs/real_light.md); without it that benchmark is skipped and its saved figures stay.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import json
 import os
 import platform
@@ -35,6 +39,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks")
     parser.add_argument("--shared", type=Path, default=HERE.parent.parent / "shared")
     parser.add_argument("--only", nargs="*", default=None, help="module names without bench_")
+    parser.add_argument("--photos", type=Path, default=None, help="real photographs' folder")
     args = parser.parse_args()
     names = sorted(p.stem for p in HERE.glob("bench_*.py"))
     if args.only:
@@ -48,9 +53,16 @@ def main() -> int:
     for name in names:
         module = importlib.import_module(f"benchmarks.{name}")
         print(f"== {name}", flush=True)
+        wants_photos = "photos" in inspect.signature(module.run).parameters
+        if wants_photos and args.photos is None:
+            print("   skipped: it measures on real photographs (--photos DIR)", flush=True)
+            continue
         t0 = time.perf_counter()
         try:
-            figures = module.run(args.shared)
+            if wants_photos:
+                figures = module.run(args.shared, photos=args.photos)
+            else:
+                figures = module.run(args.shared)
         except Exception as exc:
             failed += 1
             print(f"   FAILED: {type(exc).__name__}: {exc}", flush=True)
