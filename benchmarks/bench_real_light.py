@@ -21,8 +21,10 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import numpy as np
 
 from omnisort_hw.core.laser_stripe import laser_stripe_points
+from omnisort_hw.evaluation.camera_measures import HALO_AT_PX, chromatic_shift, crosstalk, halo
 from omnisort_hw.evaluation.real_stripe import (
     board_hull,
     judge,
@@ -40,14 +42,20 @@ def measure(photos: Path) -> dict[str, Any]:
         raise FileNotFoundError(f"{photos}: no PNG or JPEG photographs under it")
     sets: dict[str, list[dict[str, Any]]] = {}
     dark: dict[str, list[int]] = {}  # per folder: points found on each laser-off photograph
+    camera: dict[str, dict[str, list[Any]]] = {}  # per folder: the camera's measures
     t_extract = 0.0
     for i, path in enumerate(files):
         bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        name = str(path.parent.relative_to(photos))
+        name = " ".join(path.parent.relative_to(photos).parts[-2:])  # no "/": figure paths
         if bgr is None:
             raise ValueError(f"{path}: not an image OpenCV reads")
         colour = next((c for c in ("green", "blue") if c in str(path.parent).lower()), "red")
         ref = reference_stripe(bgr, colour)
+        cam = camera.setdefault(name, {"crosstalk": [], "chromatic": [], "halo": []})
+        cam["chromatic"].append(chromatic_shift(bgr))
+        if ref is not None:
+            cam["crosstalk"].append(crosstalk(bgr, ref, colour))
+            cam["halo"].append(halo(bgr, ref, colour))
         t0 = time.perf_counter()
         pts = laser_stripe_points(bgr)
         t_extract += time.perf_counter() - t0
@@ -68,7 +76,33 @@ def measure(photos: Path) -> dict[str, Any]:
             "phantom_points_total": sum(counts),
         }
     out["_extract_s_mean"] = round(t_extract / len(files), 3)
+    out["_camera"] = {name: _camera_summary(m) for name, m in sorted(camera.items())}
     return out
+
+
+def _camera_summary(m: dict[str, list[Any]]) -> dict[str, Any]:
+    """Medians over a folder's photographs of each camera measure, and their spread."""
+
+    def spread(rows: list[dict[str, float]], key: str) -> list[float] | None:
+        vals = [r[key] for r in rows if r is not None and key in r]
+        if not vals:
+            return None
+        return [round(float(v), 3) for v in np.percentile(vals, [10, 50, 90])]
+
+    xt = [r for r in m["crosstalk"] if r is not None]
+    ca = [r for r in m["chromatic"] if r is not None]
+    halos = np.array([h for h in m["halo"] if h is not None], float)
+    return {
+        "crosstalk_p10_p50_p90": {k: spread(xt, k) for k in ("red", "green", "blue")},
+        "crosstalk_photos": len(xt),
+        "chromatic_px_at_corner_p10_p50_p90": {k: spread(ca, k) for k in ("red", "blue")},
+        "chromatic_photos": len(ca),
+        "halo_at_px": list(HALO_AT_PX),
+        "halo_share_median": (
+            [round(float(v), 3) for v in np.nanmedian(halos, axis=0)] if len(halos) else None
+        ),
+        "halo_photos": len(halos),
+    }
 
 
 def run(shared: Path, photos: Path) -> dict[str, Any]:

@@ -756,6 +756,38 @@ def real_light(r: dict[str, Any]) -> str:
     return _table(head, rows) + note
 
 
+def real_light_camera(r: dict[str, Any]) -> str:
+    """The colour camera measured on the real photographs (`evaluation.camera_measures`)."""
+    cam = r["real_light"]["now"]["_camera"]
+
+    def p3(v: Any) -> str:
+        return " / ".join(f"{x:.2f}" for x in v) if v else "–"
+
+    rows: list[list[Any]] = []
+    for name, m in cam.items():
+        xt = m["crosstalk_p10_p50_p90"]
+        ca = m["chromatic_px_at_corner_p10_p50_p90"]
+        halo = m["halo_share_median"]
+        rows.append(
+            [
+                name,
+                f"{m['crosstalk_photos']}: "
+                + "; ".join(f"{k} {p3(v)}" for k, v in xt.items() if v is not None),
+                f"{m['chromatic_photos']}: red {p3(ca['red'])}; blue {p3(ca['blue'])}",
+                f"{m['halo_photos']}: " + (" / ".join(f"{x:.2f}" for x in halo) if halo else "–"),
+            ]
+        )
+    head = [
+        "set",
+        "crosstalk (photos: channel p10 / p50 / p90)",
+        "chromatic shift at the corner, px (photos: p10 / p50 / p90)",
+        "halo beside a clipped core, share of the clip at "
+        + ", ".join(str(d) for d in cam[next(iter(cam))]["halo_at_px"])
+        + " px (photos: medians)",
+    ]
+    return _table(head, rows)
+
+
 GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "summary": summary,
     "table3": table3,
@@ -776,6 +808,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "sweeps": sweeps,
     "uncertainty": uncertainty,
     "real_light": real_light,
+    "real_light_camera": real_light_camera,
 }
 
 

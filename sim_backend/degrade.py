@@ -12,12 +12,13 @@ so a seed gives the same bytes.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
 
 from omnisort_hw.core.radiometry import linear_to_srgb
+from sim_backend.camera_effects import EffectParams, apply_linear, bayer, draw_effects
 from sim_backend.scene import DegradeSpec, LaserSpec
 
 
@@ -36,16 +37,23 @@ class DegradeParams:
     ambient_tint: tuple[float, float, float]
     laser_uneven: float
     laser_speckle: float
+    effects: EffectParams | None = None
 
     @classmethod
-    def draw(cls, spec: DegradeSpec, rng: np.random.Generator) -> DegradeParams:
-        """Sample every [lo, hi] range of the spec uniformly."""
+    def draw(
+        cls,
+        spec: DegradeSpec,
+        rng: np.random.Generator,
+        laser_rgb: tuple[float, float, float] = (1.0, 0.0, 0.0),
+    ) -> DegradeParams:
+        """Sample every [lo, hi] range of the spec uniformly; with `effects`, the colour
+        camera's effects last, for a laser of colour `laser_rgb` (`camera_effects`)."""
 
         def u(pair: tuple[float, float]) -> float:
             return float(rng.uniform(pair[0], pair[1])) if pair[1] > pair[0] else float(pair[0])
 
         tint = rng.uniform(0.85, 1.15, 3)
-        return cls(
+        params = cls(
             noise_read=u(spec.noise_read),
             noise_shot=u(spec.noise_shot),
             blur_sigma_px=u(spec.blur_sigma_px),
@@ -58,19 +66,41 @@ class DegradeParams:
             laser_uneven=u(spec.laser_uneven),
             laser_speckle=u(spec.laser_speckle),
         )
+        if not spec.effects:
+            return params
+        fx = draw_effects(
+            laser_rgb,
+            (spec.chromatic_red_px, spec.chromatic_blue_px),
+            spec.bloom,
+            spec.bloom_sigma_px,
+            spec.bayer,
+            rng,
+        )
+        return replace(params, effects=fx)
 
     def to_dict(self) -> dict[str, object]:
         """Plain JSON-ready dict."""
         d = asdict(self)
         d["ambient_tint"] = list(self.ambient_tint)
+        if self.effects is None:  # the truth of a camera without them is as it was
+            del d["effects"]
+        else:
+            d["effects"] = self.effects.to_dict()
         return d
 
 
-def compose(base: np.ndarray, laser: np.ndarray, spec: LaserSpec) -> np.ndarray:
-    """Scene colour (H, W, 3) RGB plus laser light (H, W) -> RGB float image."""
+def compose(
+    base: np.ndarray,
+    laser: np.ndarray,
+    spec: LaserSpec,
+    seen_rgb: tuple[float, float, float] | None = None,
+) -> np.ndarray:
+    """Scene colour (H, W, 3) RGB plus laser light (H, W) -> RGB float image; `seen_rgb`: the
+    laser's colour as the sensor sees it (crosstalk), else the spec's."""
     lit = laser[..., None]
     hide = np.minimum(lit, 1.0) * np.float32(spec.surface_hide)
-    return base * (1.0 - hide) + lit * np.asarray(spec.color.rgb, np.float32)
+    colour = seen_rgb if seen_rgb is not None else spec.color.rgb
+    return base * (1.0 - hide) + lit * np.asarray(colour, np.float32)
 
 
 def encode(rgb: np.ndarray, tone_curve: str) -> np.ndarray:
@@ -110,7 +140,8 @@ def degrade(
         if params.laser_speckle > 0:
             k = 1.0 / params.laser_speckle**2
             light[on] *= rng.gamma(k, 1.0 / k, int(on.sum())).astype(np.float32)
-    img = compose(base, light, spec)
+    fx = params.effects
+    img = compose(base, light, spec, fx.laser_leak if fx is not None else None)
     ambient = params.ambient * (1.0 + 0.5 * smooth_field(rng, (h, w), 4))
     img += ambient[..., None] * np.asarray(params.ambient_tint, np.float32)
     img *= np.float32(2.0**params.exposure_ev)
@@ -119,10 +150,14 @@ def degrade(
     img *= (1.0 - params.vignetting * np.clip(r2, 0.0, 1.0))[..., None]
     if params.blur_sigma_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), params.blur_sigma_px)
+    if fx is not None:
+        img = apply_linear(img, fx)
     img = encode(np.clip(img, 0.0, 1.0) ** np.float32(params.gamma), tone_curve)
     sigma = np.sqrt(params.noise_shot**2 * img + params.noise_read**2)
     img = img + sigma * rng.standard_normal(img.shape, dtype=np.float32)
     bgr = to_bgr8(img)
+    if fx is not None and fx.bayer:
+        bgr = bayer(bgr)
     ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, params.jpeg_quality])
     if not ok:
         raise RuntimeError("JPEG encoding failed")

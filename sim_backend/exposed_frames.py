@@ -48,7 +48,9 @@ class ExposedFrames:
         self.model = model
         self.seed = int(seed)
         self.lighting = lighting
-        self.params = SensorParams.draw(world.scene.degrade, np.random.default_rng(self.seed))
+        self.params = SensorParams.draw(
+            world.scene.degrade, np.random.default_rng(self.seed), world.scene.laser.color.rgb
+        )
         self._key: bytes | None = None
         self._optical: OpticalImage | None = None
         self.direct_laser: np.ndarray | None = None  # (H, W) the renderer's laser intensity

@@ -297,6 +297,14 @@ class DegradeSpec:
     ambient: Vec2 = (0.0, 0.06)
     laser_uneven: Vec2 = (0.2, 0.5)
     laser_speckle: Vec2 = (0.2, 0.5)
+    # The colour camera's effects (`camera_effects`), on request; the ranges are measured on
+    # real photographs (docs/real_light.md), the crosstalk follows the laser's colour.
+    effects: bool = False
+    chromatic_red_px: Vec2 = (0.15, 0.35)  # radial shift from green at the corner, outward
+    chromatic_blue_px: Vec2 = (-0.1, 0.75)
+    bloom: Vec2 = (0.05, 0.15)
+    bloom_sigma_px: Vec2 = (14.0, 24.0)
+    bayer: bool = True
 
 
 @dataclass(frozen=True)
@@ -454,13 +462,22 @@ def _check_range_pairs(spec: DegradeSpec) -> None:
             raise ConfigError(f"degrade.{f.name}: range [lo, hi] needs lo <= hi, got {list(value)}")
     _in_range(spec.jpeg_quality[0], 1, 100, "degrade.jpeg_quality")
     _in_range(spec.jpeg_quality[1], 1, 100, "degrade.jpeg_quality")
-    for name in ("noise_read", "noise_shot", "blur_sigma_px", "ambient", "laser_uneven"):
+    for name in (
+        "noise_read",
+        "noise_shot",
+        "blur_sigma_px",
+        "ambient",
+        "laser_uneven",
+        "bloom_sigma_px",
+    ):
         _positive(getattr(spec, name)[0], f"degrade.{name}", strict=False)
     _positive(spec.gamma[0], "degrade.gamma")
     _in_range(spec.vignetting[0], 0.0, 1.0, "degrade.vignetting")
     _in_range(spec.vignetting[1], 0.0, 1.0, "degrade.vignetting")
     _in_range(spec.laser_speckle[0], 0.0, 1.0, "degrade.laser_speckle")
     _in_range(spec.laser_speckle[1], 0.0, 1.0, "degrade.laser_speckle")
+    _in_range(spec.bloom[0], 0.0, 1.0, "degrade.bloom")
+    _in_range(spec.bloom[1], 0.0, 1.0, "degrade.bloom")
 
 
 def _check_target(t: TargetSpec, floor_z: float) -> None:

@@ -82,7 +82,7 @@ def finish_image(
     if not degraded:
         return to_bgr8(encode(compose(base, laser, spec), tone)), None
     rng = np.random.default_rng(seed)
-    params = DegradeParams.draw(world.scene.degrade, rng)
+    params = DegradeParams.draw(world.scene.degrade, rng, spec.color.rgb)
     return degrade(base, laser, spec, params, rng, tone), params.to_dict()
 
 

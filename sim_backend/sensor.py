@@ -19,12 +19,13 @@ halves the chroma horizontally (4:2:2), BGR3 keeps every sample.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 
 import cv2
 import numpy as np
 
+from sim_backend.camera_effects import EffectParams, apply_linear, bayer, draw_effects
 from sim_backend.degrade import encode, smooth_field, to_bgr8
 from sim_backend.scene import DegradeSpec, LaserSpec
 
@@ -47,12 +48,19 @@ class SensorParams:
     ambient_tint: tuple[float, float, float]
     laser_uneven: float
     laser_speckle: float
+    effects: EffectParams | None = None
 
     @classmethod
-    def draw(cls, spec: DegradeSpec, rng: np.random.Generator) -> SensorParams:
+    def draw(
+        cls,
+        spec: DegradeSpec,
+        rng: np.random.Generator,
+        laser_rgb: tuple[float, float, float] = (1.0, 0.0, 0.0),
+    ) -> SensorParams:
         """The scene's [degrade] ranges, sampled uniformly. `noise_shot` is the shot noise at
         full scale (so FW = 1 / noise_shot^2 electrons), `noise_read` the read noise as a
-        fraction of full scale at gain 1."""
+        fraction of full scale at gain 1. With `effects`, the colour camera's effects are
+        drawn last (the other draws stay as they were) for a laser of colour `laser_rgb`."""
 
         def u(pair: tuple[float, float]) -> float:
             return float(rng.uniform(pair[0], pair[1])) if pair[1] > pair[0] else float(pair[0])
@@ -60,7 +68,7 @@ class SensorParams:
         shot = u(spec.noise_shot)
         fw = 1.0 / max(shot, 1e-4) ** 2
         tint = rng.uniform(0.85, 1.15, 3)
-        return cls(
+        params = cls(
             full_well_e=fw,
             read_noise_e=u(spec.noise_read) * fw,
             blur_sigma_px=u(spec.blur_sigma_px),
@@ -72,10 +80,25 @@ class SensorParams:
             laser_uneven=u(spec.laser_uneven),
             laser_speckle=u(spec.laser_speckle),
         )
+        if not spec.effects:
+            return params
+        fx = draw_effects(
+            laser_rgb,
+            (spec.chromatic_red_px, spec.chromatic_blue_px),
+            spec.bloom,
+            spec.bloom_sigma_px,
+            spec.bayer,
+            rng,
+        )
+        return replace(params, effects=fx)
 
     def to_dict(self) -> dict[str, object]:
         d = asdict(self)
         d["ambient_tint"] = list(self.ambient_tint)
+        if self.effects is None:  # the truth of a camera without them is as it was
+            del d["effects"]
+        else:
+            d["effects"] = self.effects.to_dict()
         return d
 
 
@@ -117,7 +140,9 @@ class OpticalImage:
             if params.laser_speckle > 0:
                 k = 1.0 / params.laser_speckle**2
                 light[on] *= rng.gamma(k, 1.0 / k, int(on.sum())).astype(np.float32)
-        las = light[..., None] * np.asarray(spec.color.rgb, np.float32)
+        fx = params.effects
+        colour = fx.laser_leak if fx is not None else spec.color.rgb
+        las = light[..., None] * np.asarray(colour, np.float32)
         if laser_extra is not None:
             las = las + laser_extra.astype(np.float32)
         amb = params.ambient * (1.0 + 0.5 * smooth_field(rng, (h, w), 4))
@@ -132,7 +157,7 @@ class OpticalImage:
             out = (img * vig).astype(np.float32)
             if params.blur_sigma_px > 0:
                 out = cv2.GaussianBlur(out, (0, 0), params.blur_sigma_px)
-            return out
+            return apply_linear(out, fx) if fx is not None else out
 
         return cls(optics(base.astype(np.float32)), optics(st), optics(las))
 
@@ -183,6 +208,8 @@ def expose(
     idx = e[..., ::-1].astype(np.uint16)  # RGB -> BGR while converting
     del e
     bgr = _code_lut(params.gamma, tone_curve)[idx]
+    if params.effects is not None and params.effects.bayer:
+        bgr = bayer(bgr)
     if settings.pixel_format == "MJPG":
         ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, params.jpeg_quality])
         if not ok:
