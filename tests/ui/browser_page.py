@@ -73,6 +73,21 @@ class Page:
         el = self.el(name)
         # In the middle of the window: not under the fixed header, wherever the page scrolled.
         self.d.execute_script("arguments[0].scrollIntoView({block: 'center'})", el)
+        # A tab's panel slides in: the pointer clicks where the element is, so it must have
+        # come to rest (the same box on two reads in a row), or the click lands beside it.
+        boxes: list[object] = []
+
+        def at_rest() -> bool:
+            boxes.append(
+                self.d.execute_script(
+                    "const r = arguments[0].getBoundingClientRect();"
+                    "return [r.x, r.y, r.width, r.height];",
+                    el,
+                )
+            )
+            return len(boxes) > 1 and boxes[-1] == boxes[-2]
+
+        wait_for(f"{name} to come to rest", at_rest, timeout_s, 0.05)
         el.click()
 
     def type(self, name: str, value: str) -> None:
