@@ -5,10 +5,13 @@ How (all vectorised, no loop over pixels):
 1. Candidates on strided copies. Every `stride`-th full row (all columns) and every
    `stride`-th full column (all rows) are taken; a thin stripe steeper than 45 degrees crosses
    every sampled row, a flatter one every sampled column. The redness
-   `red = r - max(g, b) - 1.5 |g - b|` is computed with saturating 8-bit OpenCV operations
-   (laser light is red with g ~ b on white, grey and black, and still dominates coloured
-   surfaces where it is bright; yellow, orange, tan and brown edges, whose g and b differ,
-   score low). Only the sparse red pixels are visited: a candidate is the maximum of its scan
+   `red = r - max(g, b) - 1.5 max(g - b, 0)` is computed with saturating 8-bit OpenCV
+   operations (laser light is red and dominates coloured surfaces where it is bright; yellow,
+   orange, tan and brown edges, whose green exceeds their blue, score low). Only green above
+   blue is punished: a real sensor's blue filter passes a red line at 0.2 to 0.56 of red and
+   its green filter hardly (measured on real photographs, docs/real_light.md), so a red line
+   is magenta at its core, where a penalty on |g - b| split it into its two flanks. Only the
+   sparse red pixels are visited: a candidate is the maximum of its scan
    line within +-4 px and stands above both samples 4 px away (a ridge, not a red area).
 2. Adaptive thresholds: the redness noise is estimated from the image itself (RMS of
    neighbouring-pixel differences below their 99th percentile); candidates need 6 noise
@@ -46,7 +49,7 @@ _HALF = 4  # half-width (px) of the across-stripe window; stripes up to ~4 px wi
 _ALONG = 5  # scan lines either side whose peaks are fitted with the candidate's
 _CENTROID_HALF = 3  # samples either side of a profile's maximum used for its centre
 _CENTROID_LEVEL = 0.3  # ... above this fraction of the peak height
-_CHROMA_K = 1.5  # weight of |g - b|: laser light has g ~ b, yellow, orange and tan do not
+_CHROMA_K = 1.5  # weight of g - b where green exceeds blue: yellow, orange and tan
 _NOISE_K = 6.0  # candidate threshold in noise standard deviations
 _FLOOR = 4.0  # grey levels: never below 8-bit quantisation and JPEG rounding
 _LOW_FRACTION = 0.08  # hysteresis: a stripe point's height, of the stripes' robust peak
@@ -88,14 +91,15 @@ def redness_u8(bgr: np.ndarray) -> np.ndarray:
     """The redness measure saturated to 0..255 (uint8, same rows and columns)."""
     b, g, r = cv2.split(bgr)
     red = cv2.subtract(r, cv2.max(g, b))
-    return cv2.addWeighted(red, 1.0, cv2.absdiff(g, b), -_CHROMA_K, 0.0)
+    return cv2.addWeighted(red, 1.0, cv2.subtract(g, b), -_CHROMA_K, 0.0)
 
 
 def redness(bgr: np.ndarray) -> np.ndarray:
-    """r - max(g, b) - k |g - b|, signed float32, for arrays of any leading shape (..., 3)."""
+    """r - max(g, b) - k max(g - b, 0), signed float32, for arrays of any leading shape
+    (..., 3)."""
     x = bgr.astype(np.float32)
     b, g, r = x[..., 0], x[..., 1], x[..., 2]
-    return r - np.maximum(g, b) - _CHROMA_K * np.abs(g - b)
+    return r - np.maximum(g, b) - _CHROMA_K * np.maximum(g - b, 0.0)
 
 
 def _noise_sigma(bgr: np.ndarray, step: int) -> float:

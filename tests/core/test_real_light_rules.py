@@ -1,0 +1,63 @@
+"""The stripe extractor's real-light rules, each on a frame of the simulated sensor with the
+colour camera's effect that broke it (`sim_backend.camera_effects`), with a known centre line.
+
+The line: a Gaussian across (sigma 2 px), straight and slightly tilted, on a dark grey card;
+2.5 grey levels of read noise. The tolerances come from the extractor's precision on such a
+line: a few hundredths of a pixel from the noise, and a tenth from 8-bit rounding and the
+profile's truncation (tests/core/test_laser_stripe.py), so 0.3 px is a clear miss."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from omnisort_hw.core.laser_stripe import laser_stripe_points
+from sim_backend.camera_effects import EffectParams
+from sim_backend.scene import LaserSpec
+from sim_backend.sensor import Exposure, OpticalImage, SensorParams, expose
+
+SIZE = 240
+SIGMA = 2.0
+PARAMS = SensorParams(
+    full_well_e=20000.0,
+    read_noise_e=200.0,
+    blur_sigma_px=0.0,
+    vignetting=0.0,
+    gamma=1.0,
+    jpeg_quality=95,
+    ambient=0.0,
+    ambient_tint=(1.0, 1.0, 1.0),
+    laser_uneven=0.0,
+    laser_speckle=0.0,
+)
+
+
+def centre_v(u: np.ndarray) -> np.ndarray:
+    return 100.0 + 0.1 * (u - SIZE / 2)
+
+
+def frame(peak: float, leak: tuple[float, float, float], card: float = 0.08) -> np.ndarray:
+    """The sensor's BGR frame of the line at `peak` full scales, the laser seen as `leak`."""
+    fx = EffectParams(leak, (0.0, 0.0), 0.0, 0.0, bayer=False)
+    v, u = np.mgrid[0:SIZE, 0:SIZE].astype(np.float32)
+    laser = peak * np.exp(-0.5 * ((v - centre_v(u)) / SIGMA) ** 2)
+    base = np.full((SIZE, SIZE, 3), card, np.float32)
+    params = replace(PARAMS, effects=fx)
+    opt = OpticalImage.prepare(base, laser, LaserSpec(), params, np.random.default_rng(0))
+    return expose(opt, params, Exposure(pixel_format="BGR3"), np.random.default_rng(1))[0]
+
+
+def _errors(pts: np.ndarray) -> np.ndarray:
+    inside = (pts[:, 0] > 20) & (pts[:, 0] < SIZE - 20)
+    return pts[inside, 1] - centre_v(pts[inside, 0])
+
+
+def test_a_line_the_camera_sees_as_magenta_is_found_once_at_its_centre() -> None:
+    """Blue sees a red line at 0.3 to 0.56 of red on the development photographs (crosstalk)
+    and green hardly: at the core g << b, which the redness must not punish (only g > b is
+    yellow, orange or tan). Before the rule the line came out twice, on its flanks."""
+    pts = laser_stripe_points(frame(0.8, (1.0, 0.05, 0.6)))
+    err = _errors(pts)
+    assert err.size > 150, err.size  # one point per column across the frame's inside
+    assert float(np.max(np.abs(err))) < 0.3, np.sort(np.abs(err))[-5:]
