@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from omnisort_hw.core.clipped_core import clipped_cores
 from omnisort_hw.errors import InputError
 
 _HALF = 4  # half-width (px) of the across-stripe window; stripes up to ~4 px wide
@@ -447,6 +448,40 @@ def _keep_chains(
     return good[lab], lab
 
 
+def _with_clipped_cores(
+    bgr: np.ndarray,
+    mask: np.ndarray | None,
+    low: float,
+    high: float,
+    stride: int,
+    pts: np.ndarray,
+    amp: np.ndarray,
+    con: np.ndarray,
+    sup: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The ridge points with those on a clipped core's flanks replaced by the core's centres
+    (`core.clipped_core`); a core is as strong as a stripe gets."""
+    cores, goes_on, reach = clipped_cores(bgr, redness_u8(bgr), low, stride)
+    if mask is not None and len(cores):
+        m = mask.astype(bool, copy=False)
+        cv, cu = np.rint(cores[:, 1]).astype(int), np.rint(cores[:, 0]).astype(int)
+        inside = m[cv, cu]
+        cores, goes_on = cores[inside], goes_on[inside]
+    if not len(cores):
+        return pts, amp, con, sup
+    h, w = reach.shape
+    pv = np.clip(np.rint(pts[:, 1]).astype(int), 0, h - 1)
+    pu = np.clip(np.rint(pts[:, 0]).astype(int), 0, w - 1)
+    keep = ~reach[pv, pu]
+    n = len(cores)
+    return (
+        np.concatenate([pts[keep], cores]),
+        np.concatenate([amp[keep], np.full(n, max(high, 255.0), amp.dtype)]),
+        np.concatenate([con[keep], np.ones(n, bool)]),
+        np.concatenate([sup[keep], goes_on]),
+    )
+
+
 def laser_stripe_points_stats(
     image_bgr: np.ndarray,
     mask: np.ndarray | None = None,
@@ -485,6 +520,8 @@ def laser_stripe_points_stats(
     amp = np.concatenate([amp_r[ok_r], amp_c[ok_c]])
     con = np.concatenate([con_r[ok_r], con_c[ok_c]])
     sup = np.concatenate([sup_r[ok_r], sup_c[ok_c]])
+    if not light_only:  # a difference image has holes where the frames clipped, no white
+        pts, amp, con, sup = _with_clipped_cores(bgr, mask, low, high, s, pts, amp, con, sup)
     keep, chain = _keep_chains(pts, amp > high, con, (h, w), s)
     pts = pts[keep]
     n_cand = int(full_r.shape[0] + full_c.shape[0])

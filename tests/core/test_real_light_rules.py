@@ -61,3 +61,30 @@ def test_a_line_the_camera_sees_as_magenta_is_found_once_at_its_centre() -> None
     err = _errors(pts)
     assert err.size > 150, err.size  # one point per column across the frame's inside
     assert float(np.max(np.abs(err))) < 0.3, np.sort(np.abs(err))[-5:]
+
+
+def test_a_line_clipped_to_white_is_found_once_at_the_centre_of_its_clipped_run() -> None:
+    """Blue sees 0.4 of the line and green 0.1: at 6 full scales the core clips in red and
+    blue and reads near white, its redness falls to zero between two red flanks. Before the
+    rule the line came out twice, on its flanks, each a few pixels off (8 to 10 px on the
+    development photographs)."""
+    img = frame(6.0, (1.0, 0.1, 0.4))
+    core = img[np.rint(centre_v(np.array([120.0]))).astype(int)[0], 120]
+    assert core[2] == 255 and core[0] == 255, core  # the frame has the effect
+    pts = laser_stripe_points(img)
+    err = _errors(pts)
+    assert err.size > 150, err.size
+    assert float(np.max(np.abs(err))) < 0.3, np.sort(np.abs(err))[-5:]
+    # once: no two points within a pixel along the line
+    u = np.sort(pts[:, 0])
+    assert float(np.min(np.diff(u))) > 0.5
+
+
+def test_a_white_glint_without_red_flanks_is_no_core() -> None:
+    """A clipped white streak (a glint on metal, white paper in the sun) has no red flanks:
+    no stripe there."""
+    v, u = np.mgrid[0:SIZE, 0:SIZE].astype(np.float32)
+    img = np.full((SIZE, SIZE, 3), 60, np.uint8)
+    streak = np.abs(v - centre_v(u)) < 3.0
+    img[streak] = 255
+    assert laser_stripe_points(img).shape[0] == 0
