@@ -23,6 +23,8 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
+from sim_backend.scene import DegradeSpec
+
 # Share of the laser's main channel that each other channel sees, [lo, hi], measured on the
 # development photographs as the slope of each channel against the laser's channel across
 # unclipped stripes (median per set; the spread between sets and photographs gives the range).
@@ -50,6 +52,32 @@ class EffectParams:
         d = asdict(self)
         d["laser_leak"], d["chromatic_px"] = list(self.laser_leak), list(self.chromatic_px)
         return d
+
+
+def effects_into(d: dict[str, object], fx: EffectParams | None) -> None:
+    """A camera's parameters as a dict (`d`, from `asdict`) with its effects as JSON, or
+    without the key when it has none (the truth of such a camera is as it was)."""
+    if fx is None:
+        d.pop("effects", None)
+    else:
+        d["effects"] = fx.to_dict()
+
+
+def effects_for(
+    spec: DegradeSpec, laser_rgb: tuple[float, float, float], rng: np.random.Generator
+) -> EffectParams | None:
+    """A scene's [degrade] effects drawn for a laser of colour `laser_rgb`, or None when the
+    scene does not ask for them."""
+    if not spec.effects:
+        return None
+    return draw_effects(
+        laser_rgb,
+        (spec.chromatic_red_px, spec.chromatic_blue_px),
+        spec.bloom,
+        spec.bloom_sigma_px,
+        spec.bayer,
+        rng,
+    )
 
 
 def draw_effects(

@@ -25,7 +25,13 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from sim_backend.camera_effects import EffectParams, apply_linear, bayer, draw_effects
+from sim_backend.camera_effects import (
+    EffectParams,
+    apply_linear,
+    bayer,
+    effects_for,
+    effects_into,
+)
 from sim_backend.degrade import encode, smooth_field, to_bgr8
 from sim_backend.scene import DegradeSpec, LaserSpec
 
@@ -80,25 +86,12 @@ class SensorParams:
             laser_uneven=u(spec.laser_uneven),
             laser_speckle=u(spec.laser_speckle),
         )
-        if not spec.effects:
-            return params
-        fx = draw_effects(
-            laser_rgb,
-            (spec.chromatic_red_px, spec.chromatic_blue_px),
-            spec.bloom,
-            spec.bloom_sigma_px,
-            spec.bayer,
-            rng,
-        )
-        return replace(params, effects=fx)
+        return replace(params, effects=effects_for(spec, laser_rgb, rng))
 
     def to_dict(self) -> dict[str, object]:
         d = asdict(self)
         d["ambient_tint"] = list(self.ambient_tint)
-        if self.effects is None:  # the truth of a camera without them is as it was
-            del d["effects"]
-        else:
-            d["effects"] = self.effects.to_dict()
+        effects_into(d, self.effects)
         return d
 
 
