@@ -54,6 +54,14 @@ class EffectParams:
         return d
 
 
+def laser_seen(
+    fx: EffectParams | None, rgb: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """The laser's colour as the sensor sees it: with the effects `fx`, its crosstalk; else
+    the scene's colour `rgb`."""
+    return fx.laser_leak if fx is not None else rgb
+
+
 def effects_into(d: dict[str, object], fx: EffectParams | None) -> None:
     """A camera's parameters as a dict (`d`, from `asdict`) with its effects as JSON, or
     without the key when it has none (the truth of such a camera is as it was)."""

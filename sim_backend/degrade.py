@@ -12,7 +12,7 @@ so a seed gives the same bytes.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
@@ -24,6 +24,7 @@ from sim_backend.camera_effects import (
     bayer,
     effects_for,
     effects_into,
+    laser_seen,
 )
 from sim_backend.scene import DegradeSpec, LaserSpec
 
@@ -59,7 +60,7 @@ class DegradeParams:
             return float(rng.uniform(pair[0], pair[1])) if pair[1] > pair[0] else float(pair[0])
 
         tint = rng.uniform(0.85, 1.15, 3)
-        params = cls(
+        return cls(
             noise_read=u(spec.noise_read),
             noise_shot=u(spec.noise_shot),
             blur_sigma_px=u(spec.blur_sigma_px),
@@ -71,8 +72,8 @@ class DegradeParams:
             ambient_tint=(float(tint[0]), float(tint[1]), float(tint[2])),
             laser_uneven=u(spec.laser_uneven),
             laser_speckle=u(spec.laser_speckle),
+            effects=effects_for(spec, laser_rgb, rng),  # drawn last: the others stay as they were
         )
-        return replace(params, effects=effects_for(spec, laser_rgb, rng))
 
     def to_dict(self) -> dict[str, object]:
         """Plain JSON-ready dict."""
@@ -83,17 +84,13 @@ class DegradeParams:
 
 
 def compose(
-    base: np.ndarray,
-    laser: np.ndarray,
-    spec: LaserSpec,
-    seen_rgb: tuple[float, float, float] | None = None,
+    base: np.ndarray, laser: np.ndarray, spec: LaserSpec, fx: EffectParams | None = None
 ) -> np.ndarray:
-    """Scene colour (H, W, 3) RGB plus laser light (H, W) -> RGB float image; `seen_rgb`: the
-    laser's colour as the sensor sees it (crosstalk), else the spec's."""
+    """Scene colour (H, W, 3) RGB plus laser light (H, W) -> RGB float image, the laser in
+    its colour as the sensor sees it (with the effects `fx`: crosstalk)."""
     lit = laser[..., None]
     hide = np.minimum(lit, 1.0) * np.float32(spec.surface_hide)
-    colour = seen_rgb if seen_rgb is not None else spec.color.rgb
-    return base * (1.0 - hide) + lit * np.asarray(colour, np.float32)
+    return base * (1.0 - hide) + lit * np.asarray(laser_seen(fx, spec.color.rgb), np.float32)
 
 
 def encode(rgb: np.ndarray, tone_curve: str) -> np.ndarray:
@@ -134,7 +131,7 @@ def degrade(
             k = 1.0 / params.laser_speckle**2
             light[on] *= rng.gamma(k, 1.0 / k, int(on.sum())).astype(np.float32)
     fx = params.effects
-    img = compose(base, light, spec, fx.laser_leak if fx is not None else None)
+    img = compose(base, light, spec, fx)
     ambient = params.ambient * (1.0 + 0.5 * smooth_field(rng, (h, w), 4))
     img += ambient[..., None] * np.asarray(params.ambient_tint, np.float32)
     img *= np.float32(2.0**params.exposure_ev)

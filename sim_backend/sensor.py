@@ -19,7 +19,7 @@ halves the chroma horizontally (4:2:2), BGR3 keeps every sample.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from functools import lru_cache
 
 import cv2
@@ -31,6 +31,7 @@ from sim_backend.camera_effects import (
     bayer,
     effects_for,
     effects_into,
+    laser_seen,
 )
 from sim_backend.degrade import encode, smooth_field, to_bgr8
 from sim_backend.scene import DegradeSpec, LaserSpec
@@ -74,7 +75,7 @@ class SensorParams:
         shot = u(spec.noise_shot)
         fw = 1.0 / max(shot, 1e-4) ** 2
         tint = rng.uniform(0.85, 1.15, 3)
-        params = cls(
+        return cls(
             full_well_e=fw,
             read_noise_e=u(spec.noise_read) * fw,
             blur_sigma_px=u(spec.blur_sigma_px),
@@ -85,8 +86,8 @@ class SensorParams:
             ambient_tint=(float(tint[0]), float(tint[1]), float(tint[2])),
             laser_uneven=u(spec.laser_uneven),
             laser_speckle=u(spec.laser_speckle),
+            effects=effects_for(spec, laser_rgb, rng),  # drawn last: the others stay as they were
         )
-        return replace(params, effects=effects_for(spec, laser_rgb, rng))
 
     def to_dict(self) -> dict[str, object]:
         d = asdict(self)
@@ -134,8 +135,7 @@ class OpticalImage:
                 k = 1.0 / params.laser_speckle**2
                 light[on] *= rng.gamma(k, 1.0 / k, int(on.sum())).astype(np.float32)
         fx = params.effects
-        colour = fx.laser_leak if fx is not None else spec.color.rgb
-        las = light[..., None] * np.asarray(colour, np.float32)
+        las = light[..., None] * np.asarray(laser_seen(fx, spec.color.rgb), np.float32)
         if laser_extra is not None:
             las = las + laser_extra.astype(np.float32)
         amb = params.ambient * (1.0 + 0.5 * smooth_field(rng, (h, w), 4))

@@ -22,9 +22,9 @@ itself does not dip: it is clipped over a run that straddles the centre. So, on 
    distances from its centre, and the flanks are not clipped): a straight cut through a
    straight stripe is centred on its centre line.
 
-Points the ridge search found within the cores' reach (the clipped pixels of every core,
-grown by the core's half width and FLANK_PX) are the flanks: they are dropped for the cores'
-centres.
+Points the ridge search found within the cores' reach (a disk about each core's centre, of
+the core's length and FLANK_PX, and half a scan spacing, in radius) are the flanks: they are
+dropped for the cores' centres.
 """
 
 from __future__ import annotations
@@ -131,12 +131,13 @@ def _across(
 
 
 def clipped_cores(
-    bgr: np.ndarray, redness_u8: np.ndarray, low: float, stride: int
+    bgr: np.ndarray, red_rows: np.ndarray, red_cols: np.ndarray, low: float, stride: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The centres (N, 2) (u, v) of clipped stripe cores on every `stride`-th row and column
     of `bgr`, whether the clipping goes on past the next scan line both ways (N,) bool, and a
-    mask (H, W) bool of the cores' reach (see module doc); `redness_u8` is the image's
-    redness, `low` the extraction's low threshold."""
+    mask (H, W) bool of the cores' reach (see module doc); `red_rows` and `red_cols` are the
+    redness of those rows (bgr[::stride]) and columns (bgr[:, ::stride]), `low` the
+    extraction's low threshold."""
     h, w = bgr.shape[:2]
     red_full = bgr[..., 2]
     pts: list[np.ndarray] = []
@@ -145,7 +146,7 @@ def clipped_cores(
     for along_rows in (True, False):
         lines = np.arange(0, h if along_rows else w, stride)
         red_ch = red_full[lines] if along_rows else red_full[:, lines].T
-        rd = redness_u8[lines] if along_rows else redness_u8[:, lines].T
+        rd = red_rows if along_rows else red_cols.T
         idx, centre, length = _cores_on_lines(red_ch, rd, low)
         if idx.size == 0:
             continue
@@ -163,7 +164,7 @@ def clipped_cores(
         # (`laser_stripe.stripe_interior`); a short clipped patch (two stripes crossing, a
         # corner) is not
         goes_on.append(np.minimum(up[cut], down[cut]) > stride)
-        # the cores' reach: each core's run, grown by its half width and FLANK_PX
+        # the cores' reach: about each core's centre, its run's length and FLANK_PX
         grow = (n + FLANK_PX).astype(int)
         for g in np.unique(grow):
             sel = grow == g

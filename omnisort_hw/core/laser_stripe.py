@@ -450,6 +450,7 @@ def _keep_chains(
 
 def _with_clipped_cores(
     bgr: np.ndarray,
+    red_rows: np.ndarray,
     mask: np.ndarray | None,
     low: float,
     high: float,
@@ -460,8 +461,10 @@ def _with_clipped_cores(
     sup: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The ridge points with those on a clipped core's flanks replaced by the core's centres
-    (`core.clipped_core`); a core is as strong as a stripe gets."""
-    cores, goes_on, reach = clipped_cores(bgr, redness_u8(bgr), low, stride)
+    (`core.clipped_core`); a core is as strong as a stripe gets. `red_rows`: the redness of
+    every `stride`-th row, as the ridge search has it."""
+    red_cols = redness_u8(np.ascontiguousarray(bgr[:, ::stride]))
+    cores, goes_on, reach = clipped_cores(bgr, red_rows, red_cols, low, stride)
     if mask is not None and len(cores):
         m = mask.astype(bool, copy=False)
         cv, cu = np.rint(cores[:, 1]).astype(int), np.rint(cores[:, 0]).astype(int)
@@ -500,7 +503,8 @@ def laser_stripe_points_stats(
     base = max(_NOISE_K * noise, _FLOOR)
     rows = np.ascontiguousarray(bgr[::s])  # every s-th row, all columns
     cols = cv2.resize(bgr, (-(-w // s), h), interpolation=cv2.INTER_NEAREST)  # every s-th col
-    cand_r, height_r = _ridge_candidates(redness_u8(rows), 1, base)
+    red_rows = redness_u8(rows)
+    cand_r, height_r = _ridge_candidates(red_rows, 1, base)
     cand_c, height_c = _ridge_candidates(redness_u8(cols), 0, base)
     heights = np.concatenate([height_r, height_c])
     peak = float(np.percentile(heights, 90)) if heights.size else 0.0
@@ -521,7 +525,9 @@ def laser_stripe_points_stats(
     con = np.concatenate([con_r[ok_r], con_c[ok_c]])
     sup = np.concatenate([sup_r[ok_r], sup_c[ok_c]])
     if not light_only:  # a difference image has holes where the frames clipped, no white
-        pts, amp, con, sup = _with_clipped_cores(bgr, mask, low, high, s, pts, amp, con, sup)
+        pts, amp, con, sup = _with_clipped_cores(
+            bgr, red_rows, mask, low, high, s, pts, amp, con, sup
+        )
     keep, chain = _keep_chains(pts, amp > high, con, (h, w), s)
     pts = pts[keep]
     n_cand = int(full_r.shape[0] + full_c.shape[0])

@@ -73,18 +73,12 @@ class ReferenceStripe:
         return max(2.0, 0.25 * float(np.median(self.width)))
 
 
-def _laser_hats(bgr: np.ndarray) -> np.ndarray:
-    """(H, W, 3) int16: how much more each channel rises above its surroundings than the
-    other two (white top-hats wider than any stripe)."""
+def _laser_hat(bgr: np.ndarray, channel: int) -> np.ndarray:
+    """(H, W) int16: how much more `channel` rises above its surroundings than the other two
+    (white top-hats wider than any stripe)."""
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * BAND_PX + 1,) * 2)
     hat = cv2.morphologyEx(bgr, cv2.MORPH_TOPHAT, kernel).astype(np.int16)
-    return np.stack([hat[..., c] - np.delete(hat, c, axis=2).max(axis=2) for c in range(3)], axis=2)
-
-
-def laser_colour(bgr: np.ndarray) -> str:
-    """The laser colour of a photograph: the channel the most pixels are raised in."""
-    counts = (_laser_hats(bgr) > DOMINANCE).reshape(-1, 3).sum(axis=0)
-    return next(c for c, i in LASER_CHANNEL.items() if i == int(np.argmax(counts)))
+    return hat[..., channel] - np.delete(hat, channel, axis=2).max(axis=2)
 
 
 def _course(bgr: np.ndarray, channel: int) -> tuple[bool, np.ndarray] | None:
@@ -92,7 +86,7 @@ def _course(bgr: np.ndarray, channel: int) -> tuple[bool, np.ndarray] | None:
     its channel above the surroundings by DOMINANCE more than the other two (white top-hats
     wider than any stripe: a white or clipped core raises all three and drops out, its flanks
     stay; white paper and print raise all three alike)."""
-    mask = _laser_hats(bgr)[..., channel] > DOMINANCE
+    mask = _laser_hat(bgr, channel) > DOMINANCE
     v, u = np.nonzero(mask)
     if u.size < 50:
         return None

@@ -15,22 +15,12 @@ import numpy as np
 from omnisort_hw.core.laser_stripe import laser_stripe_points
 from sim_backend.camera_effects import EffectParams
 from sim_backend.scene import LaserSpec
-from sim_backend.sensor import Exposure, OpticalImage, SensorParams, expose
+from sim_backend.sensor import Exposure, OpticalImage, expose
+from tests.sim.test_sensor import PARAMS as SENSOR_TEST_PARAMS
 
 SIZE = 240
 SIGMA = 2.0
-PARAMS = SensorParams(
-    full_well_e=20000.0,
-    read_noise_e=200.0,
-    blur_sigma_px=0.0,
-    vignetting=0.0,
-    gamma=1.0,
-    jpeg_quality=95,
-    ambient=0.0,
-    ambient_tint=(1.0, 1.0, 1.0),
-    laser_uneven=0.0,
-    laser_speckle=0.0,
-)
+PARAMS = replace(SENSOR_TEST_PARAMS, full_well_e=20000.0, read_noise_e=200.0, jpeg_quality=95)
 
 
 def centre_v(u: np.ndarray) -> np.ndarray:

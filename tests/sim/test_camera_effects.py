@@ -21,6 +21,7 @@ from sim_backend.camera_effects import (
 )
 from sim_backend.scene import DegradeSpec, LaserSpec
 from sim_backend.sensor import Exposure, OpticalImage, SensorParams, expose
+from tests.sim.test_sensor import PARAMS as SENSOR_TEST_PARAMS
 
 
 def test_the_mosaic_keeps_flat_colours_and_fringes_only_sharp_edges() -> None:
@@ -86,18 +87,7 @@ def test_the_leak_follows_the_lasers_colour() -> None:
         assert 0.05 <= fx.bloom <= 0.15 and 14.0 <= fx.bloom_sigma_px <= 24.0
 
 
-PARAMS = SensorParams(
-    full_well_e=4000.0,
-    read_noise_e=20.0,
-    blur_sigma_px=1.0,
-    vignetting=0.0,
-    gamma=1.0,
-    jpeg_quality=90,
-    ambient=0.0,
-    ambient_tint=(1.0, 1.0, 1.0),
-    laser_uneven=0.0,
-    laser_speckle=0.0,
-)
+PARAMS = replace(SENSOR_TEST_PARAMS, blur_sigma_px=1.0, jpeg_quality=90)
 FX = EffectParams(
     laser_leak=(1.0, 0.1, 0.4), chromatic_px=(0.0, 0.0), bloom=0.0, bloom_sigma_px=0.0, bayer=False
 )
