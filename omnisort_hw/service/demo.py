@@ -96,10 +96,17 @@ def _brief(cmd: str, res: Mapping[str, Any]) -> str:
     return json.dumps(res)[:160]
 
 
-def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None) -> dict[str, Any]:
+def run(
+    out: Path,
+    width: int = 960,
+    views: int = 10,
+    config: Path | None = None,
+    cubes: int | None = None,
+) -> dict[str, Any]:
     """Run the demo into `out`; returns the summary (steps, replies, .rrd path, exit code).
-    `config` is a cell file to serve instead of the simulated cell's (the virtual cell's)."""
-    from omnisort_hw.pipeline.requests import CalibrateRequest
+    `config` is a cell file to serve instead of the simulated cell's (the virtual cell's);
+    `cubes`: how many the sort takes (None: all)."""
+    from omnisort_hw.pipeline.requests import CalibrateRequest, SortRequest
     from omnisort_hw.service.client import Client, CommandError
     from omnisort_hw.service.launch import start_service
     from sim_backend.dataset import checkerboard_views
@@ -125,7 +132,7 @@ def run(out: Path, width: int = 960, views: int = 10, config: Path | None = None
         ),
         ("register_robot", lambda c: c.register_robot()),
         ("map", lambda c: c.map()),
-        ("sort", lambda c: c.sort()),
+        ("sort", lambda c: c.sort(SortRequest(max_objects=cubes))),
     ]
     summary: dict[str, Any] = {"port": svc.port, "steps": []}
     try:

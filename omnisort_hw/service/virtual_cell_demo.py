@@ -18,22 +18,32 @@ from sim_backend.virtual_cell.cell_file import cell_file_text
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
 
 
-def check_truth(truth: dict[str, Any]) -> list[str]:
-    """What is wrong in the cell after a sort (empty when every cube is in its own bin and
-    nothing collided)."""
+def check_truth(truth: dict[str, Any], cubes: int | None = None) -> list[str]:
+    """What is wrong in the cell after a sort of every cube (`cubes` None) or of `cubes` of
+    them: empty when each cube asked for is in its own bin, the others in none, and nothing
+    collided."""
+    placed = [c for c in truth["cubes"] if c["bin"] is not None]
     problems = [
         f"{c['color']} cube {c['index']} is in {c['bin'] or 'no bin'} at "
         f"{[round(v) for v in c['center_S_mm']]}"
         for c in truth["cubes"]
-        if c["bin"] != c["color"]
+        if c["bin"] != c["color"] and (cubes is None or c["bin"] is not None)
     ]
+    if cubes is not None and len(placed) != cubes:
+        problems.append(f"{len(placed)} cubes in a bin, {cubes} asked for")
     problems += [f"collision: {event}" for event in truth["collisions"]]
     return problems
 
 
-def run(out: Path, width: int = 960, host: str | None = None, views: int = 10) -> dict[str, Any]:
+def run(
+    out: Path,
+    width: int = 960,
+    host: str | None = None,
+    views: int = 10,
+    cubes: int | None = None,
+) -> dict[str, Any]:
     """Start a virtual cell, run the service demo against it with the real drivers, check the
-    truth; the summary (steps, truth, figures)."""
+    truth; the summary (steps, truth, figures). `cubes`: how many the sort takes (None: all)."""
     from omnisort_hw.service.demo import run as run_service_demo
 
     out.mkdir(parents=True, exist_ok=True)
@@ -44,14 +54,14 @@ def run(out: Path, width: int = 960, host: str | None = None, views: int = 10) -
         config.write_text(cell_file_text(vc.host, state_dir="state", log_dir="logs"))
         before = vc.truth()
         t0 = time.monotonic()
-        summary = run_service_demo(out, width, views, config=config)
+        summary = run_service_demo(out, width, views, config=config, cubes=cubes)
         summary["seconds"] = round(time.monotonic() - t0, 1)
         truth = vc.truth()
         status = vc.control("status")
     summary["host"] = vc.host
     summary["truth_before"] = before
     summary["truth"] = truth
-    summary["problems"] = check_truth(truth)
+    summary["problems"] = check_truth(truth, cubes)
     sort = next((s for s in summary["steps"] if s["step"] == "sort"), None)
     placed = sum(c["bin"] == c["color"] for c in truth["cubes"])
     summary["cubes_in_their_bin"] = placed

@@ -93,9 +93,10 @@ def test_vignetting_and_uneven_light_do_not_lose_the_board(photos: list[Path]) -
 @pytest.mark.reference
 def test_a_partial_or_shifted_grid_is_not_taken_for_the_board(photos: list[Path]) -> None:
     """The board has 8x6 inner corners: asked for 8x5 or 7x6, the detector must not return
-    part of it (it would shift the board frame by a square)."""
+    part of it (it would shift the board frame by a square). Three views, every other one of
+    the first six (each refusal runs every detector the product has, about 2 s)."""
     accepted = 0
-    for path in photos[:6]:
+    for path in photos[:6:2]:
         grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
         for size in ((8, 5), (7, 6)):
             try:

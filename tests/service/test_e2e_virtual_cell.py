@@ -16,6 +16,7 @@ from sim_backend.virtual_cell.cell_file import cell_file_text
 
 pytest.importorskip("rtde_control", reason="needs ur-rtde")
 ROOT = Path(__file__).resolve().parents[2]
+CUBES = 2
 
 
 def test_shipped_virtual_cell_file_is_the_generated_one() -> None:
@@ -38,8 +39,10 @@ def test_serve_sorts_the_virtual_cell_with_the_real_drivers(
     paths (the protocol refuses relative ones)."""
     monkeypatch.chdir(tmp_path)
     # Six views of the demo's ten: the same calibration path, four renders and detections fewer
-    # (the door-agreement test calibrates from the same six and passes the verdict).
-    summary = run(Path("demo"), width=960, views=6)
+    # (the door-agreement test calibrates from the same six and passes the verdict). Two cubes
+    # of the four sorted, each pick a few seconds of the controller's real time: every bin is
+    # reached through these drivers by the commissioned page's sort (tests/ui/commissioned).
+    summary = run(Path("demo"), width=960, views=6, cubes=CUBES)
     failed = [s for s in summary["steps"] if not s["ok"]]
     assert not failed, failed
     assert summary["exit_code"] == 0
@@ -47,8 +50,8 @@ def test_serve_sorts_the_virtual_cell_with_the_real_drivers(
     assert all(c["bin"] is None for c in before["cubes"]), "cubes start outside the bins"
     truth = summary["truth"]
     assert len(truth["cubes"]) == 4
-    assert check_truth(truth) == []
-    assert summary["cubes_in_their_bin"] == 4
+    assert check_truth(truth, CUBES) == []
+    assert summary["cubes_in_their_bin"] == CUBES
     print(
         f"virtual cell sort: {summary['seconds_per_pick']} s per pick, steps:",
         {s["step"]: s["seconds"] for s in summary["steps"]},
