@@ -91,7 +91,9 @@ class CellPage:
                 self._build_operator()
                 self._build_status()
             with ui.column().classes("gap-4 grow min-w-0"):
-                self.recovery = RecoveryPanel(self.ctx, self._token, self._start_job, self.laser)
+                self.recovery = RecoveryPanel(
+                    self.ctx, self._token, self._start_job, self.laser, self.browser
+                )
                 self.recovery.build()
                 self._build_job()
                 with ui.tabs().classes("w-full") as tabs:
@@ -106,7 +108,12 @@ class CellPage:
                         self._build_sort()
                     with ui.tab_panel("Commission").classes("p-0"):
                         self.commissioning = CommissioningPanel(
-                            self.ctx, self._token, self._start_job, self._operator_send, self.laser
+                            self.ctx,
+                            self._token,
+                            self._start_job,
+                            self._operator_send,
+                            self.laser,
+                            self.browser,
                         )
                         self.commissioning.build()
                     with ui.tab_panel("3D").classes("p-0"):

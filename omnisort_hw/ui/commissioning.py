@@ -23,15 +23,19 @@ from typing import Any
 from nicegui import background_tasks, ui
 
 from omnisort_hw.pipeline.requests import DEFAULT_BOARD
-from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.ui.calibration_views import (
+    extrinsics_args,
+    parameter_rows,
+    parameter_table,
+    separation_input,
+)
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
+from omnisort_hw.ui.guided_step import GuidedStep, verdict_text
 from omnisort_hw.ui.history_panel import HistoryPanel
-from omnisort_hw.ui.job_runner import JobEnd, JobWatch
+from omnisort_hw.ui.job_runner import JobWatch
 from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
 from omnisort_hw.ui.pictures import show_picture
-from omnisort_hw.ui.recovery import parameter_rows, parameter_table
-from omnisort_hw.ui.schema_form import problems
 from omnisort_hw.ui.widgets import tag
 
 STEPS = (
@@ -42,20 +46,10 @@ STEPS = (
     "Saved versions",
 )
 Send = Callable[[str, dict[str, Any]], Awaitable[dict[str, Any] | None]]
-
-
-def verdict_text(result: Mapping[str, Any]) -> str:
-    """A reply's verdict in lines: PASS/WARN/FAIL first, then each check with its reason."""
-    verdict = result.get("verdict")
-    if not isinstance(verdict, Mapping):
-        return ""
-    return "\n".join(line.strip() for line in verdict_lines(verdict))
-
-
-def passed(result: Mapping[str, Any] | None) -> bool:
-    """True when a reply's verdict lets the next step go on (pass or warn)."""
-    verdict = (result or {}).get("verdict") or {}
-    return verdict.get("level") in ("pass", "warn")
+BOARD_DOWN = (
+    "put the board down, out of the camera's view, before the next step: the target and the "
+    "floor board must be seen alone"
+)
 
 
 def intrinsics_lines(result: Mapping[str, Any]) -> list[str]:
@@ -82,15 +76,27 @@ class CommissioningPanel:
         start_job: Callable[[str, dict[str, Any]], bool],
         send: Send,
         laser: Callable[[bool], Awaitable[None]],
+        session: str,
     ) -> None:
         """`token`: this session's; `start_job`: the page's one way to start a job; `send`: its
         one way to send a quick command (None with the refusal shown); `laser`: its way to
-        switch the laser."""
+        switch the laser; `session`: the browser session, for the log."""
         self.ctx, self.token, self.send, self.laser = ctx, token, send, laser
         self.watch = JobWatch(ctx.jobs, start_job)
         self.views: dict[str, Any] = {}  # the last `views` reply
-        self.results: dict[str, Mapping[str, Any]] = {}  # each step's last reply
         self.visible = False
+
+        def step(name: str, note: str, go: str | None, go_tag: str) -> GuidedStep:
+            go_on = self._next if go is not None else self._verified
+            return GuidedStep(f"commissioning: {name}", note, go, go_tag, go_on, session)
+
+        self.steps = {
+            "intrinsics": step("camera intrinsics", "intr-note", "Next", "intr-next"),
+            "extrinsics": step("camera and laser plane", "extr-note", "Accept", "extr-next"),
+            "register_robot": step("robot registration", "reg-note", "Next", "reg-next"),
+            "map": step("laser map", "verify-map-note", None, "verify-map-accept"),
+            "locate": step("cube location", "verify-locate-note", None, "verify-locate-accept"),
+        }
         self._what = ""  # the step whose job is being followed
         self.board_detection = LiveDetection(
             ctx, token, self._board_args, "intr-detect", self._coverage
@@ -133,8 +139,8 @@ class CommissioningPanel:
         self.views_note = tag(ui.label(""), "views-note").classes("whitespace-pre-line")
         with ui.row().classes("items-center"):
             tag(ui.button("Calibrate", on_click=self.calibrate_intrinsics), "calibrate-intr")
-            self.intr_next = tag(ui.button("Next", on_click=self.stepper.next), "intr-next")
-        self.intr_note = tag(ui.label(""), "intr-note").classes("whitespace-pre-line")
+            self.steps["intrinsics"].build_buttons()
+        self.steps["intrinsics"].build_note()
         with ui.row().classes("w-full no-wrap gap-2"):
             self.intr_report = tag(ui.image().classes("w-1/2"), "intr-report")
             self.intr_uncertainty = tag(ui.image().classes("w-1/2"), "intr-uncertainty")
@@ -145,11 +151,12 @@ class CommissioningPanel:
             "markers, borders, floor lines and stripe are drawn; then calibrate."
         )
         self.target_detection.build()
+        self.separation = separation_input("extr-separation")
         with ui.row().classes("items-center"):
             tag(ui.button("Laser on", on_click=lambda: self.laser(True)), "commission-laser")
             tag(ui.button("Calibrate", on_click=self.calibrate_extrinsics), "calibrate-extr")
-            self.extr_next = tag(ui.button("Accept", on_click=self.stepper.next), "extr-next")
-        self.extr_note = tag(ui.label(""), "extr-note").classes("whitespace-pre-line")
+            self.steps["extrinsics"].build_buttons()
+        self.steps["extrinsics"].build_note()
         with ui.row().classes("w-full no-wrap gap-2"):
             self.extr_params = parameter_table("extr-params")
             self.extr_picture = tag(ui.image().classes("grow"), "extr-picture")
@@ -162,8 +169,8 @@ class CommissioningPanel:
         self.floor_detection.build()
         with ui.row().classes("items-center"):
             tag(ui.button("Register", on_click=self.register), "commission-register")
-            self.reg_next = tag(ui.button("Next", on_click=self.stepper.next), "reg-next")
-        self.reg_note = tag(ui.label(""), "reg-note").classes("whitespace-pre-line")
+            self.steps["register_robot"].build_buttons()
+        self.steps["register_robot"].build_note()
 
     def _build_verification(self) -> None:
         ui.label(
@@ -173,8 +180,9 @@ class CommissioningPanel:
         with ui.row().classes("items-center"):
             tag(ui.button("Map the laser line", on_click=self.verify_map), "verify-map")
             tag(ui.button("Locate the cubes", on_click=self.verify_locate), "verify-locate")
-        self.map_note = tag(ui.label(""), "verify-map-note").classes("whitespace-pre-line")
-        self.locate_note = tag(ui.label(""), "verify-locate-note").classes("whitespace-pre-line")
+        for what in ("map", "locate"):
+            self.steps[what].build_note()
+            self.steps[what].build_buttons()
         self.commissioned = tag(ui.label(""), "commissioned").classes("font-bold")
 
     # -- showing --------------------------------------------------------------------------
@@ -190,12 +198,14 @@ class CommissioningPanel:
             detection.active = self.visible and i == step
         if self.visible and step == STEPS.index("Saved versions"):
             background_tasks.create(self.history.load(), name="history")
-        for button, what in (
-            (self.intr_next, "intrinsics"),
-            (self.extr_next, "extrinsics"),
-            (self.reg_next, "register_robot"),
-        ):
-            button.set_visibility(passed(self.results.get(what)))
+
+    def _next(self) -> None:
+        self.stepper.next()
+
+    def _verified(self) -> None:
+        """The verdict line once the map and the location have each passed or been accepted."""
+        if all(self.steps[k].accepted for k in ("map", "locate")):
+            self.commissioned.text = "Commissioned: every step passed; the cell may sort."
 
     def _board_size(self) -> str:
         return str(self.board.value or DEFAULT_BOARD)
@@ -213,15 +223,9 @@ class CommissioningPanel:
 
     # -- acting: the views ------------------------------------------------------------------
 
-    def _problems(self, cmd: str, args: dict[str, Any]) -> list[str]:
-        """What the command's schema finds wrong with `args` (nothing before sign-in: the
-        service refuses then)."""
-        schema = self.ctx.operators.schema(cmd)
-        return problems(schema, args) if schema is not None else []
-
     async def _views(self, args: dict[str, Any]) -> None:
         """One `views` request, checked against its schema first; its reply shown."""
-        found = self._problems("views", args)
+        found = self.ctx.operators.problems("views", args)
         if found:
             self.views_note.text = "not sent: " + "; ".join(found)
             return
@@ -246,10 +250,20 @@ class CommissioningPanel:
 
     # -- acting: the jobs -------------------------------------------------------------------
 
-    def _start(self, what: str, cmd: str, args: dict[str, Any]) -> bool:
+    def _start(self, what: str, cmd: str, args: dict[str, Any], doing: str = "") -> bool:
+        """Start a step's job (`what`: the step), its request checked against the command's
+        schema first; the step's note says what it is doing, or why it was not sent."""
+        step = self.steps.get(what)
+        if step is not None and (found := self.ctx.operators.problems(cmd, args)):
+            step.refused("; ".join(found))
+            return False
         if not self.watch.start(cmd, args):
             return False
         self._what = what
+        if step is not None:
+            step.waiting(doing)
+            if what in ("map", "locate"):
+                self.commissioned.text = ""
         return True
 
     def calibrate_intrinsics(self) -> None:
@@ -259,27 +273,22 @@ class CommissioningPanel:
             "board": self._board_size(),
             "square_mm": self.square.value,
         }
-        if found := self._problems("calibrate", args):
-            self.intr_note.text = "not sent: " + "; ".join(found)
-            return
-        if self._start("intrinsics", "calibrate", args):
-            self.intr_note.text = f"calibrating the lens from {self.views.get('count', 0)} views..."
+        doing = f"calibrating the lens from {self.views.get('count', 0)} views..."
+        self._start("intrinsics", "calibrate", args, doing)
 
     def calibrate_extrinsics(self) -> None:
-        if self._start("extrinsics", "calibrate", {"what": "extrinsics"}):
-            self.extr_note.text = "calibrating camera and laser plane from a capture..."
+        args = extrinsics_args(self.separation)
+        self._start("extrinsics", "calibrate", args, "calibrating camera and laser plane...")
 
     def register(self) -> None:
-        if self._start("register_robot", "register_robot", {}):
-            self.reg_note.text = "registering the robot base from the floor board..."
+        doing = "registering the robot base from the floor board..."
+        self._start("register_robot", "register_robot", {}, doing)
 
     def verify_map(self) -> None:
-        if self._start("map", "map", {"points": True}):
-            self.map_note.text = "mapping the laser line..."
+        self._start("map", "map", {"points": True}, "mapping the laser line...")
 
     def verify_locate(self) -> None:
-        if self._start("locate", "locate", {}):
-            self.locate_note.text = "locating the cubes..."
+        self._start("locate", "locate", {}, "locating the cubes...")
 
     async def refresh(self) -> None:
         """When the job a step started has ended: show its reply and verdict, or its error."""
@@ -292,39 +301,34 @@ class CommissioningPanel:
         if what == "restore":
             await self.history.ended(end.ok, end.message, dict(end.result or {}))
             return
-        self.results.pop(what, None)
-        if end.result is not None:
-            self.results[what] = end.result
-        note = {
-            "intrinsics": self.intr_note,
-            "extrinsics": self.extr_note,
-            "register_robot": self.reg_note,
-            "map": self.map_note,
-            "locate": self.locate_note,
-        }[what]
-        if not end.ok or end.result is None:
-            note.text = f"FAIL: {end.message}\nfix the cause and retake"
-        else:
-            await self._show_end(what, end, note)
-        self._follow_step()
+        step = self.steps[what]
+        result = end.result if end.ok and end.result is not None else None
+        level = step.ended(end, self._lines(what, result))
+        if result is not None:
+            await self._show_pictures(what, result, step.note)
+        if what in ("map", "locate") and level == "pass":
+            self._verified()
 
-    async def _show_end(self, what: str, end: JobEnd, note: Any) -> None:
-        result = end.result or {}
-        lines = [verdict_text(result)]
+    def _lines(self, what: str, result: Mapping[str, Any] | None) -> list[str]:
+        """A step's own figures under its verdict."""
+        if result is None:
+            return []
+        if what == "intrinsics":
+            failed = (result.get("verdict") or {}).get("level") == "fail"
+            return intrinsics_lines(result) + ([] if failed else [BOARD_DOWN])
+        if what == "map":
+            return [f"{result.get('points_on_plane', 0)} points on the laser plane"]
+        if what == "locate":
+            return [f"{result.get('count', 0)} cubes located"]
+        return []
+
+    async def _show_pictures(self, what: str, result: Mapping[str, Any], note: Any) -> None:
         pictures: list[tuple[str, Any]] = []
         if what == "intrinsics":
-            lines += intrinsics_lines(result)
             pictures = [("report", self.intr_report), ("uncertainty_png", self.intr_uncertainty)]
         elif what == "extrinsics":
             self.extr_params.rows = parameter_rows(result)
             self.extr_params.update()
             pictures = [("overlay_png", self.extr_picture)]
-        elif what == "map":
-            lines.append(f"{result.get('points_on_plane', 0)} points on the laser plane")
-        elif what == "locate":
-            lines.append(f"{result.get('count', 0)} cubes located")
-        note.text = "\n".join(line for line in lines if line)
         for key, image in pictures:  # after the note: a picture not sent says so in it
             await show_picture(self.ctx, self.token(), result.get(key), image, note)
-        if all(passed(self.results.get(k)) for k in ("map", "locate")):
-            self.commissioned.text = "Commissioned: every step passed; the cell may sort."

@@ -8,6 +8,7 @@ import threading
 from typing import Any
 
 from omnisort_hw.ui.link import ClientError, CommandError, ServiceLink
+from omnisort_hw.ui.schema_form import problems
 
 
 class SignInError(Exception):
@@ -56,3 +57,9 @@ class Operators:
         with self._lock:
             spec = self.commands.get(command)
         return dict(spec["args"]) if spec else None
+
+    def problems(self, command: str, args: dict[str, Any]) -> list[str]:
+        """What `command`'s schema finds wrong with `args`, each naming its field (nothing
+        before a sign-in: the service refuses then)."""
+        schema = self.schema(command)
+        return problems(schema, args) if schema is not None else []

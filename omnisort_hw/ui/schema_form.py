@@ -101,7 +101,9 @@ def problems(schema: Mapping[str, Any], args: Mapping[str, Any]) -> list[str]:
     for err in sorted(Draft202012Validator(schema).iter_errors(dict(args)), key=str):
         field = ".".join(str(p) for p in err.absolute_path) or "arguments"
         detail = err.message
-        if err.validator == "anyOf":  # the reason of the alternative that is not `null`
+        if err.instance is None and err.absolute_path:  # an empty field the command needs here
+            detail = "no value given: this request needs one"
+        elif err.validator == "anyOf":  # the reason of the alternative that is not `null`
             alts = err.schema.get("anyOf", [])
             real = [
                 e

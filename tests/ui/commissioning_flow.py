@@ -148,10 +148,29 @@ def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS
     laps.restart()
 
 
-def rest_in_page(page: Page, laps: Laps, shots: bool = True) -> None:
+def calibrated_extrinsics(page: Page, separation_mm: float | None) -> str:
+    """The Commission tab's calibration of the camera and laser plane with this wall
+    separation typed (None: the field emptied, the cell file's); its note once it has ended."""
+    page.type("extr-separation", "" if separation_mm is None else f"{separation_mm:.1f}")
+    page.click("calibrate-extr")
+    wait_for("the job sent", lambda: page.text("extr-note").endswith("..."), UI_S, 0.1)
+    return str(
+        wait_for(
+            "the calibration",
+            lambda: (t := page.text("extr-note")) and not t.endswith("...") and t,
+            STEP_TIMEOUT_S,
+            0.25,
+        )
+    )
+
+
+def rest_in_page(
+    page: Page, laps: Laps, shots: bool = True, wrong_separation_mm: float | None = None
+) -> None:
     """The Commission tab's steps after the intrinsics: the camera and the laser plane from
     the two-sided target, the robot registration, the verification's map and locate (laps:
-    extrinsics, registration, verification)."""
+    extrinsics, registration, verification). `wrong_separation_mm`: first a calibration with
+    this separation typed, whose FAIL must leave no way on (not in the laps)."""
 
     def shot(name: str, at: str) -> None:
         if shots:
@@ -165,6 +184,13 @@ def rest_in_page(page: Page, laps: Laps, shots: bool = True) -> None:
         0.25,
     )
     shot("commission_target", "extr-detect-image")
+    if wrong_separation_mm is not None:
+        laps.lap("extrinsics, target")
+        failed = calibrated_extrinsics(page, wrong_separation_mm)
+        assert failed.startswith("FAIL") and "floor board's scale" in failed, failed
+        assert not page.visible("extr-next") and not page.visible("extr-next-warn")
+        page.type("extr-separation", "")
+        laps.restart()
     page.click("calibrate-extr")
     _step_passed(page, "extr-note")
     assert "laser_distance_mm" in page.el("extr-params").text

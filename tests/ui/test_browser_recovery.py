@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.service.launch import ServiceProcess
 from tests.ui.browser_page import UI_S, Page, served_page, service_status, wait_for
 from tests.ui.ui_procs import (
@@ -26,15 +27,33 @@ KNOCK_DEG = 0.3
 
 
 @pytest.fixture()
-def knocked(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page]]:
+def knocked(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page, Path]]:
     config = sim_cell_file(tmp_path, width=960, realtime=False, view_period_s=2.0)
     knock_calibration(config, KNOCK_DEG, (0.0, 1.0, 0.0))
-    with served_page(config, tmp_path) as served:
-        yield served
+    with served_page(config, tmp_path) as (svc, page):
+        yield svc, page, config
 
 
-def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, Page]) -> None:
-    svc, page = knocked
+def calibrated(page: Page, separation_mm: float | None) -> str:
+    """The recovery's calibration with this wall separation typed (None: the field emptied, the
+    cell file's); its note once the job has ended."""
+    page.type("calib-separation", "" if separation_mm is None else f"{separation_mm:.1f}")
+    page.click("calibrate")
+    wait_for("the job sent", lambda: page.text("calib-note").endswith("..."), UI_S, 0.1)
+    return str(
+        wait_for(
+            "the calibration",
+            lambda: (t := page.text("calib-note")) and not t.endswith("...") and t,
+            180,
+            0.25,
+        )
+    )
+
+
+def test_recovery_after_a_bump_to_a_sorted_cell(
+    knocked: tuple[ServiceProcess, Page, Path], tmp_path: Path
+) -> None:
+    svc, page, config = knocked
     page.click("start-sort")
     page.confirm()
     refused = wait_for(
@@ -75,14 +94,25 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     page.shot("ui_recovery_target", at="recovery")
     page.click("placed")
     wait_for("the calibration step", lambda: page.visible("calibrate"), UI_S)
-    page.click("calibrate")
-    note = wait_for(
-        "the calibration",
-        lambda: page.visible("accept-calib") and page.text("calib-note"),
-        180,
-        0.5,
-    )
+
+    # A wall separation typed wrong: 3 % is a FAIL of the scale check (nothing accepts it),
+    # 1 % a WARN (only its explicit acceptance goes on, logged; taken, then retaken).
+    separation = load_cell_config(config).target.separation_mm
+    assert separation is not None
+    note = calibrated(page, 1.03 * separation)
+    assert note.startswith("FAIL") and "floor board's scale" in note, note
+    assert not page.visible("accept-calib") and not page.visible("accept-calib-warn")
+    note = calibrated(page, 1.01 * separation)
+    assert note.startswith("WARN") and "floor board's scale" in note, note
+    assert not page.visible("accept-calib") and page.visible("accept-calib-warn")
+    page.click("accept-calib-warn")
+    wait_for("the registration step", lambda: page.visible("register"), UI_S)
+    logged = (tmp_path / "ui.log").read_text()
+    assert "recovery: camera and laser plane accepted with warning" in logged, logged[-2000:]
+    page.click("back-to-calib")
+    note = calibrated(page, None)
     assert note.startswith("PASS"), note
+    assert page.visible("accept-calib") and not page.visible("accept-calib-warn")
     rows = page.el("calib-params").text
     for name in ("cam_roll_deg", "cam_pitch_deg", "laser_distance_mm"):
         assert name in rows, rows
@@ -105,7 +135,8 @@ def test_recovery_after_a_bump_to_a_sorted_cell(knocked: tuple[ServiceProcess, P
     wait_for("the check step", lambda: page.visible("check"), UI_S)
     page.click("check")
     wait_for("the check", lambda: page.visible("recovery-done"), 120, 0.5)
-    assert page.text("check-note").startswith("no drift"), page.text("check-note")
+    checked = page.text("check-note")
+    assert checked.startswith("PASS") and "no drift" in checked, checked
     st = service_status(svc.port)
     assert not st["drift"]["motion_refused"] and st["motion_allowed"], st["drift"]
     wait_for("the banner gone", lambda: not page.visible("drift"), UI_S)

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 
 import pytest
 
+from omnisort_hw.config.cell import load_cell_config
 from tests.sim.virtual_cell_fixture import virtual_cell
 from tests.ui import commissioning_flow as flow
 from tests.ui.browser_page import served_page
@@ -41,5 +42,8 @@ def intrinsics_from_views(cell_page: CellPage) -> CellPage:
 def commissioned(intrinsics_from_views: CellPage) -> Commissioned:
     """Every step of the Commission tab done, to the verification's verdict."""
     c = intrinsics_from_views
-    flow.rest_in_page(c.page, c.laps)
+    # A separation typed 3 % wrong first: the scale check's FAIL, which nothing accepts.
+    separation = load_cell_config(c.tmp / "cell.toml").target.separation_mm
+    assert separation is not None
+    flow.rest_in_page(c.page, c.laps, wrong_separation_mm=1.03 * separation)
     return Commissioned(c.vc, c.svc, c.page, c.tmp, c.laps.total(), c.vc.truth())

@@ -1,0 +1,146 @@
+"""One guided step's end, for commissioning and recovery alike: what the verdict of the reply
+lets the technician do next.
+
+- PASS: the way on (Next, Accept) is shown.
+- WARN: the plain way on stays hidden; only "Accept with warning" goes on, and it is logged
+  (the interface's log, the journal under systemd) with the browser session and the verdict's
+  figures, because a warning taken is a decision someone made.
+- FAIL, or a refused or failed job: no way on; the note says why (each check with its figure
+  and threshold) and what to do (the failing checks' advice), and the step is retaken.
+
+The page's two guided flows build their steps from this one component, so a FAIL cannot be
+accepted in one flow and not in the other.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from nicegui import ui
+
+from omnisort_hw.pipeline.replies import Level
+from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.ui.job_runner import JobEnd
+from omnisort_hw.ui.widgets import tag
+
+log = logging.getLogger(__name__)
+
+LEVELS: tuple[Level, ...] = ("pass", "warn", "fail")
+RETAKE = "the step cannot be accepted: fix the cause above and retake it"
+WARNED = "accept with warning to go on, or fix the cause above and retake"
+
+
+def verdict_text(result: Mapping[str, Any] | None) -> str:
+    """A reply's verdict in lines: PASS/WARN/FAIL first, then each check with its figure, its
+    threshold and, when not a pass, what to do; "" for a reply without one."""
+    verdict = (result or {}).get("verdict")
+    if not isinstance(verdict, Mapping):
+        return ""
+    return "\n".join(line.strip() for line in verdict_lines(verdict))
+
+
+def level_of(end: JobEnd) -> Level:
+    """The step's level: its verdict's; fail for a job that failed or was refused; pass for a
+    reply that carries no verdict."""
+    if not end.ok or end.result is None:
+        return "fail"
+    verdict = end.result.get("verdict")
+    if not isinstance(verdict, Mapping):
+        return "pass"
+    return next((lv for lv in LEVELS if lv == verdict.get("level")), "fail")
+
+
+class GuidedStep:
+    """A step's note, its way on (`go`, shown on PASS) and its "Accept with warning" (shown on
+    WARN, tagged `{go_tag}-warn`); `ended()` shows a job's end, `waiting()` a job started."""
+
+    def __init__(
+        self,
+        name: str,
+        note_tag: str,
+        go_label: str | None,
+        go_tag: str,
+        go_on: Callable[[], None],
+        session: str,
+    ) -> None:
+        """`name`: the step, for the log; `go_label`: the way on's label (None: a step with no
+        way on of its own, such as a verification, whose acceptance is `accepted`); `session`:
+        the browser session that accepts, for the log."""
+        self.name, self.note_tag, self.go_label, self.go_tag = name, note_tag, go_label, go_tag
+        self.go_on, self.session = go_on, session
+        self.level: Level | None = None  # the last end's, None before one or while waiting
+        self.accepted_warning = False
+
+    @property
+    def accepted(self) -> bool:
+        """The step may be left: it passed, or its warning was accepted."""
+        return self.level == "pass" or (self.level == "warn" and self.accepted_warning)
+
+    def build_note(self) -> None:
+        self.note = tag(ui.label(""), self.note_tag).classes("whitespace-pre-line")
+
+    def build_buttons(self) -> None:
+        """The way on and the acceptance of a warning, hidden until an end allows them."""
+        self.go = (
+            tag(ui.button(self.go_label, on_click=self.go_on), self.go_tag)
+            if self.go_label is not None
+            else None
+        )
+        self.warn = tag(
+            ui.button("Accept with warning", on_click=self.accept_warning, color="amber-9"),
+            f"{self.go_tag}-warn",
+        )
+        self._show_buttons()
+
+    def _show_buttons(self) -> None:
+        if self.go is not None:
+            self.go.set_visibility(self.accepted)
+        self.warn.set_visibility(self.level == "warn" and not self.accepted_warning)
+
+    def reset(self, text: str = "") -> None:
+        """Back to before any end (a step opened again, or a job started: `text` says so)."""
+        self.level, self.accepted_warning = None, False
+        self.note.text = text
+        self._show_buttons()
+
+    waiting = reset
+
+    def refused(self, why: str) -> None:
+        """A request not sent (the schema or the page refused it): why, and no way on."""
+        self.reset(f"not sent: {why}")
+
+    def ended(self, end: JobEnd, lines: list[str] | None = None) -> Level:
+        """Show how the job ended: its verdict (or its error) and the step's own `lines`, then
+        what the level allows."""
+        level = level_of(end)
+        if not end.ok or end.result is None:
+            text = [f"FAIL: {end.message}"]
+        else:
+            text = [verdict_text(end.result) or f"{end.cmd} done", *(lines or [])]
+        if level == "fail":
+            text.append(RETAKE)
+        elif level == "warn":
+            text.append(WARNED)
+        self.level, self.accepted_warning = level, False
+        self.note.text = "\n".join(line for line in text if line)
+        self._show_buttons()
+        return level
+
+    def accept_warning(self) -> None:
+        """The operator takes the warning: logged, then on as on a pass."""
+        if self.level != "warn":
+            return
+        self.accepted_warning = True
+        log.warning(
+            "%s accepted with warning by the operator of browser session %s: %s",
+            self.name,
+            self.session,
+            " | ".join(self.note.text.splitlines()[:-1]),
+        )
+        self.note.text += "\naccepted with warning (logged)"
+        self._show_buttons()
+        if self.go is None:
+            return
+        self.go_on()

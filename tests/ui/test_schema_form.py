@@ -1,0 +1,17 @@
+"""What the page says of a request its schema refuses, before sending it: each problem names
+its field, and an empty field the request needs says so (not the schema's `null` rule)."""
+
+from __future__ import annotations
+
+from omnisort_hw.pipeline.request_fields import schema_of
+from omnisort_hw.pipeline.requests import CalibrateRequest
+from omnisort_hw.ui.schema_form import problems
+
+
+def test_an_empty_needed_field_is_named_as_missing() -> None:
+    schema = schema_of(CalibrateRequest, "calibrate")
+    args = {"what": "intrinsics", "folder": "/views", "board": "9x6", "square_mm": None}
+    assert problems(schema, args) == ["square_mm: no value given: this request needs one"]
+    assert problems(schema, {**args, "square_mm": 20.0}) == []
+    low = problems(schema, {"what": "extrinsics", "separation_mm": 0.5})
+    assert low == ["separation_mm: 0.5 is less than the minimum of 1.0"], low
