@@ -23,6 +23,7 @@ from omnisort_hw.errors import NotAvailableError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
 from omnisort_hw.pipeline.gripper_load import InFlightJournal, resolve_before_sort
 from omnisort_hw.pipeline.pick_cycle import Compute
+from omnisort_hw.pipeline.request_fields import ArgumentError
 from omnisort_hw.pipeline.requests import SortRequest
 from omnisort_hw.pipeline.sort import Sorter, SortVerifier
 from omnisort_hw.pipeline.sort_report import SortReport
@@ -101,6 +102,14 @@ def run(
         raise NotAvailableError(
             "the sorting pipeline needs a [sorting] section in the cell configuration (bins, "
             "obstacles, cube size, home pose; or from_scene = true)"
+        )
+    binless = [c for c in request.colors or () if cfg.bin_for(c) is None]
+    if binless:  # every cube would be skipped: refused before anything moves
+        raise ArgumentError(
+            "colors",
+            f"sort: argument 'colors': no bin for {', '.join(binless)} (the cell's bins: "
+            + ", ".join(b.color for b in cfg.bins)
+            + ")",
         )
     calibration = rig.calibration_source()
     calibration.check_motion_allowed()

@@ -5,6 +5,7 @@ send is left out. Pure functions of the reply, so each door reads it the same wa
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
 from typing import Any
@@ -80,6 +81,13 @@ def summarise(status: dict[str, Any]) -> str:
     return "\n".join(f"{k:<{width}}{v}" for k, v in rows)
 
 
+def motion_offered(status: Mapping[str, Any]) -> bool:
+    """The service would move the arm now: its calibration usable, not in fault, and no drift
+    refusing motion."""
+    drift = status.get("drift") or {}
+    return bool(status.get("motion_allowed")) and not drift.get("motion_refused")
+
+
 def status_rows(status: dict[str, Any]) -> list[tuple[str, str]]:
     """`summarise`'s rows: (heading, text), the heading empty on a continuation row."""
     rows: list[tuple[str, str]] = []
@@ -88,7 +96,7 @@ def status_rows(status: dict[str, Any]) -> list[tuple[str, str]]:
     rows.append(("job", _job(status.get("job"))))
     cal = status.get("calibration") or {}
     drift = status.get("drift") or {}
-    if status.get("motion_allowed") and not drift.get("motion_refused"):
+    if motion_offered(status):
         rows.append(("motion", "allowed"))
     else:
         why = [

@@ -9,7 +9,8 @@ from typing import Any
 
 from nicegui import ui
 
-from omnisort_hw.ui.widgets import tag
+from omnisort_hw.ui.schema_form import typed_number
+from omnisort_hw.ui.widgets import number_input, tag
 
 PARAMETER_UNITS = {"_deg": "deg", "_mm": "mm"}
 PARAMETER_COLUMNS = ("name", "value", "sigma")
@@ -42,13 +43,14 @@ def parameter_table(name: str) -> Any:
 
 def separation_input(name: str) -> Any:
     """The walls' measured separation, named `name` for the tests; empty by default."""
-    return tag(ui.number(SEPARATION_LABEL).classes("w-72"), name)
+    return number_input(SEPARATION_LABEL, name).classes("w-72")
 
 
 def extrinsics_args(separation: Any) -> dict[str, Any]:
     """The `calibrate` arguments of the camera and laser plane's calibration, with the
     separation typed in the `separation_input` (left out when it is empty)."""
     args: dict[str, Any] = {"what": "extrinsics"}
-    if separation.value is not None:
-        args["separation_mm"] = separation.value
+    typed = typed_number(separation.value)
+    if typed is not None:
+        args["separation_mm"] = typed  # what is not a number, as typed: the schema names it
     return args

@@ -19,6 +19,7 @@ from nicegui import app, run, ui
 
 from omnisort_hw.service.status_reading import (
     drift_alarm,
+    motion_offered,
     pick_log,
     picks_per_minute,
     sort_progress,
@@ -66,6 +67,8 @@ class CellPage:
         self.sort_inputs: dict[str, Any] = {}
         self._picks_shown: list[dict[str, Any]] = []
         self.simulator: SimulatorPanel | None = None
+        self._stale: Callable[[], bool] | None = None  # when the message shown is stale
+        self.start_button: Any = None
 
     # -- building -------------------------------------------------------------------------
 
@@ -213,18 +216,21 @@ class CellPage:
                 if f.kind == "bool":
                     field: Any = ui.checkbox(f.label, value=bool(f.default))
                 elif f.kind in ("int", "number"):
-                    field = ui.number(f.label, value=f.default).classes("w-40")
+                    text = "" if f.default is None else f"{f.default:g}"
+                    field = ui.input(f.label, value=text).classes("w-40")
                 elif f.kind == "choice":
                     field = ui.select(list(f.choices), label=f.label, value=f.default)
                 else:
                     field = ui.input(f.label + (" (a, b)" if f.kind == "list" else ""))
                 self.sort_inputs[f.name] = tag(field.tooltip(f.help), f"sort-{f.name}")
-            tag(ui.button("Start sort", on_click=self.start_sort), "start-sort")
+            self.start_button = tag(ui.button("Start sort", on_click=self.start_sort), "start-sort")
 
     # -- reading --------------------------------------------------------------------------
 
     def refresh(self) -> None:
         snap = self.ctx.link.snapshot
+        if self._stale is not None and self._stale():
+            self.message.text, self._stale = "", None
         operator = self.ctx.operators.signed_in(self.browser)
         if self.ctx.operators.allowed:
             self.sign_in_row.set_visibility(not operator)
@@ -245,6 +251,10 @@ class CellPage:
             self.down.text = f"{snap.problem}; trying again every {self.ctx.link.period_s:g} s"
             self.down.set_visibility(True)
             self.link_label.text = "service: unreachable"
+            self._show_start(False)
+            if self.rows.rows:  # the last status is not the cell's now
+                self.rows.rows = []
+                self.rows.update()
             return
         status: dict[str, Any] = dict(snap.status)
         self.down.set_visibility(False)
@@ -262,6 +272,13 @@ class CellPage:
             self.rows.rows = rows
             self.rows.update()
         self._show_job(status)
+        self._show_start(motion_offered(status) and state in ("idle", "stopped"))
+
+    def _show_start(self, allowed: bool) -> None:
+        """Start sort is enabled only when the service would take a sort now."""
+        button = self.start_button  # built with the form, at the sign-in
+        if button is not None and button.enabled != allowed:
+            button.set_enabled(allowed)
 
     def _show_job(self, status: dict[str, Any]) -> None:
         job = status.get("job")
@@ -317,16 +334,27 @@ class CellPage:
 
     # -- acting ---------------------------------------------------------------------------
 
-    def say(self, text: str, kind: str = "info") -> None:
+    def say(self, text: str, kind: str = "info", until: Callable[[], bool] | None = None) -> None:
+        """A message under the header (and a notification); `until`: once it holds, the
+        message is stale and `refresh` takes it away (a job that has ended, a service back)."""
         self.message.text = text
+        self._stale = until
         ui.notify(text, type=kind)  # type: ignore[arg-type]
+
+    def _unreachable(self, cmd: str) -> None:
+        """Not sent for want of the service: said until the service answers again."""
+        self.say(
+            f"{cmd}: not sent, the service is unreachable",
+            "negative",
+            lambda: self.ctx.link.snapshot.reachable,
+        )
 
     async def _send(
         self, cmd: str, args: dict[str, Any] | None = None, token: str | None = None
     ) -> dict[str, Any] | None:
         """One quick command; its result, or None with the refusal shown."""
         if not self.ctx.link.snapshot.reachable:
-            self.say(f"{cmd}: not sent, the service is unreachable", "negative")
+            self._unreachable(cmd)
             return None
         try:
             return await run.io_bound(self.ctx.link.execute, cmd, args, token)
@@ -413,14 +441,15 @@ class CellPage:
         if token is None:
             return False
         if not self.ctx.link.snapshot.reachable:
-            self.say(f"{cmd}: not sent, the service is unreachable", "negative")
+            self._unreachable(cmd)
             return False
         try:
             self.ctx.jobs.start(cmd, args, token)
         except RuntimeError as exc:
             self.say(f"{cmd}: not sent: {exc}", "negative")
             return False
-        self.say(f"{cmd} started")
+        ended = self.ctx.jobs.ended
+        self.say(f"{cmd} started", until=lambda: self.ctx.jobs.ended > ended)
         return True
 
     def map_line(self) -> None:
@@ -443,7 +472,7 @@ class CellPage:
             return
         snap = self.ctx.link.snapshot
         if snap.status is None:
-            self.say("sort: not sent, the service is unreachable", "negative")
+            self._unreachable("sort")
             return
         if self.ctx.jobs.running is not None:
             self.say(f"sort: not sent: {self.ctx.jobs.running} started here is still running")

@@ -36,7 +36,8 @@ from omnisort_hw.ui.history_panel import HistoryPanel
 from omnisort_hw.ui.job_runner import JobWatch
 from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
 from omnisort_hw.ui.pictures import show_picture
-from omnisort_hw.ui.widgets import tag
+from omnisort_hw.ui.schema_form import typed_number
+from omnisort_hw.ui.widgets import number_input, tag
 
 STEPS = (
     "Camera intrinsics",
@@ -130,7 +131,7 @@ class CommissioningPanel:
         )
         with ui.row().classes("items-center gap-4"):
             self.board = tag(ui.input("board (inner corners)", value=DEFAULT_BOARD), "board")
-            self.square = tag(ui.number("square (mm)", min=1.0, format="%.2f"), "square")
+            self.square = number_input("square (mm)", "square")
         self.board_detection.build()
         with ui.row().classes("items-center"):
             tag(ui.button("Add view", on_click=self.add_view), "add-view")
@@ -271,7 +272,7 @@ class CommissioningPanel:
             "what": "intrinsics",
             "folder": str(self.views.get("folder", "")),
             "board": self._board_size(),
-            "square_mm": self.square.value,
+            "square_mm": typed_number(self.square.value),
         }
         doing = f"calibrating the lens from {self.views.get('count', 0)} views..."
         self._start("intrinsics", "calibrate", args, doing)

@@ -4,6 +4,7 @@ shows the problems; nothing here knows a command by name."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -76,12 +77,33 @@ def form_fields(schema: Mapping[str, Any]) -> list[FormField]:
     return out
 
 
+def typed_number(text: Any, integer: bool = False) -> Any:
+    """A number field's text as the number it reads as (an int for an integer field when it is
+    whole); None when empty. What is not a finite number stays the text, so the schema refuses
+    it by name: a browser's own number field would report it as empty, and an empty field
+    means the default (`abc` in max_objects would have sorted every cube)."""
+    if not isinstance(text, str):
+        return text
+    text = text.strip()
+    if not text:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        return text
+    if not math.isfinite(value):
+        return text
+    return int(value) if integer and value.is_integer() else value
+
+
 def args_from_form(fields: list[FormField], typed: Mapping[str, Any]) -> dict[str, Any]:
     """The `args` object of what was typed: empty fields are left out (the service's default),
-    a list is read as `a, b`, and a number as typed (the schema judges it)."""
+    a list is read as `a, b`, and a number as it reads (`typed_number`; the schema judges it)."""
     args: dict[str, Any] = {}
     for f in fields:
         value = typed.get(f.name)
+        if f.kind in ("int", "number"):
+            value = typed_number(value, f.kind == "int")
         if value is None or (isinstance(value, str) and not value.strip()):
             continue
         if f.kind == "list" and isinstance(value, str):

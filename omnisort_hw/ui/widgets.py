@@ -26,3 +26,10 @@ async def confirm(text: str) -> bool:
     result = await dialog
     dialog.clear()
     return result is True
+
+
+def number_input(label: str, name: str, value: float | None = None) -> Any:
+    """A number typed as text, named `name` for the tests: read it with
+    `schema_form.typed_number`, so that what is not a number reaches the schema's check as
+    typed (a browser's number field reports it as empty, which means the default)."""
+    return tag(ui.input(label, value="" if value is None else f"{value:g}"), name)

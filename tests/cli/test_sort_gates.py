@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -47,7 +48,7 @@ def _cell(tmp_path: Path) -> tuple[Path, CalibrationStore]:
     return cfg, store
 
 
-def service_refusal(cfg: Path) -> dict[str, str]:
+def service_refusal(cfg: Path, request: Any = None) -> dict[str, str]:
     """The error the service's cell raises for a sort on the same cell file and state."""
     import threading
 
@@ -59,7 +60,7 @@ def service_refusal(cfg: Path) -> dict[str, str]:
     cell = Cell.from_settings(load_cell_config(cfg))
     cell.connect()
     try:
-        cell.jobs.sort(SortRequest(), threading.Event())
+        cell.jobs.sort(request or SortRequest(), threading.Event())
     except OmnisortError as exc:
         return {"code": exc.code, "message": str(exc)}
     finally:
@@ -84,6 +85,21 @@ def test_a_drift_on_record_refuses_the_cli_sort(tmp_path: Path, capsys) -> None:
     from omnisort_hw.cli.file_rig import FileRig
 
     FileRig(config=cfg).check_drift()
+
+
+def test_a_colour_with_no_bin_refuses_the_sort_before_anything_moves(
+    tmp_path: Path, capsys
+) -> None:
+    """Every cube would be skipped: refused with the field and the cell's bins, by both doors
+    (the service's before its gates, so on a good calibration too)."""
+    from omnisort_hw.pipeline.requests import SortRequest
+
+    cfg, _ = _cell(tmp_path)
+    code = main(["sort", "--config", str(cfg), "--colors", "red,purple", "--json"])
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert code == 2 and err["code"] == "bad_input", err
+    assert "'colors': no bin for purple" in err["message"] and "red" in err["message"], err
+    assert service_refusal(cfg, SortRequest(colors=("red", "purple"))) == err
 
 
 def test_a_tampered_calibration_refuses_the_cli_sort(tmp_path: Path, capsys) -> None:

@@ -79,6 +79,30 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     assert st["last_run"]["job"] == "locate", "an invalid sort reached the service"
     assert st["service"]["errors"] == before["errors"], "the service refused something sent"
     page.shot("ui_bad_input")
+    # Not a number: named as typed, not read as an empty field (which would sort every cube).
+    page.type("sort-max_objects", "abc")
+    page.click("start-sort")
+    wait_for(
+        "the refusal of abc", lambda: "'abc' is not of type" in page.text("sort-problems"), UI_S
+    )
+    assert not page.visible("confirm"), "a sort of every cube was offered for 'abc'"
+    # A colour with no bin: refused by the service before anything moves, and the page's
+    # "sort started" goes once the refusal is shown.
+    page.type("sort-max_objects", "")
+    page.type("sort-colors", "purple")
+    page.click("start-sort")
+    page.confirm()
+    refused = wait_for(
+        "the refusal of purple",
+        lambda: "no bin for purple" in (t := page.text("job-end")) and t,
+        UI_S,
+    )
+    assert "bad_input" in refused, refused
+    wait_for("the stale message gone", lambda: "started" not in page.text("message"), UI_S)
+    assert service_status(svc.port)["last_run"]["job"] != "sort" or not [
+        ev for ev in service_status(svc.port)["last_run"]["progress"] if "cube" in ev
+    ], "a cube was picked for a colour with no bin"
+    page.type("sort-colors", "")
 
     # Sort every cube: confirmed, then watched until the first pick is logged.
     page.type("sort-max_objects", "")

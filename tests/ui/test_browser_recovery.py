@@ -64,6 +64,8 @@ def test_recovery_after_a_bump_to_a_sorted_cell(
     )
     assert "turned" in refused, refused
     alarm = wait_for("the drift banner", lambda: page.visible("drift") and page.text("drift"), UI_S)
+    # Motion refused: Start sort is not offered until the recovery.
+    wait_for("Start disabled", lambda: not page.el("start-sort").is_enabled(), UI_S, 0.1)
     angle = float(alarm.split("camera turned ")[1].split(" deg")[0])
     assert abs(angle - KNOCK_DEG) < 0.1, alarm  # the board's measure of the knock
     assert service_status(svc.port)["last_run"]["job"] != "sort" or not [
@@ -142,6 +144,7 @@ def test_recovery_after_a_bump_to_a_sorted_cell(
     wait_for("the banner gone", lambda: not page.visible("drift"), UI_S)
     page.click("recovery-done")
 
+    wait_for("Start enabled", lambda: page.el("start-sort").is_enabled(), UI_S, 0.1)
     page.click("start-sort")
     page.confirm()
     wait_for("the sort", lambda: "sort done" in page.text("job-end"), 240, 0.5)

@@ -148,8 +148,9 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
             set_value(other, "token", TOKEN)
             other.find(marker="sign-in").click()
             await until("the sign-in", lambda: "Signed in" in label(other, "signed"), UI_S)
+            # The other browser is not offered a sort while one runs: Start sort is disabled.
+            await until("Start disabled", lambda: not _enabled(other, "start-sort"), UI_S)
             other.find(marker="start-sort").click()
-            await until("busy", lambda: "still running" in label(other, "message"), UI_S)
             await other.should_not_see(marker="confirm")
             await until("the sort's end", lambda: "sort done" in label(user, "job-end"), 120)
             await until("the log", lambda: len(_rows(other, "pick-log")) == 1, UI_S)
@@ -158,6 +159,11 @@ def test_page_shows_the_service_guards_operator_actions_and_checks_the_schema(
             assert st["last_run"]["request_id"] == 1, "the refused sort reached the service"
 
         simulate(context(svc.port), scenario)
+
+
+def _enabled(user: Any, name: str) -> bool:
+    (element,) = user.find(marker=name).elements
+    return bool(element.enabled)
 
 
 def _rows(user: Any, name: str = "status-rows") -> list[dict[str, Any]]:
@@ -193,13 +199,17 @@ def test_page_outlives_a_service_restart_mid_sort_and_a_service_that_is_down(
         # While it is down: nothing can be sent, and the page says so.
         user.find(marker="stop").click()
         await until("not sent", lambda: "not sent" in label(user, "message"), 5)
+        await until("Start disabled", lambda: not _enabled(user, "start-sort"), UI_S)
         user.find(marker="start-sort").click()
-        await until("not sent", lambda: "sort: not sent" in label(user, "message"), 5)
         await user.should_not_see(marker="confirm")
+        assert not _rows(user), "the status of a service that is down is still shown"
 
         svc = await asyncio.to_thread(start_service, config, tmp_path / "second", 120.0, None, port)
         await until("the service back", lambda: label(user, "state") != "unreachable", UI_S)
         await user.should_not_see(marker="unreachable")
+        # What was said while it was down is gone with it; Start is offered again.
+        await until("the message gone", lambda: "not sent" not in label(user, "message"), UI_S)
+        await until("Start enabled", lambda: _enabled(user, "start-sort"), UI_S)
         print(f"\nthe page after the restart mid-sort: {ended}")
         st = status(port)
         assert st["last_run"]["state"] in ("stopped", "interrupted"), st["last_run"]
