@@ -73,7 +73,7 @@ def typed_args(command: str, args: dict[str, Any], host: str) -> dict[str, Any]:
     machine (loopback): a service under systemd runs in `/`, so a relative `folder=views` would
     name a different folder there. Anything else goes as typed, for the service to check."""
     from omnisort_hw.config.service import is_loopback
-    from omnisort_hw.pipeline.request_fields import split_items
+    from omnisort_hw.request_fields import split_items
     from omnisort_hw.service.protocol import COMMANDS
 
     spec = COMMANDS.get(command)

@@ -12,7 +12,7 @@ import argparse
 from collections.abc import Collection, Mapping
 from typing import Any
 
-from omnisort_hw.pipeline.request_fields import (
+from omnisort_hw.request_fields import (
     Arg,
     RequestClass,
     args_of,

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from omnisort_hw.core.choices import METHODS, REFINEMENTS, SQUARE_RANGE_MM, TARGETS
 from omnisort_hw.errors import InputError
-from omnisort_hw.pipeline.request_fields import GIVEN, param
+from omnisort_hw.request_fields import GIVEN, param
 
 if TYPE_CHECKING:
     from omnisort_hw.core.checkerboard import BoardSpec

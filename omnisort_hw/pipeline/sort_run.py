@@ -23,10 +23,10 @@ from omnisort_hw.errors import NotAvailableError
 from omnisort_hw.pipeline.calibration_source import CalibrationSource, robot_base_T
 from omnisort_hw.pipeline.gripper_load import InFlightJournal, resolve_before_sort
 from omnisort_hw.pipeline.pick_cycle import Compute
-from omnisort_hw.pipeline.request_fields import ArgumentError
 from omnisort_hw.pipeline.requests import SortRequest
 from omnisort_hw.pipeline.sort import Sorter, SortVerifier
 from omnisort_hw.pipeline.sort_report import SortReport
+from omnisort_hw.request_fields import ArgumentError
 from omnisort_hw.runlog import RunLog
 
 if TYPE_CHECKING:

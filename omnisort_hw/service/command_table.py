@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from omnisort_hw.pipeline.request_fields import Arg, condition_text
+from omnisort_hw.request_fields import Arg, condition_text
 from omnisort_hw.service.protocol import COMMANDS, Command
 
 BEGIN = "<!-- commands: written by python -m omnisort_hw.service.command_table -->"

@@ -25,7 +25,6 @@ from omnisort_hw.pipeline.replies import (
     SortReply,
     ViewsReply,
 )
-from omnisort_hw.pipeline.request_fields import wire_args
 from omnisort_hw.pipeline.requests import (
     AdoptRequest,
     CalibrateRequest,
@@ -45,6 +44,7 @@ from omnisort_hw.pipeline.requests import (
     ViewRequest,
     ViewsRequest,
 )
+from omnisort_hw.request_fields import wire_args
 from omnisort_hw.service.status_reply import StatusReply
 
 Result = dict[str, Any]

@@ -19,14 +19,14 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from omnisort_hw.pipeline import requests
-from omnisort_hw.pipeline.request_fields import (
+from omnisort_hw.request_fields import (
     SCHEMA_DIALECT,
     Arg,
     ArgumentError,
     args_of,
     build,
+    check_args,
     check_rules,
-    check_value,
     schema_of,
     summary_line,
     type_name,
@@ -324,32 +324,12 @@ def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
 
 
 def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
-    """Check each argument of `spec` in `raw`; unknown or missing ones are bad_argument."""
-    unknown = sorted(set(raw) - {a.name for a in spec.args})
-    if unknown:
-        allowed = ", ".join(a.name for a in spec.args) or "none"
-        shown = ", ".join(repr(k[:32]) for k in unknown[:5])
-        raise ProtocolError(
-            BAD_ARGUMENT,
-            f"{spec.name}: unknown argument(s) {shown}; allowed: {allowed}",
-            field=unknown[0][:32],
-        )
-    args: dict[str, Any] = {}
-    for arg in spec.args:
-        value = raw.get(arg.name)
-        if value is None:
-            if arg.required:
-                raise ProtocolError(
-                    BAD_ARGUMENT, f"{spec.name}: argument {arg.name!r} is required", field=arg.name
-                )
-            args[arg.name] = arg.default
-            continue
-        try:
-            args[arg.name] = check_value(arg, spec.name, value)
-        except ArgumentError as exc:
-            raise ProtocolError(BAD_ARGUMENT, str(exc), field=exc.field) from None
-    spec.check(args)
-    return args
+    """Check each argument of `spec` in `raw` (`request_fields.check_args`); unknown, missing
+    or bad ones are bad_argument naming the field."""
+    try:
+        return check_args(spec.request, spec.name, raw)
+    except ArgumentError as exc:
+        raise ProtocolError(BAD_ARGUMENT, str(exc), field=exc.field) from None
 
 
 def parse_request(line: bytes, authorize: Authorizer | None = None) -> Request:

@@ -23,13 +23,14 @@ from typing import Any
 
 from nicegui import run, ui
 
-from omnisort_hw.sim_link import SimControlError, SimLink
+from omnisort_hw import sim_requests as sr
+from omnisort_hw.request_fields import build
+from omnisort_hw.sim_link import MOVE_TIMEOUT_S, SimControlError, SimLink
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.widgets import confirm, tag
+from omnisort_hw.ui.schema_form import problems, typed_number
+from omnisort_hw.ui.widgets import confirm, number_input, tag
 
-BOARD_POSES = 12  # the virtual cell's held-board poses (`{"cmd": "board", "view": k}`)
-COLOURS = ("red", "green", "blue", "yellow")
-TARGET_KINDS = ("two_sided", "three_sided")
+COLOURS = sr.SIM_COLORS[:4]  # the cubes the colour table sorts
 CUBE_COLUMNS = [
     {"name": k, "label": label, "field": k, "align": "left"}
     for k, label in (
@@ -93,7 +94,7 @@ def cube_rows(truth: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _number(label: str, value: float, name: str, width: str = "w-24") -> Any:
-    return tag(ui.number(label, value=value).classes(width), name)
+    return number_input(label, name, value).classes(width)
 
 
 class SimulatorPanel:
@@ -108,6 +109,7 @@ class SimulatorPanel:
         self._busy = False
         self._shown = -1
         self._filled = False  # the forms start from the cell as it is, once
+        self._schemas: dict[str, Any] = {}  # each command's, from the channel's describe
 
     # -- building -------------------------------------------------------------------------
 
@@ -149,7 +151,7 @@ class SimulatorPanel:
             with ui.row().classes("items-center"):
                 self.board_view = tag(
                     ui.select(
-                        {-1: "none", **{k: f"pose {k}" for k in range(BOARD_POSES)}},
+                        {-1: "none", **{k: f"pose {k}" for k in range(sr.HELD_VIEWS)}},
                         value=-1,
                         label="board held",
                     ).classes("w-36"),
@@ -181,7 +183,9 @@ class SimulatorPanel:
             with ui.row().classes("items-center"):
                 self.target_on = tag(ui.checkbox("in the cell", value=True), "sim-target-on")
                 self.target_kind = tag(
-                    ui.select(list(TARGET_KINDS), value="two_sided", label="kind").classes("w-32"),
+                    ui.select(list(sr.SIM_TARGETS), value="two-sided", label="kind").classes(
+                        "w-32"
+                    ),
                     "sim-target-kind",
                 )
                 self.target_x = _number("x, mm", 0.0, "sim-target-x")
@@ -281,24 +285,26 @@ class SimulatorPanel:
             *zip(self.joints, truth.get("joints_deg") or [], strict=False),
         ):
             if value is not None:
-                field.value = round(float(value), 3)
+                field.value = f"{round(float(value), 3):g}"
         self.laser_on.value = bool(truth.get("laser_on"))
         target = truth.get("target")
         self.target_on.value = target is not None
         if target is not None:
             self.target_kind.value = target["kind"]
-            self.target_x.value, self.target_y.value = target["center_mm"]
-            self.target_yaw.value = target["yaw_deg"]
+            x, y = target["center_mm"]
+            self.target_x.value, self.target_y.value = f"{x:g}", f"{y:g}"
+            self.target_yaw.value = f"{target['yaw_deg']:g}"
 
     # -- acting ---------------------------------------------------------------------------
 
     async def _control(
-        self, cmd: str, quiet: bool = False, timeout_s: float = 120.0, **args: Any
+        self, cmd: str, request: Any = None, quiet: bool = False
     ) -> dict[str, Any] | None:
-        """One control-channel command; its result, or None with why in the note."""
+        """One control-channel command with its request record; its result, or None with why
+        in the note."""
         self._busy = True
         try:
-            return await run.io_bound(self.sim.control, cmd, timeout_s, **args)
+            return await run.io_bound(self.sim.execute, cmd, request, MOVE_TIMEOUT_S)
         except SimControlError as exc:
             if not quiet:
                 self.note.text = f"{cmd}: refused by the virtual cell {exc.address}: {exc.message}"
@@ -306,65 +312,66 @@ class SimulatorPanel:
         finally:
             self._busy = False
 
-    async def _act(self, cmd: str, done: str, **args: Any) -> dict[str, Any] | None:
-        """A signed-in operator's command: sent, then the note and the truth after it."""
+    async def _problems(self, cmd: str, args: dict[str, Any]) -> list[str]:
+        """What the channel's schema of `cmd` (its `describe`, asked once) finds wrong with
+        `args`, each naming its field."""
+        if not self._schemas:
+            described = await self._control("describe")
+            if described is None:
+                return ["the control channel did not describe its commands"]
+            self._schemas = {k: v["args"] for k, v in described["commands"].items()}
+        return problems(self._schemas[cmd], args)
+
+    async def _act(self, cmd: str, done: str, args: dict[str, Any]) -> dict[str, Any] | None:
+        """A signed-in operator's command: checked against the channel's schema (nothing sent
+        when it refuses, each problem naming its field), sent as its request record, then the
+        note and the truth after it. `args`: what was typed (None: not given)."""
         if self.token() is None:
             self.note.text = f"{cmd}: sign in as operator first: nothing was sent"
             return None
+        given = {k: v for k, v in args.items() if v is not None}
+        found = await self._problems(cmd, given)
+        if found:
+            self.note.text = f"{cmd}: not sent: " + "; ".join(found)
+            return None
         self.note.text = f"{cmd} ..."
-        result = await self._control(cmd, **args)
+        result = await self._control(cmd, build(sr.SIM_COMMANDS[cmd].request, given))
         if result is None:
             return None
         shown = "" if result.get("shown", True) else " (no picture shows it yet)"
-        self.note.text = done.format(**result) + shown
+        self.note.text = done.format(**{**given, **result}) + shown
         truth = await self._control("truth", quiet=True)
         if truth is not None:
             self._show_truth(truth)
         return result
 
-    @staticmethod
-    def _value(field: Any) -> float | None:
-        value = field.value
-        return None if value is None or value == "" else float(value)
-
-    def _numbers(self, cmd: str, fields: dict[str, Any]) -> dict[str, float] | None:
-        values = {k: self._value(f) for k, f in fields.items()}
-        missing = [k for k, v in values.items() if v is None]
-        if missing:
-            self.note.text = f"{cmd}: not sent: {', '.join(missing)} must be numbers"
-            return None
-        return {k: float(v) for k, v in values.items() if v is not None}
-
     async def mount(self) -> None:
-        args = self._numbers(
-            "camera", {"roll_deg": self.roll, "pitch_deg": self.pitch, "yaw_deg": self.yaw}
+        args = {
+            "roll_deg": typed_number(self.roll.value),
+            "pitch_deg": typed_number(self.pitch.value),
+            "yaw_deg": typed_number(self.yaw.value),
+        }
+        await self._act(
+            "camera",
+            "camera mounted at roll {roll_deg:g}, pitch {pitch_deg:g}, yaw {yaw_deg:g} deg",
+            args,
         )
-        if args is not None:
-            said = ", ".join(f"{k[:-4]} {v:g}" for k, v in args.items())
-            await self._act("camera", f"camera mounted at {said} deg", **args)
 
     async def knock(self) -> None:
-        args = self._numbers("knock", {"angle_deg": self.knock_angle})
-        if args is not None:
-            axis = str(self.knock_axis.value)
-            await self._act(
-                "knock",
-                f"camera knocked by {args['angle_deg']:g} deg about {axis}",
-                axis=axis,
-                **args,
-            )
+        args = {"angle_deg": typed_number(self.knock_angle.value), "axis": self.knock_axis.value}
+        await self._act("knock", "camera knocked by {angle_deg:g} deg about {axis}", args)
 
     async def hold_board(self) -> None:
         view = int(self.board_view.value)
         await self._act(
             "board",
             "board put down" if view < 0 else f"board held at pose {view}",
-            view=None if view < 0 else view,
+            {"view": None if view < 0 else view},
         )
 
     async def next_board(self) -> None:
         """The board moved on to its next pose, as a person walks it through the field."""
-        self.board_view.value = (int(self.board_view.value) + 1) % BOARD_POSES
+        self.board_view.value = (int(self.board_view.value) + 1) % sr.HELD_VIEWS
         await self.hold_board()
 
     async def put_board_down(self) -> None:
@@ -372,59 +379,49 @@ class SimulatorPanel:
         await self.hold_board()
 
     async def set_laser(self) -> None:
-        args = self._numbers(
+        args = {
+            "on": bool(self.laser_on.value),
+            "roll_deg": typed_number(self.laser_roll.value),
+            "pitch_deg": typed_number(self.laser_pitch.value),
+            "distance_mm": typed_number(self.laser_distance.value),
+        }
+        state = "on" if args["on"] else "off"
+        await self._act(
             "laser",
-            {
-                "roll_deg": self.laser_roll,
-                "pitch_deg": self.laser_pitch,
-                "distance_mm": self.laser_distance,
-            },
+            f"laser {state} at roll {{roll_deg:g}}, pitch {{pitch_deg:g}} deg, "
+            "{distance_mm:g} mm",
+            args,
         )
-        if args is not None:
-            on = bool(self.laser_on.value)
-            await self._act(
-                "laser",
-                f"laser {'on' if on else 'off'} at roll {args['roll_deg']:g}, pitch "
-                f"{args['pitch_deg']:g} deg, {args['distance_mm']:g} mm",
-                on=on,
-                **args,
-            )
 
     async def set_target(self) -> None:
         if not self.target_on.value:
-            await self._act("target", "target taken away", on=False)
+            await self._act("target", "target taken away", {"on": False})
             return
-        place = self._numbers(
-            "target", {"x_mm": self.target_x, "y_mm": self.target_y, "yaw_deg": self.target_yaw}
-        )
-        if place is not None:
-            kind = str(self.target_kind.value)
-            await self._act("target", f"target {kind} set", kind=kind, **place)
+        args = {
+            "kind": self.target_kind.value,
+            "x_mm": typed_number(self.target_x.value),
+            "y_mm": typed_number(self.target_y.value),
+            "yaw_deg": typed_number(self.target_yaw.value),
+        }
+        await self._act("target", "target {kind} set", args)
 
     async def cube(self, action: str) -> None:
         args: dict[str, Any] = {"action": action}
         if action != "add":
-            index = self._value(self.cube_index)
-            if index is None:
-                self.note.text = "cube: not sent: the cube's index must be a number"
-                return
-            args["index"] = int(index)
+            args["index"] = typed_number(self.cube_index.value, integer=True)
         if action != "remove":
-            place = self._numbers(
-                "cube", {"x_mm": self.cube_x, "y_mm": self.cube_y, "yaw_deg": self.cube_yaw}
-            )
-            if place is None:
-                return
-            args.update(place)
+            args["x_mm"] = typed_number(self.cube_x.value)
+            args["y_mm"] = typed_number(self.cube_y.value)
+            args["yaw_deg"] = typed_number(self.cube_yaw.value)
         if action == "add":
-            args["color"] = str(self.cube_color.value)
-        await self._act("cube", f"cube {action}: done, cube {{index}}", **args)
+            args["color"] = self.cube_color.value
+        await self._act("cube", f"cube {action}: done, cube {{index}}", args)
 
     async def read_joints(self) -> None:
         truth = await self._control("truth")
         if truth is not None:
             for field, q in zip(self.joints, truth["joints_deg"], strict=True):
-                field.value = round(float(q), 2)
+                field.value = f"{float(q):.2f}"
             self._show_truth(truth)
 
     async def _confirmed(self, what: str) -> bool:
@@ -437,34 +434,33 @@ class SimulatorPanel:
         return True
 
     async def move_joints(self) -> None:
-        q = [self._value(f) for f in self.joints]
-        if any(v is None for v in q):
-            self.note.text = "joints: not sent: every joint must be a number"
-            return
-        if await self._confirmed("Move the arm to these joints"):
-            await self._act("joints", "arm at the joints asked ({seconds:.1f} s)", q_deg=q)
+        args = {"q_deg": [typed_number(f.value) for f in self.joints]}
+        if await self._problems("joints", args):  # said by _act, before any confirmation
+            await self._act("joints", "", args)
+        elif await self._confirmed("Move the arm to these joints"):
+            await self._act("joints", "arm at the joints asked ({seconds:.1f} s)", args)
 
     async def move_to(self) -> None:
-        xyz = self._numbers(
-            "move_to", {"x_mm": self.xyz[0], "y_mm": self.xyz[1], "z_mm": self.xyz[2]}
-        )
-        if xyz is not None and await self._confirmed("Move the tool to this point"):
-            await self._act("move_to", "tool at the point asked ({seconds:.1f} s)", **xyz)
+        args = {
+            k: typed_number(f.value)
+            for k, f in zip(("x_mm", "y_mm", "z_mm"), self.xyz, strict=True)
+        }
+        if await self._problems("move_to", args):
+            await self._act("move_to", "", args)
+        elif await self._confirmed("Move the tool to this point"):
+            await self._act("move_to", "tool at the point asked ({seconds:.1f} s)", args)
 
     async def gripper(self, closed: bool) -> None:
         if await self._confirmed("Close the gripper" if closed else "Open the gripper"):
             await self._act(
                 "gripper",
                 "gripper closed, holding: {holding}" if closed else "gripper open",
-                closed=closed,
+                {"closed": closed},
             )
 
     async def render(self) -> None:
-        folder = str(self.folder.value or "")
-        await self._act("render", "written: {images}", folder=folder)
+        await self._act("render", "written: {images}", {"folder": self.folder.value or None})
 
     async def render_views(self) -> None:
-        folder = str(self.folder.value or "")
-        await self._act(
-            "render", "written: {images}", folder=folder, views=list(range(BOARD_POSES))
-        )
+        folder = self.folder.value or None
+        await self._act("render", "written: {images}", {"folder": folder, "views": True})

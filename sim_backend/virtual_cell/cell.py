@@ -8,8 +8,9 @@
 Faces on `host` (the ports are a UR controller's, so parallel cells need distinct loopback
 addresses): RTDE 30004, dashboard 29999, script port 30003, the laser's Modbus TCP 5020, the
 camera's MJPEG stream 8080 and the control channel 30111 (one JSON object per line; its
-commands are `control.COMMANDS`: faults, the board held for the intrinsics, the camera's
-mounting and knocks, the laser, the cubes, the arm from the pendant, renders with truth).
+commands are `omnisort_hw.sim_requests.SIM_COMMANDS`: faults, the board held for the
+intrinsics, the camera's mounting and knocks, the laser, the cubes, the arm from the pendant,
+renders with truth).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.sim_requests import SCENE_TARGETS
 from sim_backend.devices import SimArm, SimCell
 from sim_backend.sort_harness import SimVerifier
 from sim_backend.truth import mounting_truth
@@ -171,7 +173,7 @@ class VirtualCell:
             "gripper_closed": self.arm.gripper.is_closed,
             "joints_deg": np.rad2deg(self.ctl.q).tolist(),
             "tcp_B_mm": world.tcp_pose_B()[:3, 3].tolist(),
-            "target": target_pose(world.target_spec),
+            "target": _contract_names(target_pose(world.target_spec)),
             "laser_on": bool(self.cell.world.laser_on),
         }
 
@@ -208,3 +210,11 @@ class VirtualCell:
         self.frames.close()
         self.verifier.stop()
         self.cell.close()
+
+
+def _contract_names(target: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The target's pose with its kind as the control channel names it (`two-sided`)."""
+    if target is None:
+        return None
+    kind = next((k for k, scene in SCENE_TARGETS.items() if scene == target["kind"]), None)
+    return {**target, "kind": kind or target["kind"]}

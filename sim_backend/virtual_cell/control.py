@@ -4,8 +4,9 @@ and one out (`{"ok": true, "result": {...}}` or `{"ok": false, "error": "..."}`)
 It is what the simulator's panel (`omnisort ui` with `[ui] sim_control`) and the tests use to
 do what a person or the world would do to a real cell: hold a board, knock the camera, move a
 cube, jog the arm from the pendant, drop a connection. The service never uses it: it only
-sees the cell through the real protocols. `COMMANDS` is the one list of the commands and their
-arguments; docs/virtual_cell.md shows it.
+sees the cell through the real protocols. Its commands and their arguments are declared once,
+in `omnisort_hw.sim_requests` (`describe` gives their JSON Schema; docs/virtual_cell.md lists
+them): each request is checked against its declaration, then handled as its record.
 """
 
 from __future__ import annotations
@@ -17,95 +18,43 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw import sim_requests as sr
 from omnisort_hw.errors import MotionRefusedError
 from sim_backend.scene_images import write_render
-from sim_backend.virtual_cell.held_board import HELD_VIEWS, check_view
+from sim_backend.virtual_cell.held_board import HELD_VIEWS
 from sim_backend.virtual_cell.servers import all_status
 
 FACES = ("arm", "dashboard", "laser", "camera")
 MOVE_TIMEOUT_S = 120.0
 
-COMMANDS: dict[str, str] = {
-    "status": "the controller's modes, the laser, renders, late ticks",
-    "truth": "cube poses in S, the bin each is in, collisions, the camera's rotation and the "
-    "laser plane as system.json holds them, the joints and the gripper",
-    "protective_stop": "a protective stop, as a safety sensor triggers it",
-    "emergency_stop": "an emergency stop",
-    "release_emergency_stop": "the emergency stop button pulled out again",
-    "drop": "`what` = arm, dashboard, laser, camera or all: its connections closed",
-    "stall": "`what`, `seconds`: that face stops answering for a while",
-    "unstall": "`what`: that face answers again",
-    "board": "`view` = 0..11 or null: a checkerboard held in front of the camera (one of 12 "
-    "poses covering the field), or put down",
-    "camera": "`roll_deg`, `pitch_deg`, `yaw_deg`: the camera mounted at these angles",
-    "knock": "`angle_deg`, `axis` (x, y, z or a vector of S): the camera turned from where it is",
-    "laser": "`on`, `roll_deg`, `pitch_deg`, `distance_mm` (each optional): the emitter "
-    "switched, turned and moved",
-    "target": "`on` (default true), `kind` (two_sided or three_sided), `x_mm`, `y_mm`, "
-    "`yaw_deg` (its centre on the floor, in S; each optional): the calibration target put "
-    "in the cell, changed, moved, or taken away",
-    "cube": "`action` = move (`index`, `x_mm`, `y_mm`, `yaw_deg`: put down there, in S), add "
-    "(`color`, `x_mm`, `y_mm`, `yaw_deg`) or remove (`index`)",
-    "joints": "`q_deg` (6): the arm jogged there from the pendant; returns once it stands",
-    "move_to": "`x_mm`, `y_mm`, `z_mm` of the robot base: the tool moved there, turned as it "
-    "is, through the core's inverse kinematics; returns once it stands",
-    "gripper": "`closed`: the gripper closed (on the cube between its fingers) or opened",
-    "render": "`folder` (and `name`): the picture as it is now and the renderer's truth beside "
-    "it (NAME.png, NAME.truth.json); with `views` (a list of board poses) one pair per "
-    "held board instead, the dataset of the intrinsics",
-}
-
 # The calls that change the picture return once a picture shows the change.
 SHOWN_TIMEOUT_S = 60.0
 
 
-def _number(req: dict[str, Any], key: str) -> float | None:
-    """The request's number `key`, None when it is not given."""
-    value = req.get(key)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        raise ValueError(f"{key} must be a number, got {value!r}")
-    return float(value)
-
-
-def _number_or(req: dict[str, Any], key: str, default: float) -> float:
-    """The request's number `key`, `default` when it is not given."""
-    value = _number(req, key)
-    return default if value is None else value
-
-
-def _required(req: dict[str, Any], key: str) -> float:
-    value = _number(req, key)
-    if value is None:
-        raise ValueError(f"{key} is required")
-    return value
-
-
 class ControlChannel:
-    """The commands of `COMMANDS` on one virtual cell; `execute(request) -> result` raises
-    ValueError (the reply's error) on a bad or refused request."""
+    """The commands of `sim_requests.SIM_COMMANDS` on one virtual cell; `execute(request) ->
+    result` raises ValueError (the reply's error) on a bad or refused request."""
 
     def __init__(self, vc: Any) -> None:
         self.vc = vc  # the `cell.VirtualCell` it belongs to (which builds this channel)
         self._renders = 0
-        self._handlers: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
-            name: getattr(self, f"_{name}") for name in COMMANDS
+        self._handlers: dict[str, Callable[[Any], dict[str, Any]]] = {
+            name: getattr(self, f"_{name}") for name in sr.SIM_COMMANDS
         }
 
     def execute(self, req: dict[str, Any]) -> dict[str, Any]:
-        cmd = req.get("cmd")
-        handler = self._handlers.get(cmd) if isinstance(cmd, str) else None
-        if handler is None:
-            raise ValueError(f"unknown command {cmd!r} (known: {', '.join(COMMANDS)})")
+        cmd, request = sr.validate(req)
         try:
-            return handler(req)
+            return self._handlers[cmd](request)
         except MotionRefusedError as exc:
             raise ValueError(str(exc)) from exc
 
     # ---- the cell's state ---------------------------------------------------------------------
 
-    def _status(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _describe(self, req: sr.NoArgs) -> dict[str, Any]:
+        return sr.describe_sim()
+
+    def _status(self, req: sr.NoArgs) -> dict[str, Any]:
         vc = self.vc
         return {
             **all_status(vc.ctl),
@@ -115,32 +64,30 @@ class ControlChannel:
             "rtde_packages_sent": vc.rtde.sent,
         }
 
-    def _truth(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _truth(self, req: sr.NoArgs) -> dict[str, Any]:
         return self.vc.truth()
 
     # ---- safety and faults ---------------------------------------------------------------------
 
-    def _protective_stop(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _protective_stop(self, req: sr.NoArgs) -> dict[str, Any]:
         self.vc.ctl.protective_stop()
         return {}
 
-    def _emergency_stop(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _emergency_stop(self, req: sr.NoArgs) -> dict[str, Any]:
         self.vc.ctl.emergency_stop()
         return {}
 
-    def _release_emergency_stop(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _release_emergency_stop(self, req: sr.NoArgs) -> dict[str, Any]:
         self.vc.ctl.release_emergency_stop()
         return {}
 
-    def _faces(self, req: dict[str, Any]) -> tuple[str, ...]:
-        what = req.get("what", "arm")
-        if what not in (*FACES, "all"):
-            raise ValueError(f"what must be one of {', '.join(FACES)} or all")
+    @staticmethod
+    def _faces(what: str) -> tuple[str, ...]:
         return FACES if what == "all" else (what,)
 
-    def _drop(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _drop(self, req: sr.DropRequest) -> dict[str, Any]:
         vc, closed = self.vc, 0
-        for face in self._faces(req):
+        for face in self._faces(req.what):
             if face == "arm":
                 closed += vc.rtde.listener.drop() + vc.script.listener.drop()
             elif face == "dashboard":
@@ -151,14 +98,13 @@ class ControlChannel:
                 vc.laser.drop()
         return {"closed": closed}
 
-    def _stall(self, req: dict[str, Any]) -> dict[str, Any]:
-        seconds = _number_or(req, "seconds", 3600.0)
-        for face in self._faces(req):
-            self.vc.faults.stall(face, seconds)
+    def _stall(self, req: sr.StallRequest) -> dict[str, Any]:
+        for face in self._faces(req.what):
+            self.vc.faults.stall(face, req.seconds)
         return {}
 
-    def _unstall(self, req: dict[str, Any]) -> dict[str, Any]:
-        for face in self._faces(req):
+    def _unstall(self, req: sr.UnstallRequest) -> dict[str, Any]:
+        for face in self._faces(req.what):
             self.vc.faults.clear(face)
         return {}
 
@@ -167,70 +113,46 @@ class ControlChannel:
     def _shown(self) -> bool:
         return self.vc.frames.wait_shown(SHOWN_TIMEOUT_S)
 
-    def _board(self, req: dict[str, Any]) -> dict[str, Any]:
-        view = check_view(req.get("view"))
-        shown = self.vc.frames.hold_board(view, SHOWN_TIMEOUT_S)
-        return {"view": view, "views": HELD_VIEWS, "shown": shown}
+    def _board(self, req: sr.BoardRequest) -> dict[str, Any]:
+        shown = self.vc.frames.hold_board(req.view, SHOWN_TIMEOUT_S)
+        return {"view": req.view, "views": HELD_VIEWS, "shown": shown}
 
-    def _camera(self, req: dict[str, Any]) -> dict[str, Any]:
-        R = self.vc.cell.mount_camera(
-            _number_or(req, "roll_deg", 0.0),
-            _number_or(req, "pitch_deg", 0.0),
-            _number_or(req, "yaw_deg", 0.0),
-        )
+    def _camera(self, req: sr.CameraRequest) -> dict[str, Any]:
+        R = self.vc.cell.mount_camera(req.roll_deg, req.pitch_deg, req.yaw_deg)
         return {"R_SC": R.tolist(), "shown": self._shown()}
 
-    def _knock(self, req: dict[str, Any]) -> dict[str, Any]:
-        R = self.vc.cell.bump_camera(_number_or(req, "angle_deg", 0.5), req.get("axis", "x"))
+    def _knock(self, req: sr.KnockRequest) -> dict[str, Any]:
+        R = self.vc.cell.bump_camera(req.angle_deg, req.axis)
         return {"R_SC": R.tolist(), "shown": self._shown()}
 
-    def _laser(self, req: dict[str, Any]) -> dict[str, Any]:
+    def _laser(self, req: sr.LaserRequest) -> dict[str, Any]:
         cell = self.vc.cell
-        on = req.get("on")
-        if on is not None and not isinstance(on, bool):
-            raise ValueError(f"on must be true or false, got {on!r}")
-        cell.set_laser_plane(
-            _number(req, "roll_deg"), _number(req, "pitch_deg"), _number(req, "distance_mm")
-        )
-        if on is not None:
+        cell.set_laser_plane(req.roll_deg, req.pitch_deg, req.distance_mm)
+        if req.on is not None:
             with cell.lock:
-                cell.world.laser_on = on
+                cell.world.laser_on = req.on
         return {"laser_plane": self.vc.truth()["laser_plane"], "shown": self._shown()}
 
-    def _target(self, req: dict[str, Any]) -> dict[str, Any]:
-        on = req.get("on", True)
-        kind = req.get("kind")
-        if not isinstance(on, bool) or (kind is not None and not isinstance(kind, str)):
-            raise ValueError(f"on must be true or false and kind a name, got {on!r}, {kind!r}")
-        x, y = _number(req, "x_mm"), _number(req, "y_mm")
-        if (x is None) != (y is None):
-            raise ValueError("x_mm and y_mm go together: the target's centre on the floor")
+    def _target(self, req: sr.TargetRequest) -> dict[str, Any]:
+        x, y = req.x_mm, req.y_mm
         self.vc.cell.set_target(
-            on, kind, None if x is None or y is None else (x, y), _number(req, "yaw_deg")
+            req.on,
+            sr.SCENE_TARGETS[req.kind] if req.kind is not None else None,
+            None if x is None or y is None else (x, y),
+            req.yaw_deg,
         )
         return {"target": self.vc.truth()["target"], "shown": self._shown()}
 
-    def _cube(self, req: dict[str, Any]) -> dict[str, Any]:
-        cell, action = self.vc.cell, req.get("action")
-        index = req.get("index")
-        if action == "move":
-            cell.place_cube(
-                index,
-                _required(req, "x_mm"),
-                _required(req, "y_mm"),
-                _number_or(req, "yaw_deg", 0.0),
-            )
-        elif action == "add":
-            index = cell.add_cube(
-                str(req.get("color", "")),
-                _required(req, "x_mm"),
-                _required(req, "y_mm"),
-                _number_or(req, "yaw_deg", 0.0),
-            )
-        elif action == "remove":
-            cell.remove_cube(index, held=self.vc.arm.gripper.held_body)
+    def _cube(self, req: sr.CubeRequest) -> dict[str, Any]:
+        cell, index, yaw = self.vc.cell, req.index, req.yaw_deg or 0.0
+        if req.action == "move":
+            assert index is not None and req.x_mm is not None and req.y_mm is not None
+            cell.place_cube(index, req.x_mm, req.y_mm, yaw)
+        elif req.action == "add":
+            assert req.color is not None and req.x_mm is not None and req.y_mm is not None
+            index = cell.add_cube(req.color, req.x_mm, req.y_mm, yaw)
         else:
-            raise ValueError(f"action must be move, add or remove, got {action!r}")
+            cell.remove_cube(index, held=self.vc.arm.gripper.held_body)
         return {"index": index, "cubes": self.vc.truth()["cubes"], "shown": self._shown()}
 
     # ---- the arm from the pendant ----------------------------------------------------------------
@@ -245,71 +167,48 @@ class ControlChannel:
             time.sleep(0.02)
         return {**started, "joints_deg": np.rad2deg(ctl.q).tolist(), "shown": self._shown()}
 
-    def _joints(self, req: dict[str, Any]) -> dict[str, Any]:
-        q = req.get("q_deg")
-        if (
-            not isinstance(q, list)
-            or len(q) != 6
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in q)
-            or not np.all(np.isfinite(q))
-        ):
-            raise ValueError(f"q_deg must be 6 joint angles in degrees, got {q!r}")
-        return self._stand(self.vc.ctl.pendant_move(q_deg=np.asarray(q, float)))
+    def _joints(self, req: sr.JointsRequest) -> dict[str, Any]:
+        return self._stand(self.vc.ctl.pendant_move(q_deg=np.asarray(req.q_deg, float)))
 
-    def _move_to(self, req: dict[str, Any]) -> dict[str, Any]:
-        xyz = np.array([_required(req, k) for k in ("x_mm", "y_mm", "z_mm")])
+    def _move_to(self, req: sr.MoveToRequest) -> dict[str, Any]:
+        xyz = np.array([req.x_mm, req.y_mm, req.z_mm])
         return self._stand(self.vc.ctl.pendant_move(xyz_mm=xyz))
 
-    def _gripper(self, req: dict[str, Any]) -> dict[str, Any]:
-        closed = req.get("closed")
-        if not isinstance(closed, bool):
-            raise ValueError(f"closed must be true or false, got {closed!r}")
+    def _gripper(self, req: sr.GripperRequest) -> dict[str, Any]:
         vc = self.vc
         if vc.ctl.moving:
             raise ValueError("the arm is moving: wait for it to stop")
         with vc.ctl.lock:
-            if closed:
+            if req.closed:
                 vc.arm.gripper.close()
             else:
                 vc.arm.gripper.open()
         return {
-            "closed": closed,
+            "closed": req.closed,
             "holding": vc.arm.gripper.held_body is not None,
             "shown": self._shown(),
         }
 
     # ---- pictures and their truth -----------------------------------------------------------
 
-    def _render(self, req: dict[str, Any]) -> dict[str, Any]:
-        folder = req.get("folder")
-        if not isinstance(folder, str) or not folder:
-            raise ValueError("folder is required: where the pictures and their truth go")
-        out = Path(folder).expanduser()
-        views = req.get("views")
+    def _render(self, req: sr.RenderRequest) -> dict[str, Any]:
+        out = Path(req.folder).expanduser()
         frames = self.vc.frames
         written: list[str] = []
         try:
-            if views is None:
-                name = req.get("name")
+            if not req.views:
+                name = req.name
                 if name is None:
                     self._renders += 1
                     name = f"render_{self._renders:03d}"
-                if (
-                    not isinstance(name, str)
-                    or not name.replace("_", "").replace("-", "").isalnum()
-                ):
+                if not name.replace("_", "").replace("-", "").isalnum():
                     raise ValueError(f"name must be letters, digits, - and _, got {name!r}")
                 image, truth = frames.snapshot()
                 written.append(str(write_render(out, name, image, truth)[0]))
             else:
-                if not isinstance(views, list) or not views:
-                    raise ValueError(f"views must be a list of board poses, got {views!r}")
-                poses = [check_view(v) for v in views if v is not None]
-                if len(poses) != len(views):
-                    raise ValueError("views: each must be a board pose, not null")
                 held = frames.board
                 try:
-                    for k in poses:
+                    for k in range(HELD_VIEWS):
                         frames.board = k
                         image, truth = frames.snapshot()
                         written.append(str(write_render(out, f"board_{k:02d}", image, truth)[0]))

@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import functools
 
+from omnisort_hw.sim_requests import HELD_VIEWS
 from sim_backend.dataset import calibration_screen_scene, screen_views
 from sim_backend.scene import Scene
 
-HELD_VIEWS = 12  # board poses in the set
+__all__ = ["HELD_VIEWS", "check_view", "held_board_scene"]
 HELD_SEED = 1
 HELD_BOARD = (9, 6)  # inner corners
 HELD_SQUARE_MM = 116.0

@@ -12,8 +12,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from jsonschema import Draft202012Validator
 
 from omnisort_hw.core.frames import laser_normal
+from omnisort_hw.sim_requests import SIM_COMMANDS
 from sim_backend.virtual_cell.launcher import VirtualCellError
 from tests.sim.virtual_cell_fixture import streamed_frame, virtual_cell
 
@@ -90,10 +92,12 @@ def test_cubes_moved_added_and_taken_away(vc, tmp_path: Path) -> None:
     refusals = []
     for bad, field in (
         ({"action": "move", "index": 1, "x_mm": 0.0, "y_mm": 560.0}, "on cube 0"),
-        ({"action": "move", "index": 1, "x_mm": 5000.0, "y_mm": 0.0}, "work area"),
-        ({"action": "add", "color": "mauve", "x_mm": 0.0, "y_mm": 0.0}, "unknown colour"),
+        ({"action": "move", "index": 1, "x_mm": 2900.0, "y_mm": 0.0}, "work area"),
+        ({"action": "move", "index": 1, "x_mm": 5000.0, "y_mm": 0.0}, "'x_mm' must be a finite"),
+        ({"action": "add", "color": "mauve", "x_mm": 0.0, "y_mm": 0.0}, "'color' must be one"),
+        ({"action": "add", "x_mm": 0.0, "y_mm": 0.0}, "action=add needs color"),
         ({"action": "remove", "index": 9}, "index must be"),
-        ({"action": "spin"}, "action must be"),
+        ({"action": "spin"}, "'action' must be one of move, add, remove"),
     ):
         with pytest.raises(VirtualCellError, match=field):
             vc.control("cube", **bad)
@@ -133,8 +137,8 @@ def test_the_arm_jogged_by_joints_and_by_xyz_and_the_gripper(vc) -> None:
     by_xyz = vc.control("move_to", timeout_s=120.0, x_mm=-300.0, y_mm=-350.0, z_mm=300.0)
     at_xyz = vc.truth()
     with pytest.raises(VirtualCellError, match="out of reach"):
-        vc.control("move_to", x_mm=3000.0, y_mm=0.0, z_mm=0.0)
-    with pytest.raises(VirtualCellError, match="q_deg must be"):
+        vc.control("move_to", x_mm=1900.0, y_mm=0.0, z_mm=0.0)
+    with pytest.raises(VirtualCellError, match="'q_deg' must be an array of 6"):
         vc.control("joints", q_deg=[0.0] * 5)
     closed = vc.control("gripper", timeout_s=30.0, closed=True)
     gripping = vc.truth()
@@ -148,18 +152,27 @@ def test_the_arm_jogged_by_joints_and_by_xyz_and_the_gripper(vc) -> None:
     assert closed["closed"] and gripping["gripper_closed"] and not gripping["held"]
 
 
+def test_the_channel_describes_its_commands_as_json_schema(vc) -> None:
+    described = vc.control("describe")["commands"]
+    assert set(described) == set(SIM_COMMANDS)
+    for spec in described.values():
+        Draft202012Validator.check_schema(spec["args"])
+    with pytest.raises(VirtualCellError, match="'angle_deg' must be a finite number within"):
+        vc.control("knock", angle_deg=1000.0)
+
+
 def test_the_target_taken_away_moved_and_changed(vc, tmp_path: Path) -> None:
     _, before = rendered(vc, tmp_path, "target_before")
     away = vc.control("target", timeout_s=60.0, on=False)
     _, gone = rendered(vc, tmp_path, "target_away")
     moved = vc.control("target", timeout_s=60.0, x_mm=40.0, y_mm=680.0, yaw_deg=3.0)
     image, after = rendered(vc, tmp_path, "target_moved")
-    three = vc.control("target", timeout_s=60.0, kind="three_sided")
+    three = vc.control("target", timeout_s=60.0, kind="three-sided")
     with pytest.raises(VirtualCellError, match="target"):
         vc.control("target", kind="round")
-    with pytest.raises(VirtualCellError, match="x_mm and y_mm"):
+    with pytest.raises(VirtualCellError, match="needs y_mm"):
         vc.control("target", x_mm=10.0)
-    back = vc.control("target", timeout_s=60.0, kind="two_sided", x_mm=0.0, y_mm=650.0, yaw_deg=0.0)
+    back = vc.control("target", timeout_s=60.0, kind="two-sided", x_mm=0.0, y_mm=650.0, yaw_deg=0.0)
     assert away["target"] is None and gone["target"] is None and gone["markers_px"] == []
     # The renderer's truth: the pose asked, its walls and markers there.
     assert after["target"]["center_mm"] == [40.0, 680.0] and after["target"]["yaw_deg"] == 3.0
@@ -167,5 +180,5 @@ def test_the_target_taken_away_moved_and_changed(vc, tmp_path: Path) -> None:
     assert len(after["markers_px"]) == 8 and len(after["target"]["walls"]) == 2
     # The picture shows the markers where the moved target has them, not where they were.
     assert blue_at(image, after["markers_px"]) > 3 * max(blue_at(image, before["markers_px"]), 5)
-    assert three["target"]["kind"] == "three_sided"
-    assert back["target"] == {"kind": "two_sided", "center_mm": [0.0, 650.0], "yaw_deg": 0.0}
+    assert three["target"]["kind"] == "three-sided"
+    assert back["target"] == {"kind": "two-sided", "center_mm": [0.0, 650.0], "yaw_deg": 0.0}

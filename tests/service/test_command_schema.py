@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 from jsonschema import Draft202012Validator
 
-from omnisort_hw.pipeline.request_fields import Arg, build
+from omnisort_hw.request_fields import Arg, build
 from omnisort_hw.service import protocol as proto
 from tests.schema_agreement import schema_accepts, validator
 from tests.service.conftest import TOKEN

@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from omnisort_hw.pipeline.request_fields import build, wire_args
 from omnisort_hw.pipeline.requests import LaserRequest, MoveRequest, SortRequest
+from omnisort_hw.request_fields import build, wire_args
 from omnisort_hw.service.client import Client, CommandError
 from omnisort_hw.service.protocol import COMMANDS
 from omnisort_hw.service.status_reply import StatusReply

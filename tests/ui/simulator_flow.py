@@ -51,6 +51,11 @@ def in_simulator_tab(
         note_check()
         return (t := page.text("drift")).startswith("Calibration drift") and t
 
+    # A knock beyond what a knock is: refused in the page by the channel's schema, not sent.
+    mounted = vc.truth()["camera_rotation"]
+    page.type("sim-knock-angle", "1000")
+    out["refused_knock"] = sim_note_after(page, "sim-knock", "knock: not sent")
+    out["mounted_unchanged"] = vc.truth()["camera_rotation"] == mounted
     page.type("sim-knock-angle", f"{KNOCK_DEG}")
     sim_note_after(page, "sim-knock", "camera knocked")
     knocked_at = time.monotonic()
@@ -77,7 +82,7 @@ def in_simulator_tab(
     out["cubes"] = vc.truth()["cubes"]
     page.type("sim-target-x", "40")
     page.type("sim-target-y", "680")
-    sim_note_after(page, "sim-target", "target two_sided set")
+    sim_note_after(page, "sim-target", "target two-sided set")
     out["target"] = vc.truth()["target"]
     page.click("sim-move-to")
     page.confirm()
@@ -89,6 +94,9 @@ def in_simulator_tab(
 
 def check(out: dict[str, Any]) -> None:
     """The measurements against what the page asked."""
+    refused = out["refused_knock"]
+    assert "angle_deg" in refused and "maximum of 10" in refused, refused
+    assert out["mounted_unchanged"], "a refused knock turned the camera"
     # Within one period: the first check that takes its frame after the knock finds it. At
     # most one check ends after the knock without finding it, the one under way when the
     # camera was knocked (its frame taken before), so at most two checks in all.
@@ -115,5 +123,5 @@ def check(out: dict[str, Any]) -> None:
     assert near < far / 4, (near, far)
 
     assert np.allclose(out["cubes"][1]["center_S_mm"][:2], [0.0, 1000.0], atol=0.5)
-    assert out["target"] == {"kind": "two_sided", "center_mm": [40.0, 680.0], "yaw_deg": 0.0}
+    assert out["target"] == {"kind": "two-sided", "center_mm": [40.0, 680.0], "yaw_deg": 0.0}
     assert np.allclose(out["tool"], [-300.0, -350.0, 300.0], atol=1e-6), out["tool"]

@@ -3,8 +3,8 @@ its field, and an empty field the request needs says so (not the schema's `null`
 
 from __future__ import annotations
 
-from omnisort_hw.pipeline.request_fields import schema_of
 from omnisort_hw.pipeline.requests import CalibrateRequest
+from omnisort_hw.request_fields import schema_of
 from omnisort_hw.ui.schema_form import args_from_form, form_fields, problems, typed_number
 
 

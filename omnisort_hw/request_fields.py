@@ -336,6 +336,34 @@ def check_rules(
         raise ArgumentError("|".join(group), f"{command} needs exactly one of: {options}")
 
 
+def check_args(
+    cls: type[RequestClass] | None, command: str, raw: Mapping[str, Any]
+) -> dict[str, Any]:
+    """Every argument of `raw` checked against `cls`'s declaration (None: a command without
+    arguments), the defaults filled in, then the rules between them; ArgumentError naming the
+    field, an unknown or a missing one included. What every channel that takes requests (the
+    service's protocol, the virtual cell's control channel) checks with."""
+    declared = args_of(cls) if cls is not None else ()
+    unknown = sorted(set(raw) - {a.name for a in declared})
+    if unknown:
+        allowed = ", ".join(a.name for a in declared) or "none"
+        shown = ", ".join(repr(k[:32]) for k in unknown[:5])
+        text = f"{command}: unknown argument(s) {shown}; allowed: {allowed}"
+        raise ArgumentError(unknown[0][:32], text)
+    args: dict[str, Any] = {}
+    for arg in declared:
+        value = raw.get(arg.name)
+        if value is None:
+            if arg.required:
+                raise ArgumentError(arg.name, f"{command}: argument {arg.name!r} is required")
+            args[arg.name] = arg.default
+            continue
+        args[arg.name] = check_value(arg, command, value)
+    if cls is not None:
+        check_rules(cls, command, args)
+    return args
+
+
 def build(cls: type[Any], args: Mapping[str, Any]) -> Any:
     """The request `cls` from checked arguments (JSON arrays become tuples; None: default)."""
     values: dict[str, Any] = {}
