@@ -57,7 +57,7 @@ def measure(photos: Path) -> dict[str, Any]:
             cam["crosstalk"].append(crosstalk(bgr, ref, colour))
             cam["halo"].append(halo(bgr, ref, colour))
         t0 = time.perf_counter()
-        pts = laser_stripe_points(bgr)
+        pts = laser_stripe_points(bgr, color=colour)  # the laser as the cell file names it
         t_extract += time.perf_counter() - t0
         if ref is None:
             dark.setdefault(name, []).append(len(pts))

@@ -225,6 +225,9 @@ class CellJobs:
         camera = self.cell.devices.camera
         return ToneCurve.parse(camera.tone_curve if camera is not None else None)
 
+    def laser_color(self) -> str:
+        return self.cell.config.devices.laser_color
+
     def target_defaults(self) -> tuple[str | None, float | None, str]:
         t = self.cell.config.target
         field = "separation_mm (or [target] separation_mm in the cell file)"

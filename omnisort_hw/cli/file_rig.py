@@ -146,6 +146,10 @@ class FileRig:
         camera = self._opened().camera if self._cell is not None else None
         return ToneCurve.parse(camera.tone_curve) if camera is not None else SRGB
 
+    def laser_color(self) -> str:
+        """The cell file's `[laser] color`; red without a cell file."""
+        return self._cell.devices.laser_color if self._cell is not None else "red"
+
     def target_defaults(self) -> tuple[str | None, float | None, str]:
         if self._cell is None:
             return None, None, "--separation"

@@ -29,6 +29,7 @@ from drivers.modbus_laser import ModbusLaserConfig
 from drivers.serial_laser import SerialLaserConfig
 from drivers.ur_arm import URArmConfig
 from drivers.v4l2_camera import V4L2CameraConfig
+from omnisort_hw.core.choices import LASER_COLORS
 from omnisort_hw.errors import ConfigError
 
 DeviceKind = Literal["camera", "laser", "arm"]
@@ -121,6 +122,8 @@ class DeviceSection:
     kind: DeviceKind
     backend: str
     settings: Any
+    color: str = "red"  # the laser's light (`[laser] color`, any backend): what the
+    # stripe extractor looks for (core.laser_stripe.as_red_laser)
 
     @property
     def is_sim(self) -> bool:
@@ -138,6 +141,11 @@ class CellDeviceConfig:
 
     def sections(self) -> list[tuple[DeviceKind, DeviceSection | None]]:
         return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
+
+    @property
+    def laser_color(self) -> str:
+        """The laser's colour (red without a `[laser]`, and by default)."""
+        return self.laser.color if self.laser is not None else "red"
 
 
 def _type_name(tp: Any) -> str:
@@ -236,11 +244,20 @@ def parse_device_section(
             f"[{kind}].backend", f"unknown backend {backend!r}; one of {', '.join(known)}"
         )
     settings = {k: v for k, v in data.items() if k != "backend"}
+    color = "red"
+    if kind == "laser" and "color" in settings:
+        color = settings.pop("color")
+        if color not in LASER_COLORS:
+            raise config_error(
+                "[laser].color", f"{color!r} is not one of {', '.join(LASER_COLORS)}"
+            )
     if backend == SIM_BACKEND:
-        return DeviceSection(kind, backend, check_sim_settings(kind, settings))
+        return DeviceSection(kind, backend, check_sim_settings(kind, settings), color)
     if kind == "camera" and base_dir is not None:
         settings = _resolve_camera_file(settings, base_dir)
-    return DeviceSection(kind, backend, build_config(BACKENDS[kind][backend], kind, settings))
+    return DeviceSection(
+        kind, backend, build_config(BACKENDS[kind][backend], kind, settings), color
+    )
 
 
 def _resolve_camera_file(settings: dict[str, Any], base_dir: Path) -> dict[str, Any]:

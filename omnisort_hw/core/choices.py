@@ -18,3 +18,6 @@ SQUARE_RANGE_MM = (1.0, 1000.0)
 """What a checkerboard's square can be: below 1 mm no fisheye pixel resolves it at a cell's
 distances; 1 m squares make a 9x6 board 10 m x 7 m, larger than a cell (a square given in
 micrometres or metres by mistake lands outside)."""
+LASER_COLORS = ("red", "green", "blue")
+"""The line lasers' colours the stripe extractor knows (industrial line lasers come in all
+three; blue is common on shiny metal); the cell file's `[laser] color`, red by default."""

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from omnisort_hw.core.laser_colour import as_red_laser
 from omnisort_hw.core.laser_stripe import check_bgr
 from omnisort_hw.core.radiometry import ToneCurve
 from omnisort_hw.errors import InputError
@@ -82,8 +83,9 @@ def _robust_noise(x: np.ndarray) -> float:
     return 1.4826 * mad / np.sqrt(2.0)
 
 
-def laser_difference(on: FrameStack, off: FrameStack) -> LaserDifference:
-    """on - g off in linear light (g: the flicker gain, see the module docstring)."""
+def laser_difference(on: FrameStack, off: FrameStack, color: str = "red") -> LaserDifference:
+    """on - g off in linear light (g: the flicker gain, see the module docstring); `color`:
+    the laser's, whose channel's excess over the others is its light."""
     if on.mean.shape != off.mean.shape:
         raise InputError(f"laser-on frames are {on.mean.shape}, laser-off {off.mean.shape}")
     lum_on = on.mean.mean(axis=2)
@@ -93,7 +95,8 @@ def laser_difference(on: FrameStack, off: FrameStack) -> LaserDifference:
     gain = float(np.median(ratio)) if ratio.size > 100 else 1.0
     diff = on.mean - np.float32(gain) * off.mean
     blind = off.clipped
-    red = diff[..., 2] - np.maximum(diff[..., 1], diff[..., 0])
+    seen = as_red_laser(diff, color)
+    red = seen[..., 2] - np.maximum(seen[..., 1], seen[..., 0])
     noise = _robust_noise(red)
     laser = red > _NOISE_K * max(noise, 1e-6)
     clipped_core = laser & on.clipped & ~blind

@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from omnisort_hw.core.clipped_core import clipped_cores
+from omnisort_hw.core.laser_colour import as_red_laser
 from omnisort_hw.errors import InputError
 
 _HALF = 4  # half-width (px) of the across-stripe window; stripes up to ~4 px wide
@@ -490,9 +491,10 @@ def laser_stripe_points_stats(
     mask: np.ndarray | None = None,
     stride: int | None = None,
     light_only: bool = False,
+    color: str = "red",
 ) -> tuple[np.ndarray, StripeStats]:
     """`laser_stripe_points` plus the figures it used (noise, thresholds, counts)."""
-    bgr = check_bgr(image_bgr)
+    bgr = as_red_laser(check_bgr(image_bgr), color)
     h, w = bgr.shape[:2]
     if mask is not None:
         mask = np.asarray(mask)
@@ -542,8 +544,9 @@ def laser_stripe_points(
     mask: np.ndarray | None = None,
     stride: int | None = None,
     light_only: bool = False,
+    color: str = "red",
 ) -> np.ndarray:
-    """(N, 2) sub-pixel (u, v) centre points of red laser stripes anywhere in the image.
+    """(N, 2) sub-pixel (u, v) centre points of laser stripes anywhere in the image.
 
     `mask` (H, W), nonzero where to look; `stride` the scan-line spacing (default: 4 px for a
     1920 px image, fewer for smaller images). An image without a stripe gives few or no points;
@@ -555,8 +558,10 @@ def laser_stripe_points(
     reject coloured surfaces, which the difference has removed, and in a difference they carry
     no laser light, only noise (measured on the renders: the centres' scatter after 8 on/off
     pairs falls from 0.036 to 0.023 px RMS, what 32 pairs give with the redness).
+
+    `color`: the laser's, one of `core.choices.LASER_COLORS` (`as_red_laser`).
     """
-    return laser_stripe_points_stats(image_bgr, mask, stride, light_only)[0]
+    return laser_stripe_points_stats(image_bgr, mask, stride, light_only, color)[0]
 
 
 def stripe_interior(stats: StripeStats) -> np.ndarray:

@@ -36,6 +36,10 @@ class SceneRig:
     def calibration_source(self) -> MemoryCalibration:
         return self.calibration
 
+    def laser_color(self) -> str:
+        """The scene's laser, drawn red (sim_backend.scene.LaserSpec)."""
+        return "red"
+
     def check_drift(self) -> None:
         return None
 

@@ -51,6 +51,10 @@ class CaptureRig(Protocol):
 
     def prune_captures(self) -> None: ...
 
+    def laser_color(self) -> str:
+        """The laser's colour (`[laser] color`)."""
+        ...
+
 
 @dataclass
 class Acquired:
@@ -96,7 +100,9 @@ def acquire(rig: CaptureRig, image: str | None, board: bool = True) -> Acquired:
         img = read_image(image)
         return Acquired(img, img, None, image_record(image), str(image))
     with rig.measuring() as (camera, laser):
-        cap = capture_measurement(camera, laser, rig.capture_settings, rig.runlog, board=board)
+        cap = capture_measurement(
+            camera, laser, rig.capture_settings, rig.runlog, board=board, color=rig.laser_color()
+        )
     stripe = _save(rig.capture_dir, "laser", cap.stripe_image)
     record: dict[str, Any] = {"capture": cap.record, "laser_image": stripe}
     if cap.board_image is not None:

@@ -42,6 +42,8 @@ class DetectionRig(Protocol):
 
     def tone_curve(self) -> ToneCurve: ...
 
+    def laser_color(self) -> str: ...
+
     def target_defaults(self) -> tuple[str | None, float | None, str]: ...
 
     @property
@@ -138,12 +140,19 @@ def _points(uv: list[np.ndarray]) -> np.ndarray:
 
 
 def _target_layers(
-    image: np.ndarray, kind: str, board: BoardSpec, model: OcamModel, tone: ToneCurve
+    image: np.ndarray,
+    kind: str,
+    board: BoardSpec,
+    model: OcamModel,
+    tone: ToneCurve,
+    laser_color: str = "red",
 ) -> list[Layer]:
+    from omnisort_hw.core.laser_stripe import laser_stripe_points
     from omnisort_hw.core.target_features import extract_board_features, extract_target_features
 
+    stripe = laser_stripe_points(image, color=laser_color)
     if kind == "checkerboards":
-        boards = extract_board_features(image, model, board.size, board.square_mm)
+        boards = extract_board_features(image, model, board.size, board.square_mm, stripe)
         return [
             layer
             for name, b in boards.boards.items()
@@ -152,7 +161,7 @@ def _target_layers(
                 Layer(f"{name} board laser", "laser", b.laser_px, LASER),
             )
         ]
-    features = extract_target_features(image, model, kind=kind, tone=tone)
+    features = extract_target_features(image, model, kind=kind, tone=tone, stripe_px=stripe)
     layers = []
     for wall, f in features.walls.items():
         layers += [
@@ -178,7 +187,11 @@ def _markers_seen(image: np.ndarray, tone: ToneCurve) -> list[Layer]:
 
 
 def detect(
-    image: np.ndarray, pattern: Pattern, model: OcamModel | None, tone: ToneCurve
+    image: np.ndarray,
+    pattern: Pattern,
+    model: OcamModel | None,
+    tone: ToneCurve,
+    laser_color: str = "red",
 ) -> Detection:
     """`pattern` in `image` ((H, W, 3) BGR). `model` is needed for the targets (the extractor
     works on rays) and not for a checkerboard (commissioning finds boards before there is a
@@ -189,7 +202,7 @@ def detect(
     try:
         if pattern.what == "target":
             assert model is not None and pattern.board is not None
-            layers = _target_layers(image, pattern.kind, pattern.board, model, tone)
+            layers = _target_layers(image, pattern.kind, pattern.board, model, tone, laser_color)
         else:
             assert pattern.board is not None
             found = detect_board(image, pattern.board)
@@ -228,4 +241,4 @@ def run(rig: DetectionRig, request: DetectRequest) -> Detection:
     pattern = pattern_of(rig, request)
     image = read_image(request.image) if request.image is not None else rig.live_frame()
     model = rig.camera_model() if pattern.what == "target" else None
-    return detect(image, pattern, model, rig.tone_curve())
+    return detect(image, pattern, model, rig.tone_curve(), rig.laser_color())

@@ -100,13 +100,18 @@ def run_extrinsics(
     tone: ToneCurve = SRGB,
     stripe_px: np.ndarray | None = None,
     layout: TargetLayout | None = None,
+    laser_color: str = "red",
 ) -> ExtrinsicsRun:
     """Extract the target's features from one image and run the chosen method on them;
     `tone` is the camera's tone curve (sRGB unless the camera is configured otherwise);
     `stripe_px` the laser points of a measurement capture (else found in the image); `layout`
     the target as measured (`config.target.load_target_description`; its separation is then
-    the one used), else the symmetric paper target. With the
+    the one used), else the symmetric paper target; `laser_color` the laser's. With the
     log on, the overlay picture (`ExtrinsicsRun.overlay`) goes to it as well."""
+    if stripe_px is None and laser_color != "red":
+        from omnisort_hw.core.laser_stripe import laser_stripe_points
+
+        stripe_px = laser_stripe_points(image, color=laser_color)
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
     from omnisort_hw.core.extrinsics.method2 import calibrate_method2
@@ -202,6 +207,7 @@ def run(
         tone=tone,
         stripe_px=acq.stripe_px,
         layout=layout,
+        laser_color=rig.laser_color(),
         cancel=cancel,
         what="calibration",
     )

@@ -82,6 +82,7 @@ def map_laser(
     floor_S: tuple[np.ndarray, float] | None = None,
     light_only: bool = False,
     with_sigmas: bool = True,
+    color: str = "red",
 ) -> LaserMap:
     """The laser map of one laser-on image (or a capture's laser-light image; its size must
     match the camera model). Points at the stripe's ends and kinks, where the straight-stripe
@@ -90,9 +91,9 @@ def map_laser(
     the floor known, `floor_S` = (unit normal up, k) of n . x = k in S, the floor's mirror image
     of a stripe point seen) are dropped. `light_only`: the image is a capture's laser light
     alone (on minus off), whose centres are fitted on the red channel (`laser_stripe_points`).
-    `with_sigmas`: every point's uncertainty too (core.map_uncertainty)."""
+    `with_sigmas`: every point's uncertainty too (core.map_uncertainty). `color`: the laser's."""
     check_image_size(image, calib.model, source)
-    pixels, stats = laser_stripe_points_stats(image, light_only=light_only)
+    pixels, stats = laser_stripe_points_stats(image, light_only=light_only, color=color)
     interior = stripe_interior(stats)
     assert stats.heights is not None
     every = pixels_to_plane(pixels, calib)
@@ -201,7 +202,9 @@ def run(rig: Rig, request: MapRequest, cancel: threading.Event | None = None) ->
     stripe = acq.stripe if acq.stripe is not None else acq.board
     floor = floor_plane_S(calib, rig.sort_config)
     light = acq.stripe_px is not None  # a capture's laser light: red-channel centres
-    laser_map = map_laser(stripe, calib, acq.source, rig.runlog, floor, light_only=light)
+    laser_map = map_laser(
+        stripe, calib, acq.source, rig.runlog, floor, light_only=light, color=rig.laser_color()
+    )
     result = MapResult(laser_map, acq.record, with_points=request.points)
     if request.picture:
         result.picture = write_picture(

@@ -147,6 +147,7 @@ def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None)
         T_SB,
         calib.robot_base,
         prefix="locate",
+        laser_color=rig.laser_color(),
         cancel=cancel,
         what="location",
     )
@@ -168,12 +169,14 @@ def locate_in_images(
     robot_base: Mapping[str, Any] | None,
     log: RunLog = NullLog,
     prefix: str = "sorting",
+    laser_color: str = "red",
 ) -> tuple[list[Cube], dict[str, Any]]:
-    """The cubes in `colour` (laser off) with the laser-on image's stripe as height check;
-    `robot_base` is the registration record (its board area is excluded)."""
+    """The cubes in `colour` (laser off) with the laser-on image's stripe (of a `laser_color`
+    laser) as height check; `robot_base` is the registration record (its board area is
+    excluded)."""
     lp = None
     if laser_image is not None:
-        px = laser_stripe_points(laser_image)
+        px = laser_stripe_points(laser_image, color=laser_color)
         lp = pixels_to_plane(px, calib)
         log.points2d(f"{prefix}/laser_image/stripe", px, color=(255, 0, 0), radius=1)
     settings = locate_settings_for(cfg, calib, robot_base)

@@ -159,15 +159,18 @@ def _pick_format(camera: Camera, prefer_uncompressed: bool) -> str:
     return camera.pixel_format or "as delivered (the source cannot tell or switch)"
 
 
-def single_frame(camera: Camera, laser: LaserSwitch, log: RunLog = NullLog) -> MeasurementCapture:
-    """One laser-on frame as it comes, the stripe found in it (the single-frame method)."""
+def single_frame(
+    camera: Camera, laser: LaserSwitch, log: RunLog = NullLog, color: str = "red"
+) -> MeasurementCapture:
+    """One laser-on frame as it comes, the stripe found in it (the single-frame method);
+    `color`: the laser's."""
     timer = _Timer()
     t0 = time.monotonic()
     _switch(laser, True, timer)
     exposure = _try(camera.get_exposure_ms) or 0.0
     image = _grab(camera, timer, exposure)
     log.image("capture/single/on", image)
-    pixels = laser_stripe_points(image)
+    pixels = laser_stripe_points(image, color=color)
     record = {
         "method": "single frame",
         "frames": 1,
@@ -185,11 +188,13 @@ def capture_measurement(
     settings: CaptureSettings | None = None,
     log: RunLog = NullLog,
     board: bool = True,
+    color: str = "red",
 ) -> MeasurementCapture:
-    """A measurement capture (see the module docstring); raises the typed errors above."""
+    """A measurement capture (see the module docstring) of a `color` laser; raises the typed
+    errors above."""
     cfg = settings or CaptureSettings()
     if not cfg.differencing:
-        return single_frame(camera, laser, log)
+        return single_frame(camera, laser, log, color)
     tone = ToneCurve.parse(camera.tone_curve)
     t_start = time.monotonic()
     timer = _Timer()
@@ -236,7 +241,7 @@ def capture_measurement(
                 log.image("capture/stripe/on", on[-1])
                 log.image("capture/stripe/off", off[-1])
             diff = laser_difference(
-                stack_frames(on, tone, "laser-on"), stack_frames(off, tone, "laser-off")
+                stack_frames(on, tone, "laser-on"), stack_frames(off, tone, "laser-off"), color
             )
             tried.append(
                 {
@@ -247,7 +252,8 @@ def capture_measurement(
                 }
             )
             faint = diff.stripe_pixels < MIN_STRIPE_PIXELS
-            if faint and len(laser_stripe_points(diff.image, light_only=True)) < MIN_STRIPE_POINTS:
+            found = laser_stripe_points(diff.image, light_only=True, color=color)
+            if faint and len(found) < MIN_STRIPE_POINTS:
                 raise NoLaserDifferenceError(
                     f"{laser.name} reads back on, but {camera.name} sees no laser light between "
                     f"laser-on and laser-off frames ({diff.stripe_pixels} px above the noise): is "
@@ -267,7 +273,7 @@ def capture_measurement(
             )
         assert diff is not None
         log.image("capture/stripe/difference", diff.image)
-        pixels = laser_stripe_points(diff.image, light_only=True)
+        pixels = laser_stripe_points(diff.image, light_only=True, color=color)
         log.points2d("capture/stripe/difference/laser", pixels, color=(255, 0, 0), radius=1)
     finally:
         _restore(camera, laser, old_exposure, old_gain, old_format, old_laser)

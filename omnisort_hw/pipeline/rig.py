@@ -52,6 +52,10 @@ class Rig(CaptureRig, Protocol):
         """The camera's transfer curve, undone where edges are located."""
         ...
 
+    def laser_color(self) -> str:
+        """The laser's colour (`[laser] color`: red, green or blue), what its stripe is."""
+        ...
+
     def target_defaults(self) -> tuple[str | None, float | None, str]:
         """(target kind, measured wall distance mm, the field that gives it) of the cell file's
         `[target]`, for a calibration request that leaves them out."""

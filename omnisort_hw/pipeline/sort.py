@@ -102,8 +102,10 @@ class Sorter:
         compute: Compute | None = None,
         check_changes: bool = True,
         acquire: Callable[[], tuple[np.ndarray, np.ndarray | None, dict[str, Any]]] | None = None,
+        laser_color: str = "red",
     ) -> None:
         self.camera = camera
+        self.laser_color = laser_color  # the laser's, what its stripe is
         # the cycle's images from a measurement capture (`pipeline.sort_capture`), if given
         self.acquire = acquire
         self.last_capture: dict[str, Any] | None = None
@@ -188,6 +190,7 @@ class Sorter:
             self.cfg,
             T_SB,
             robot_base,
+            laser_color=self.laser_color,
             cancel=self.cancel,
             what="cube location",
         )

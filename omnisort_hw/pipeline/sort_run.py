@@ -73,6 +73,8 @@ class SortRig(Protocol):
     @property
     def sort_config(self) -> SortConfig | None: ...
 
+    def laser_color(self) -> str: ...
+
     @property
     def registration_config(self) -> RegistrationConfig | None: ...
 
@@ -129,6 +131,7 @@ def run(
             on_pick=lambda phase, o: journal.pick_phase(phase, o.index, o.color, o.bin),
             compute=session.compute,
             acquire=session.acquire,
+            laser_color=rig.laser_color(),
             clock=session.clock,
         )
         system = calibration.system()

@@ -209,8 +209,12 @@ class ViewsResult:
                     "outer band of the image circle covered",
                     "pass" if ok else "warn",
                     f"{cov.fraction:.0%}",
-                    f">= {LOW_COVERAGE:.0%}",
-                    "" if ok else "add views with the board near the rim, where the band is red",
+                    f">= {LOW_COVERAGE:.0%}, or a small projection sigma at the rim",
+                    ""
+                    if ok
+                    else "add views with the board near the rim, where the band is red; or "
+                    "calibrate: the intrinsics pass this check when their projection sigma at "
+                    "the rim is small, which only the calibration can tell",
                 )
             )
         return Verdict("views for the intrinsic calibration", tuple(checks))

@@ -370,9 +370,14 @@ class SimulatorPanel:
         )
 
     async def next_board(self) -> None:
-        """The board moved on to its next pose, as a person walks it through the field."""
-        self.board_view.value = (int(self.board_view.value) + 1) % sr.HELD_VIEWS
+        """The board moved on to its next pose, as a person walks it through the field; after
+        the last, the first again (said in the note)."""
+        view = (int(self.board_view.value) + 1) % sr.HELD_VIEWS
+        wrapped = view == 0 and int(self.board_view.value) == sr.HELD_VIEWS - 1
+        self.board_view.value = view
         await self.hold_board()
+        if wrapped:
+            self.note.text += f" (all {sr.HELD_VIEWS} poses shown: the first again)"
 
     async def put_board_down(self) -> None:
         self.board_view.value = -1

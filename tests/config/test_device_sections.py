@@ -61,7 +61,7 @@ def test_example_configuration_documents_every_device_key() -> None:
     fields = sum(
         len(dataclasses.fields(c)) for c in (V4L2CameraConfig, SerialLaserConfig, URArmConfig)
     )
-    assert documented == fields + 3  # every field plus the three backend keys
+    assert documented == fields + 4  # every field, the three backend keys, the laser's colour
 
 
 def test_example_modbus_alternative_parses_when_uncommented() -> None:
@@ -77,6 +77,16 @@ def test_example_modbus_alternative_parses_when_uncommented() -> None:
     cell = parse("[laser]\n" + "\n".join(block))
     assert isinstance(cell.laser.settings, ModbusLaserConfig)
     assert cell.laser.settings.host == "192.168.1.20"
+
+
+def test_the_lasers_colour_is_read_for_any_backend() -> None:
+    assert parse('[laser]\nbackend = "serial"\nport = "/dev/x"\n').laser_color == "red"
+    green = parse('[laser]\nbackend = "serial"\nport = "/dev/x"\ncolor = "green"\n')
+    assert green.laser_color == "green" and green.laser.settings.port == "/dev/x"
+    assert parse('[laser]\nbackend = "sim"\ncolor = "blue"\n').laser_color == "blue"
+    assert parse('[camera]\nbackend = "sim"\n').laser_color == "red"  # no laser section
+    with pytest.raises(ConfigError, match=r"\[laser\]\.color: 'violet' is not one of red"):
+        parse('[laser]\nbackend = "sim"\ncolor = "violet"\n')
 
 
 def test_absent_sections_are_none() -> None:
