@@ -51,10 +51,11 @@ def rendered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"dir": out, "truth": out / "on.truth.json"}
 
 
-def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
-    d = rendered["dir"]
-    out = d / "system.json"
-    proc = run_cli(
+def calibrate_cli(d: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    """`extrinsics calibrate` of `d`'s on.png with its camera.json and the truth's separation,
+    into d/system.json (`extra`: more arguments)."""
+    truth = json.loads((d / "on.truth.json").read_text())
+    return run_cli(
         "extrinsics",
         "calibrate",
         str(d / "on.png"),
@@ -63,11 +64,18 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
         "--target",
         "two-sided",
         "--separation",
-        str(json.loads(rendered["truth"].read_text())["target"]["separation_mm"]),
+        str(truth["target"]["separation_mm"]),
         "--out",
-        str(out),
+        str(d / "system.json"),
         "--json",
+        *extra,
     )
+
+
+def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
+    d = rendered["dir"]
+    out = d / "system.json"
+    proc = calibrate_cli(d)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)["result"]
     truth = json.loads(rendered["truth"].read_text())

@@ -12,7 +12,7 @@ import pytest
 
 from omnisort_hw.core.camera_io import save_camera_json
 from omnisort_hw.core.camera_model import OcamModel
-from tests.cli.test_extrinsics_cli import run_cli
+from tests.cli.test_extrinsics_cli import calibrate_cli, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -32,22 +32,7 @@ def green(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 
 def calibrate(d: Path, *config: str) -> tuple[int, dict]:
-    truth = json.loads((d / "on.truth.json").read_text())
-    proc = run_cli(
-        "extrinsics",
-        "calibrate",
-        str(d / "on.png"),
-        "--camera",
-        str(d / "camera.json"),
-        "--target",
-        "two-sided",
-        "--separation",
-        str(truth["target"]["separation_mm"]),
-        "--out",
-        str(d / "system.json"),
-        "--json",
-        *config,
-    )
+    proc = calibrate_cli(d, *config)
     return proc.returncode, json.loads(proc.stdout or proc.stderr or "{}")
 
 

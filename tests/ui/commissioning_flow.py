@@ -148,16 +148,20 @@ def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS
     laps.restart()
 
 
-def calibrated_extrinsics(page: Page, separation_mm: float | None) -> str:
-    """The Commission tab's calibration of the camera and laser plane with this wall
-    separation typed (None: the field emptied, the cell file's); its note once it has ended."""
-    page.type("extr-separation", "" if separation_mm is None else f"{separation_mm:.1f}")
-    page.click("calibrate-extr")
-    wait_for("the job sent", lambda: page.text("extr-note").endswith("..."), UI_S, 0.1)
+def calibrated_extrinsics(
+    page: Page, separation_mm: float | None, step: tuple[str, str, str] | None = None
+) -> str:
+    """A calibration of the camera and laser plane with this wall separation typed (None: the
+    field emptied, the cell file's); its note once it has ended. `step`: the (separation field,
+    button, note) of the flow, the Commission tab's by default."""
+    field, button, note = step or ("extr-separation", "calibrate-extr", "extr-note")
+    page.type(field, "" if separation_mm is None else f"{separation_mm:.1f}")
+    page.click(button)
+    wait_for("the job sent", lambda: page.text(note).endswith("..."), UI_S, 0.1)
     return str(
         wait_for(
             "the calibration",
-            lambda: (t := page.text("extr-note")) and not t.endswith("...") and t,
+            lambda: (t := page.text(note)) and not t.endswith("...") and t,
             STEP_TIMEOUT_S,
             0.25,
         )

@@ -15,6 +15,7 @@ import pytest
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.service.launch import ServiceProcess
 from tests.ui.browser_page import UI_S, Page, served_page, service_status, wait_for
+from tests.ui.commissioning_flow import calibrated_extrinsics
 from tests.ui.ui_procs import (
     knock_calibration,
     sim_cell_file,
@@ -35,18 +36,9 @@ def knocked(tmp_path: Path) -> Iterator[tuple[ServiceProcess, Page, Path]]:
 
 
 def calibrated(page: Page, separation_mm: float | None) -> str:
-    """The recovery's calibration with this wall separation typed (None: the field emptied, the
-    cell file's); its note once the job has ended."""
-    page.type("calib-separation", "" if separation_mm is None else f"{separation_mm:.1f}")
-    page.click("calibrate")
-    wait_for("the job sent", lambda: page.text("calib-note").endswith("..."), UI_S, 0.1)
-    return str(
-        wait_for(
-            "the calibration",
-            lambda: (t := page.text("calib-note")) and not t.endswith("...") and t,
-            180,
-            0.25,
-        )
+    """The recovery's calibration with this wall separation typed (None: the cell file's)."""
+    return calibrated_extrinsics(
+        page, separation_mm, ("calib-separation", "calibrate", "calib-note")
     )
 
 
