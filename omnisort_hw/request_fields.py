@@ -6,6 +6,8 @@ bounds, choices, default and help, and the rules between arguments (`only_when`,
 
 - `args_of(cls)`: the `Arg` records the protocol checks a request's arguments against;
 - `check_rules(cls, args)`: the rules between arguments, as `ArgumentError` naming the field;
+- `check_args(cls, command, raw)`: every argument checked, defaults filled, then the rules
+  (what the service's protocol and the virtual cell's control channel check with);
 - `schema_of(cls)`: the JSON Schema (draft 2020-12) of the arguments object, which any client
   (the browser interface, `omnisort ctl describe`) builds its forms and checks from;
 - `build(cls, args)`: the request itself from checked arguments.

@@ -2,8 +2,8 @@
 back, each request bounded by a timeout. The Simulator tab and the test harness
 (`sim_backend.virtual_cell.launcher`) speak it; the service never does, so it never learns
 that its cell is simulated. It imports nothing of the simulator: the channel's commands are
-declared in `sim_requests` (docs/virtual_cell.md lists them), and each has one method here that
-sends its request record through `execute`."""
+declared in `sim_requests` (docs/virtual_cell.md lists them), and `execute` sends a command's
+request record."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ import socket
 import threading
 from typing import Any
 
-from omnisort_hw import sim_requests as sr
 from omnisort_hw.request_fields import wire_args
 
 DEFAULT_TIMEOUT_S = 10.0
@@ -76,71 +75,9 @@ class SimLink:
         with self._lock:
             self._drop()
 
-    # -- one method per command, each through `execute` ------------------------------------
-
     def execute(
         self, cmd: str, request: Any = None, timeout_s: float = DEFAULT_TIMEOUT_S
     ) -> dict[str, Any]:
-        """The command `cmd` with its request record's arguments (none: its defaults)."""
+        """The command `cmd` with its request record's arguments (a `sim_requests` record, or
+        None: its defaults)."""
         return self.control(cmd, timeout_s, **wire_args(request))
-
-    def describe(self) -> dict[str, Any]:
-        return self.execute("describe")
-
-    def schema(self, cmd: str) -> dict[str, Any]:
-        """The JSON Schema of `cmd`'s arguments, as the channel describes it."""
-        return dict(self.describe()["commands"][cmd]["args"])
-
-    def status(self) -> dict[str, Any]:
-        return self.execute("status")
-
-    def truth(self, timeout_s: float = DEFAULT_TIMEOUT_S) -> dict[str, Any]:
-        return self.execute("truth", timeout_s=timeout_s)
-
-    def board(self, request: sr.BoardRequest) -> dict[str, Any]:
-        return self.execute("board", request, MOVE_TIMEOUT_S)
-
-    def camera(self, request: sr.CameraRequest) -> dict[str, Any]:
-        return self.execute("camera", request, MOVE_TIMEOUT_S)
-
-    def knock(self, request: sr.KnockRequest) -> dict[str, Any]:
-        return self.execute("knock", request, MOVE_TIMEOUT_S)
-
-    def laser(self, request: sr.LaserRequest) -> dict[str, Any]:
-        return self.execute("laser", request, MOVE_TIMEOUT_S)
-
-    def target(self, request: sr.TargetRequest) -> dict[str, Any]:
-        return self.execute("target", request, MOVE_TIMEOUT_S)
-
-    def cube(self, request: sr.CubeRequest) -> dict[str, Any]:
-        return self.execute("cube", request, MOVE_TIMEOUT_S)
-
-    def joints(self, request: sr.JointsRequest) -> dict[str, Any]:
-        return self.execute("joints", request, MOVE_TIMEOUT_S)
-
-    def move_to(self, request: sr.MoveToRequest) -> dict[str, Any]:
-        return self.execute("move_to", request, MOVE_TIMEOUT_S)
-
-    def gripper(self, request: sr.GripperRequest) -> dict[str, Any]:
-        return self.execute("gripper", request, MOVE_TIMEOUT_S)
-
-    def render(self, request: sr.RenderRequest) -> dict[str, Any]:
-        return self.execute("render", request, MOVE_TIMEOUT_S)
-
-    def drop(self, request: sr.DropRequest) -> dict[str, Any]:
-        return self.execute("drop", request)
-
-    def stall(self, request: sr.StallRequest) -> dict[str, Any]:
-        return self.execute("stall", request)
-
-    def unstall(self, request: sr.UnstallRequest) -> dict[str, Any]:
-        return self.execute("unstall", request)
-
-    def protective_stop(self) -> dict[str, Any]:
-        return self.execute("protective_stop")
-
-    def emergency_stop(self) -> dict[str, Any]:
-        return self.execute("emergency_stop")
-
-    def release_emergency_stop(self) -> dict[str, Any]:
-        return self.execute("release_emergency_stop")

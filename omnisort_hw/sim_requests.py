@@ -1,8 +1,8 @@
 """The virtual cell's control channel's commands, declared as the service's are
 (`request_fields`): one request record per command, each argument once with its type,
 unit, bounds, choices and help. From it the channel checks every request (`validate`), its
-`describe` gives each command's JSON Schema, `SimLink` has one typed method per command, and
-the Simulator tab builds and checks its forms. Nothing of the simulator is imported: the
+`describe` gives each command's JSON Schema, `SimLink.execute` sends a command's record, and
+the Simulator tab checks its forms against the schema. Nothing of the simulator is imported: the
 client and the channel share this contract.
 
 Bounds are the simulator's own (a mounting within +-180 deg, the laser's emitter within
@@ -225,37 +225,33 @@ class SimCommand:
         return {"help": self.summary, "args": self.schema()}
 
 
-def _command(name: str, request: type[Any], help: str = "") -> SimCommand:
-    return SimCommand(name, request, help)
-
-
 SIM_COMMANDS: dict[str, SimCommand] = {
     c.name: c
     for c in (
-        _command("status", NoArgs, "the controller's modes, the laser, renders, late ticks"),
-        _command(
+        SimCommand("status", NoArgs, "the controller's modes, the laser, renders, late ticks"),
+        SimCommand(
             "truth",
             NoArgs,
             "cube poses in S, the bin each is in, collisions, the camera's rotation and the "
             "laser plane as system.json holds them, the joints and the gripper",
         ),
-        _command("describe", NoArgs, "each command and the JSON Schema of its arguments"),
-        _command("protective_stop", NoArgs, "a protective stop, as a safety sensor triggers it"),
-        _command("emergency_stop", NoArgs, "an emergency stop"),
-        _command("release_emergency_stop", NoArgs, "the emergency stop button pulled out again"),
-        _command("drop", DropRequest),
-        _command("stall", StallRequest),
-        _command("unstall", UnstallRequest),
-        _command("board", BoardRequest),
-        _command("camera", CameraRequest),
-        _command("knock", KnockRequest),
-        _command("laser", LaserRequest),
-        _command("target", TargetRequest),
-        _command("cube", CubeRequest),
-        _command("joints", JointsRequest),
-        _command("move_to", MoveToRequest),
-        _command("gripper", GripperRequest),
-        _command("render", RenderRequest),
+        SimCommand("describe", NoArgs, "each command and the JSON Schema of its arguments"),
+        SimCommand("protective_stop", NoArgs, "a protective stop, as a safety sensor triggers it"),
+        SimCommand("emergency_stop", NoArgs, "an emergency stop"),
+        SimCommand("release_emergency_stop", NoArgs, "the emergency stop button pulled out again"),
+        SimCommand("drop", DropRequest),
+        SimCommand("stall", StallRequest),
+        SimCommand("unstall", UnstallRequest),
+        SimCommand("board", BoardRequest),
+        SimCommand("camera", CameraRequest),
+        SimCommand("knock", KnockRequest),
+        SimCommand("laser", LaserRequest),
+        SimCommand("target", TargetRequest),
+        SimCommand("cube", CubeRequest),
+        SimCommand("joints", JointsRequest),
+        SimCommand("move_to", MoveToRequest),
+        SimCommand("gripper", GripperRequest),
+        SimCommand("render", RenderRequest),
     )
 }
 

@@ -108,7 +108,7 @@ def run_extrinsics(
     the target as measured (`config.target.load_target_description`; its separation is then
     the one used), else the symmetric paper target; `laser_color` the laser's. With the
     log on, the overlay picture (`ExtrinsicsRun.overlay`) goes to it as well."""
-    if stripe_px is None and laser_color != "red":
+    if stripe_px is None:  # the image's stripe, of the laser's colour
         from omnisort_hw.core.laser_stripe import laser_stripe_points
 
         stripe_px = laser_stripe_points(image, color=laser_color)

@@ -26,7 +26,6 @@ from omnisort_hw.request_fields import (
     args_of,
     build,
     check_args,
-    check_rules,
     schema_of,
     summary_line,
     type_name,
@@ -109,15 +108,6 @@ class Command:
 
     def arg(self, name: str) -> Arg | None:
         return next((a for a in self.args if a.name == name), None)
-
-    def check(self, args: Mapping[str, Any]) -> None:
-        """The rules between the arguments, as ProtocolError(bad_argument) naming the field."""
-        if self.request is None:
-            return
-        try:
-            check_rules(self.request, self.name, args)
-        except ArgumentError as exc:
-            raise ProtocolError(BAD_ARGUMENT, str(exc), field=exc.field) from None
 
     def schema(self) -> dict[str, Any]:
         """The JSON Schema (draft 2020-12) of this command's `args` object."""

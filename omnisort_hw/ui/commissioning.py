@@ -252,20 +252,18 @@ class CommissioningPanel:
     # -- acting: the jobs -------------------------------------------------------------------
 
     def _start(self, what: str, cmd: str, args: dict[str, Any], doing: str = "") -> bool:
-        """Start a step's job (`what`: the step), its request checked against the command's
-        schema first; the step's note says what it is doing, or why it was not sent."""
+        """Start a step's job (`what`: the step; `restore` has none), its request checked
+        against the command's schema first (`GuidedStep.start`)."""
         step = self.steps.get(what)
-        if step is not None and (found := self.ctx.operators.problems(cmd, args)):
-            step.refused("; ".join(found))
-            return False
-        if not self.watch.start(cmd, args):
-            return False
-        self._what = what
-        if step is not None:
-            step.waiting(doing)
+        if step is None:
+            started = self.watch.start(cmd, args)
+        else:
+            started = step.start(self.watch, self.ctx.operators.problems, cmd, args, doing)
+        if started:
+            self._what = what
             if what in ("map", "locate"):
                 self.commissioned.text = ""
-        return True
+        return started
 
     def calibrate_intrinsics(self) -> None:
         args = {

@@ -22,7 +22,7 @@ from nicegui import ui
 
 from omnisort_hw.pipeline.replies import Level
 from omnisort_hw.pipeline.verdict import verdict_lines
-from omnisort_hw.ui.job_runner import JobEnd
+from omnisort_hw.ui.job_runner import JobEnd, JobWatch
 from omnisort_hw.ui.widgets import tag
 
 log = logging.getLogger(__name__)
@@ -106,6 +106,24 @@ class GuidedStep:
         self._show_buttons()
 
     waiting = reset
+
+    def start(
+        self,
+        watch: JobWatch,
+        problems: Callable[[str, dict[str, Any]], list[str]],
+        cmd: str,
+        args: dict[str, Any],
+        doing: str,
+    ) -> bool:
+        """Send the step's job through `watch`, its request checked by `problems` (the
+        command's schema) first: the note says what is being done, or why nothing was sent."""
+        if found := problems(cmd, args):
+            self.refused("; ".join(found))
+            return False
+        if not watch.start(cmd, args):
+            return False
+        self.waiting(doing)
+        return True
 
     def refused(self, why: str) -> None:
         """A request not sent (the schema or the page refused it): why, and no way on."""

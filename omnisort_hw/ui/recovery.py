@@ -147,11 +147,7 @@ class RecoveryPanel:
         self.stepper.next()
 
     def _start(self, cmd: str, args: dict[str, Any], doing: str) -> None:
-        step = self.steps[cmd]
-        if found := self.ctx.operators.problems(cmd, args):
-            step.refused("; ".join(found))
-        elif self.watch.start(cmd, args):
-            step.waiting(doing)
+        self.steps[cmd].start(self.watch, self.ctx.operators.problems, cmd, args, doing)
 
     def calibrate(self) -> None:
         args = extrinsics_args(self.separation)

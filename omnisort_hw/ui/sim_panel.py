@@ -322,10 +322,13 @@ class SimulatorPanel:
             self._schemas = {k: v["args"] for k, v in described["commands"].items()}
         return problems(self._schemas[cmd], args)
 
-    async def _act(self, cmd: str, done: str, args: dict[str, Any]) -> dict[str, Any] | None:
+    async def _act(
+        self, cmd: str, done: str, args: dict[str, Any], moves: str | None = None
+    ) -> dict[str, Any] | None:
         """A signed-in operator's command: checked against the channel's schema (nothing sent
-        when it refuses, each problem naming its field), sent as its request record, then the
-        note and the truth after it. `args`: what was typed (None: not given)."""
+        when it refuses, each problem naming its field), confirmed when it `moves` the arm (the
+        question), sent as its request record, then the note and the truth after it. `args`:
+        what was typed (None: not given)."""
         if self.token() is None:
             self.note.text = f"{cmd}: sign in as operator first: nothing was sent"
             return None
@@ -333,6 +336,9 @@ class SimulatorPanel:
         found = await self._problems(cmd, given)
         if found:
             self.note.text = f"{cmd}: not sent: " + "; ".join(found)
+            return None
+        if moves is not None and not await confirm(f"{moves}? The simulated arm will move."):
+            self.note.text = "cancelled: nothing was sent"
             return None
         self.note.text = f"{cmd} ..."
         result = await self._control(cmd, build(sr.SIM_COMMANDS[cmd].request, given))
@@ -429,39 +435,26 @@ class SimulatorPanel:
                 field.value = f"{float(q):.2f}"
             self._show_truth(truth)
 
-    async def _confirmed(self, what: str) -> bool:
-        if self.token() is None:
-            self.note.text = "sign in as operator first: nothing was sent"
-            return False
-        if not await confirm(f"{what}? The simulated arm will move."):
-            self.note.text = "cancelled: nothing was sent"
-            return False
-        return True
-
     async def move_joints(self) -> None:
         args = {"q_deg": [typed_number(f.value) for f in self.joints]}
-        if await self._problems("joints", args):  # said by _act, before any confirmation
-            await self._act("joints", "", args)
-        elif await self._confirmed("Move the arm to these joints"):
-            await self._act("joints", "arm at the joints asked ({seconds:.1f} s)", args)
+        done = "arm at the joints asked ({seconds:.1f} s)"
+        await self._act("joints", done, args, "Move the arm to these joints")
 
     async def move_to(self) -> None:
         args = {
             k: typed_number(f.value)
             for k, f in zip(("x_mm", "y_mm", "z_mm"), self.xyz, strict=True)
         }
-        if await self._problems("move_to", args):
-            await self._act("move_to", "", args)
-        elif await self._confirmed("Move the tool to this point"):
-            await self._act("move_to", "tool at the point asked ({seconds:.1f} s)", args)
+        done = "tool at the point asked ({seconds:.1f} s)"
+        await self._act("move_to", done, args, "Move the tool to this point")
 
     async def gripper(self, closed: bool) -> None:
-        if await self._confirmed("Close the gripper" if closed else "Open the gripper"):
-            await self._act(
-                "gripper",
-                "gripper closed, holding: {holding}" if closed else "gripper open",
-                {"closed": closed},
-            )
+        await self._act(
+            "gripper",
+            "gripper closed, holding: {holding}" if closed else "gripper open",
+            {"closed": closed},
+            "Close the gripper" if closed else "Open the gripper",
+        )
 
     async def render(self) -> None:
         await self._act("render", "written: {images}", {"folder": self.folder.value or None})

@@ -24,7 +24,7 @@ from sim_backend.scene_images import write_render
 from sim_backend.virtual_cell.held_board import HELD_VIEWS
 from sim_backend.virtual_cell.servers import all_status
 
-FACES = ("arm", "dashboard", "laser", "camera")
+FACES = tuple(f for f in sr.FACES if f != "all")  # each face "all" names
 MOVE_TIMEOUT_S = 120.0
 
 # The calls that change the picture return once a picture shows the change.
