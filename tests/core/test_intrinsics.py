@@ -213,8 +213,8 @@ def test_bad_inputs_fail_clearly_and_write_nothing(reference_dir: Path, tmp_path
         ([*good, broken], ["--board", "9x6"], "broken.jpg: not a readable image"),
         ([*good, tmp_path / "missing.jpg"], ["--board", "9x6"], "missing.jpg: no such image file"),
         ([*good[:2], no_board], ["--board", "9x6"], "(gray.png): no complete 9x6 checkerboard"),
-        (good[:3], ["--board", "8x6"], "3 image(s) (a1.jpg, a2.jpg, a3.jpg): no complete 8x6"),
-        (good[:3], ["--board", "10x7"], "the first image shows a 9x6 board"),
+        (good[:2], ["--board", "8x6"], "2 image(s) (a1.jpg, a2.jpg): no complete 8x6"),
+        (good[:1], ["--board", "10x7"], "the first image shows a 9x6 board"),
         (good[:2], ["--board", "9x6"], "only 2 of 2 image(s)"),
         (good[:3], ["--board", "9by6"], "--board"),
     ]

@@ -89,13 +89,11 @@ def test_recovery_after_a_bump_to_a_sorted_cell(
     page.click("placed")
     wait_for("the calibration step", lambda: page.visible("calibrate"), UI_S)
 
-    # A wall separation typed wrong: 3 % is a FAIL of the scale check (nothing accepts it),
-    # 1 % a WARN (only its explicit acceptance goes on, logged; taken, then retaken).
+    # A wall separation typed 1 % wrong: a WARN of the scale check, which only its explicit
+    # acceptance takes on, logged; taken, then retaken. (A FAIL, which nothing accepts, is the
+    # same guided step's: tested on the commissioned cell, tests/ui/commissioned.)
     separation = load_cell_config(config).target.separation_mm
     assert separation is not None
-    note = calibrated(page, 1.03 * separation)
-    assert note.startswith("FAIL") and "floor board's scale" in note, note
-    assert not page.visible("accept-calib") and not page.visible("accept-calib-warn")
     note = calibrated(page, 1.01 * separation)
     assert note.startswith("WARN") and "floor board's scale" in note, note
     assert not page.visible("accept-calib") and page.visible("accept-calib-warn")
