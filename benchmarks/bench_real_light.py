@@ -105,8 +105,46 @@ def _camera_summary(m: dict[str, list[Any]]) -> dict[str, Any]:
     }
 
 
+OFF_RENDERS = 50  # laser-off renders of the sorting cell, unseen seeds
+OFF_WIDTH = 960  # the cell's frame size
+
+
+def laser_off_renders(n: int = OFF_RENDERS, width: int = OFF_WIDTH) -> dict[str, Any]:
+    """The cluttered sorting cell (red, green, blue and yellow cubes and bins, the floor
+    board's black print, the arm's metal) rendered laser off through the colour camera's
+    effects, `n` seeds: the points the extractor returns from one image (phantoms, every
+    one), and what its chains held before the line rule (`core.laser_presence`) dropped them."""
+    from dataclasses import replace
+
+    from omnisort_hw.core.laser_stripe import laser_stripe_points_stats
+    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene_images import render_scene
+
+    scene = sized(load_scene("sorting"), width)
+    scene = replace(scene, degrade=replace(scene.degrade, enabled=True, effects=True))
+    now, without = [], []
+    for k, seed in enumerate(range(1000, 1000 + n)):
+        off, _ = render_scene(scene, seed=seed, laser_on=False, with_truth=False)
+        pts, stats = laser_stripe_points_stats(off)
+        held = stats.presence.points if stats.presence is not None else len(pts)
+        now.append(len(pts))
+        without.append(held)
+        print(f"   laser-off render {k + 1}/{n}: {len(pts)} points ({held} before the line rule)")
+
+    def summary(counts: list[int]) -> dict[str, int]:
+        return {
+            "renders": len(counts),
+            "with_phantoms": sum(c > 0 for c in counts),
+            "phantom_points_max": max(counts),
+            "phantom_points_total": sum(counts),
+        }
+
+    return {"width_px": width, "now": summary(now), "without_line_rule": summary(without)}
+
+
 def run(shared: Path, photos: Path) -> dict[str, Any]:
     now = measure(photos)
+    now["_laser_off_renders"] = laser_off_renders()
     saved = HERE / "results.json"
     before = None
     if saved.exists():

@@ -739,6 +739,22 @@ def real_light(r: dict[str, Any]) -> str:
                     pct(s["clipped_split_mean"]),
                 ]
             )
+    renders = rl["now"].get("_laser_off_renders")
+    if renders is not None:  # the simulator's cluttered cell, laser off, through the effects
+        for when, key in (("without the line rule", "without_line_rule"), ("now", "now")):
+            s = renders[key]
+            rows.append(
+                [
+                    when,
+                    f"sorting cell renders, {renders['width_px']} px, colour camera (laser off)",
+                    s["renders"],
+                    f"{s['with_phantoms']} with phantoms (at most {s['phantom_points_max']} "
+                    "points)",
+                    "",
+                    "",
+                    "",
+                ]
+            )
     head = [
         "extractor",
         "set",

@@ -46,6 +46,13 @@ class FeatureNotFoundError(CalibrationError):
     code = "feature_not_found"
 
 
+class NoLaserLineError(FeatureNotFoundError):
+    """The image shows no laser line (`core.laser_presence`): nothing is measured on the light
+    of spots, coloured marks or defocused patches."""
+
+    code = "no_laser_line"
+
+
 class CalibrationFileError(OmnisortError):
     """A calibration file is missing, corrupt, stale or from another camera."""
 

@@ -34,6 +34,8 @@ How (all vectorised, no loop over pixels):
 4. Chains: points are linked through a grid of one scan spacing (gaps of a cell bridged, for
    dashed, aliased stripes); chains that fail the tests above are dropped, and with them
    isolated specks of JPEG colour noise.
+5. No laser here: an image none of whose chains is a line (long and thin; spots, marks and
+   defocused patches are not) gives no points (`core.laser_presence`).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ import numpy as np
 
 from omnisort_hw.core.clipped_core import clipped_cores
 from omnisort_hw.core.laser_colour import as_red_laser
+from omnisort_hw.core.laser_presence import LinePresence, line_presence
 from omnisort_hw.errors import InputError
 
 _HALF = 4  # half-width (px) of the across-stripe window; stripes up to ~4 px wide
@@ -77,6 +80,7 @@ class StripeStats:
     # the point's line (False at a stripe's end or a kink), and its chain's label
     supported: np.ndarray | None = None
     chains: np.ndarray | None = None
+    presence: LinePresence | None = None  # whether a laser line was seen at all
 
 
 def check_bgr(image: np.ndarray, what: str = "image") -> np.ndarray:
@@ -531,10 +535,13 @@ def laser_stripe_points_stats(
             bgr, red_rows, mask, low, high, s, pts, amp, con, sup
         )
     keep, chain = _keep_chains(pts, amp > high, con, (h, w), s)
+    presence = line_presence(pts[keep], chain[keep], s)
+    if not presence.present:  # spots, marks, blobs: no laser here (core.laser_presence)
+        keep[:] = False
     pts = pts[keep]
     n_cand = int(full_r.shape[0] + full_c.shape[0])
     stats = StripeStats(
-        noise, low, high, n_cand, int(pts.shape[0]), amp[keep], sup[keep], chain[keep]
+        noise, low, high, n_cand, int(pts.shape[0]), amp[keep], sup[keep], chain[keep], presence
     )
     return pts, stats
 

@@ -28,3 +28,16 @@ class DecisionSummary(TypedDict):
     t2: float
     p_value: float
     source: str
+
+
+class LaserLineReply(TypedDict):
+    """Whether an image showed a laser line (`core.laser_presence`): the longest thin chain
+    against what a line needs, and the pieces that were not one."""
+
+    present: bool
+    longest_line_px: float
+    min_line_px: float
+    chains: int
+    spots: int
+    blobs: int
+    points: int

@@ -229,7 +229,7 @@ def judge(ref: ReferenceStripe, hull: np.ndarray | None, pts: np.ndarray) -> dic
     if clip.sum() >= 5:
         line_of = np.rint(along).astype(int)
         pos = {int(x): i for i, x in enumerate(ref.lines)}
-        at = np.array([pos.get(int(x), -1) for x in line_of])
+        at = np.array([pos.get(int(x), -1) for x in line_of], dtype=np.intp)
         hit = (at >= 0) & on_extent
         hit[hit] &= clip[at[hit]]
         hit[hit] &= d[hit] <= ref.width[at[hit]]  # the stripe's points, not phantoms elsewhere

@@ -25,7 +25,7 @@ from omnisort_hw.core.overlays import draw_extrinsics, overlay_path, write_pictu
 from omnisort_hw.core.radiometry import SRGB, ToneCurve
 from omnisort_hw.core.records import PictureReply
 from omnisort_hw.core.target_layout import TargetLayout
-from omnisort_hw.errors import InputError
+from omnisort_hw.errors import InputError, NoLaserLineError
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.replies import ExtrinsicsReply
@@ -109,9 +109,14 @@ def run_extrinsics(
     the one used), else the symmetric paper target; `laser_color` the laser's. With the
     log on, the overlay picture (`ExtrinsicsRun.overlay`) goes to it as well."""
     if stripe_px is None:  # the image's stripe, of the laser's colour
-        from omnisort_hw.core.laser_stripe import laser_stripe_points
+        from omnisort_hw.core.laser_stripe import laser_stripe_points_stats
 
-        stripe_px = laser_stripe_points(image, color=laser_color)
+        stripe_px, found = laser_stripe_points_stats(image, color=laser_color)
+        if found.presence is not None and not found.presence.present:
+            raise NoLaserLineError(
+                f"{source}: {found.presence.reason()}: is the {laser_color} laser on, and does "
+                "its line cross the target?"
+            )
     from omnisort_hw.core.extrinsics.joint import calibrate_joint
     from omnisort_hw.core.extrinsics.method1 import calibrate_method1
     from omnisort_hw.core.extrinsics.method2 import calibrate_method2

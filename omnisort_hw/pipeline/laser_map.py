@@ -14,6 +14,7 @@ import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.laser_echoes import direct_hits, floor_echoes
+from omnisort_hw.core.laser_presence import LinePresence
 from omnisort_hw.core.laser_stripe import laser_stripe_points_stats, stripe_interior
 from omnisort_hw.core.map_uncertainty import (
     PointSigmas,
@@ -29,7 +30,7 @@ from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.replies import MapReply, MapSummary
 from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Verdict, at_least
+from omnisort_hw.pipeline.verdict import Check, Verdict, at_least
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -44,6 +45,7 @@ class LaserMap:
     echoes: int = 0  # stripe points dropped as reflections (core.laser_echoes)
     ends: int = 0  # stripe points dropped at ends and kinks (core.laser_stripe.stripe_interior)
     sigmas: PointSigmas | None = None  # each point's uncertainty (core.map_uncertainty)
+    laser_line: LinePresence | None = None  # whether the image showed a laser line at all
 
     @property
     def finite_points_S(self) -> np.ndarray:
@@ -63,6 +65,8 @@ class LaserMap:
         }
         if self.sigmas is not None:
             out["sigma"] = self.sigmas.summary()
+        if self.laser_line is not None:
+            out["laser_line"] = self.laser_line.to_dict()
         if with_points:
             out["points_S"] = np.round(self.points_S[finite], 1).tolist()
             out["pixels"] = np.round(self.pixels[finite], 2).tolist()
@@ -114,6 +118,7 @@ def map_laser(
         int((~keep).sum()),
         int((~interior).sum()),
         sigmas,
+        stats.presence,
     )
     log.image("map/image", image)
     log.points2d("map/image/laser", pixels, color=(255, 0, 0), radius=1)
@@ -181,15 +186,28 @@ class MapResult:
         }
 
     def verdict(self) -> Verdict:
-        """A map with no segment maps nothing: a laser off, or its line out of view."""
+        """No laser line in the image is a FAIL: nothing is measured on phantom points (the
+        light of spots, coloured marks, defocused patches; `core.laser_presence`). A map with
+        a line but no segment maps nothing: its line falls on no surface in view, a WARN."""
         n_points = len(self.laser_map.pixels)
+        line = self.laser_map.laser_line
+        checks = []
+        if line is not None:
+            checks.append(
+                Check(
+                    "laser line",
+                    "pass" if line.present else "fail",
+                    f"{line.longest_line_px:.0f} px",
+                    f">= {line.min_line_px:.0f} px long and thin",
+                    "" if line.present else f"{line.reason()}: is the laser on and in view?",
+                )
+            )
         advice = (
             f"nothing was mapped ({n_points} laser points, none forming a segment): is the "
             "laser on, and does its line fall on a surface in view?"
         )
-        return Verdict(
-            "laser map", (at_least("segments", len(self.laser_map.segments), 1, "warn", advice),)
-        )
+        checks.append(at_least("segments", len(self.laser_map.segments), 1, "warn", advice))
+        return Verdict("laser map", tuple(checks))
 
 
 def run(rig: Rig, request: MapRequest, cancel: threading.Event | None = None) -> MapResult:

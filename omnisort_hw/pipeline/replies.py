@@ -13,7 +13,7 @@ each real reply against its declared keys.)
 
 from typing import Any, Literal, NotRequired, TypedDict
 
-from omnisort_hw.core.records import DecisionSummary, PictureReply, Record
+from omnisort_hw.core.records import DecisionSummary, LaserLineReply, PictureReply, Record
 
 Level = Literal["pass", "warn", "fail"]
 
@@ -45,6 +45,7 @@ class MapSummary(TypedDict):
     stripe_ends_dropped: int
     segments: list[Record]
     sigma: NotRequired[Record]
+    laser_line: NotRequired[LaserLineReply]
     points_S: NotRequired[list[list[float]]]
     pixels: NotRequired[list[list[float]]]
     sigma_normal_mm: NotRequired[list[float]]

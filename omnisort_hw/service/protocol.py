@@ -68,6 +68,7 @@ ERROR_CODES: tuple[str, ...] = (
     "instance_locked",
     "calibration_drift",
     "not_registered",
+    "no_laser_line",
 )
 
 MAX_ID_CHARS = 128

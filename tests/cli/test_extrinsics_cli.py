@@ -105,12 +105,20 @@ def test_calibrate_and_map_a_rendered_image(rendered: dict[str, Path]) -> None:
     want = float(np.hypot(half, near))
     assert len(segs) >= 2
     assert sorted(s["distance_mm"] for s in segs)[:2] == pytest.approx([want, want], rel=0.01)
+    assert json.loads(proc.stdout)["result"]["laser_line"]["present"] is True
+    # The laser off: no laser line, so nothing measured, and the verdict says why.
+    proc = run_cli("map", str(d / "off.png"), "--system", str(out), "--json")
+    dark = json.loads(proc.stdout)["result"]
+    assert dark["points"] == 0 and dark["laser_line"]["present"] is False, dark
+    assert dark["verdict"]["level"] == "fail", dark["verdict"]
+    check = next(c for c in dark["verdict"]["checks"] if c["name"] == "laser line")
+    assert "no laser line in the image" in check["advice"], check
 
 
 @pytest.mark.parametrize(
     ("image", "extra", "message"),
     [
-        ("off.png", [], "laser"),
+        ("off.png", [], "[no_laser_line]: "),
         ("no_markers.png", [], "marker"),
         ("small.png", [], "image is 640x640 but the camera model is for 960x960"),
         ("on.png", ["--target", "checkerboards"], "checkerboard"),

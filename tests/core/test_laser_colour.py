@@ -12,6 +12,7 @@ from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.errors import InputError
 from sim_backend.scene import Color, load_scene, sized
 from sim_backend.scene_images import render_scene
+from tests.sim.image_measures import distance_to_lines
 
 # Each colour as the shipped red laser is drawn: the main channel full, the others faint.
 LASERS = {
@@ -19,20 +20,6 @@ LASERS = {
     "green": (0.06, 1.0, 0.04),
     "blue": (0.04, 0.06, 1.0),
 }
-
-
-def distance_to_lines(pts: np.ndarray, lines: list[dict]) -> np.ndarray:
-    """(N,) distance (px) of each point to the nearest segment of the truth's polylines."""
-    segs = np.concatenate(
-        [
-            np.stack([p[:-1], p[1:]], axis=1)
-            for p in (np.asarray(line["points_px"]) for line in lines)
-        ]
-    )
-    a, b = segs[None, :, 0], segs[None, :, 1]
-    ab = b - a
-    t = np.clip(np.sum((pts[:, None] - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0, 1)
-    return np.min(np.linalg.norm(pts[:, None] - (a + t[..., None] * ab), axis=-1), axis=1)
 
 
 @pytest.fixture(scope="module")

@@ -82,6 +82,9 @@ def test_judge_counts_flank_points_as_off_and_split(photo: np.ndarray) -> None:
     some = judge(ref, hull, np.concatenate([on, phantom]))
     n_board = some["points_on_board"]
     assert some["off_on_board"] == pytest.approx(2 / n_board, abs=1e-4), some  # 4 decimals
+    # No point at all (an extractor that saw no laser line): nothing covered, nothing off.
+    none = judge(ref, hull, np.zeros((0, 2)))
+    assert none["points"] == 0 and none["coverage"] == 0.0 and none["off_on_board"] is None
 
 
 def test_no_laser_line_gives_no_reference() -> None:

@@ -163,3 +163,40 @@ def test_a_clipped_stripe_is_re_exposed_and_a_stubborn_one_is_refused() -> None:
                 )
     finally:
         cell.close()
+
+
+class _CoveredLaser(SimLaserSwitch):
+    """A switch that reads back what it was told but whose light never reaches the scene (a
+    covered aperture, a dead diode)."""
+
+    lit = False
+
+    def set(self, on: bool, timeout_s: float | None = None) -> None:
+        self._require()
+        self.lit = bool(on)
+
+    def state(self, timeout_s: float | None = None) -> bool:
+        self._require()
+        return self.lit
+
+
+@pytest.mark.parametrize("seed", [21, 22])
+def test_a_dark_laser_through_a_real_colour_camera_is_no_laser_not_phantoms(seed: int) -> None:
+    """The cell's own path, laser on/off differences, on the cluttered sorting cell through the
+    colour camera's effects (crosstalk, chromatic aberration, bloom, Bayer demosaicing) with a
+    laser whose light never arrives: a typed error naming the laser, not a stripe of phantoms."""
+    from dataclasses import replace
+
+    from sim_backend.scene import load_scene, sized
+
+    scene = sized(load_scene("sorting"), WIDTH)
+    scene = replace(scene, degrade=replace(scene.degrade, enabled=True, effects=True))
+    cell = SimCell.from_scene(scene, seed=seed)
+    cam = SimCamera(cell, degraded=True, exposure_ms=6.0, pixel_format="BGR3")
+    laser = _CoveredLaser(cell)
+    try:
+        with cam, laser, pytest.raises(NoLaserDifferenceError) as err:
+            capture_measurement(cam, laser, CaptureSettings(frames=FRAMES), board=False)
+    finally:
+        cell.close()
+    assert err.value.device == laser.name and "sees no laser light" in str(err.value)

@@ -33,11 +33,13 @@ def test_a_map_that_mapped_nothing_says_so_on_one_screen(service: Harness, tmp_p
     short = _ctl(service.running.port, "map", f"image={dark}", "picture=true")
     assert short.returncode == 0, short.stderr
     lines = short.stdout.splitlines()
-    assert lines[0] == "WARN: laser map", lines
-    assert "segments: 0 (>= 1)" in lines[1] and "is the laser on" in lines[1]
+    # No laser line in a laser-off image: nothing is measured, the check says why.
+    assert lines[0] == "FAIL: laser map", lines
+    assert "laser line: 0 px" in lines[1] and "no laser line in the image" in lines[1], lines
+    assert "segments: 0 (>= 1)" in lines[2] and "is the laser on" in lines[2], lines
     assert any(line.startswith("overlay_png: ") for line in lines)
     assert len(lines) <= 20 and lines[-1] == "(the whole reply: --json)"
     whole = _ctl(service.running.port, "--json", "map", f"image={dark}")
     reply = json.loads(whole.stdout)
-    assert reply["result"]["verdict"]["level"] == "warn"
-    assert reply["result"]["segments"] == []
+    assert reply["result"]["verdict"]["level"] == "fail"
+    assert reply["result"]["segments"] == [] and not reply["result"]["laser_line"]["present"]

@@ -176,3 +176,15 @@ def test_plc_reads_a_running_sort_and_starts_and_stops_it(tmp_path: Path) -> Non
         plc.client.close()
         face.close()
         running.stop()
+
+
+def test_the_documented_error_numbers_are_the_faces() -> None:
+    """docs/plc.md's table of `last_error` values is what the face writes, code for code."""
+    import re
+
+    from omnisort_hw.service import protocol as proto
+    from omnisort_hw.service.plc_face import error_number
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "plc.md").read_text()
+    table = {code: int(n) for n, code in re.findall(r"^\| (\d+) \| `(\w+)` \|$", doc, re.M)}
+    assert table == {code: error_number(code) for code in proto.ERROR_CODES}

@@ -56,3 +56,17 @@ def only_board(image: np.ndarray, corners_px: np.ndarray, grow_px: int) -> np.nd
     out = image.copy()
     out[mask == 0] = 128
     return out
+
+
+def distance_to_lines(pts: np.ndarray, lines: list[dict]) -> np.ndarray:
+    """(N,) distance (px) of each point to the nearest segment of the truth's polylines."""
+    segs = np.concatenate(
+        [
+            np.stack([p[:-1], p[1:]], axis=1)
+            for p in (np.asarray(line["points_px"]) for line in lines)
+        ]
+    )
+    a, b = segs[None, :, 0], segs[None, :, 1]
+    ab = b - a
+    t = np.clip(np.sum((pts[:, None] - a) * ab, -1) / np.maximum(np.sum(ab * ab, -1), 1e-12), 0, 1)
+    return np.min(np.linalg.norm(pts[:, None] - (a + t[..., None] * ab), axis=-1), axis=1)

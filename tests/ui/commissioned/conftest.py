@@ -17,7 +17,7 @@ from omnisort_hw.config.cell import load_cell_config
 from tests.sim.virtual_cell_fixture import virtual_cell
 from tests.ui import commissioning_flow as flow
 from tests.ui.browser_page import served_page
-from tests.ui.commissioned.shared import PERIOD_S, WIDTH, CellPage, Commissioned
+from tests.ui.commissioned.shared import PERIOD_S, VIEWS, WIDTH, CellPage, Commissioned
 
 
 @pytest.fixture(scope="session")
@@ -34,7 +34,7 @@ def cell_page(tmp_path_factory: pytest.TempPathFactory) -> Iterator[CellPage]:
 @pytest.fixture(scope="session")
 def intrinsics_from_views(cell_page: CellPage) -> CellPage:
     """The Commission tab's first step done: the views and the intrinsics."""
-    flow.views_in_page(cell_page.page, cell_page.laps)
+    flow.views_in_page(cell_page.page, cell_page.laps, views=VIEWS)
     return cell_page
 
 

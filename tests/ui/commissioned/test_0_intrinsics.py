@@ -1,5 +1,5 @@
 """The Commission tab's first step on the virtual cell with no calibration (the package's
-`intrinsics_from_views` fixture): ten views of a board held in front of the camera, walked
+`intrinsics_from_views` fixture): six views of a board held in front of the camera, walked
 through the field from the Simulator tab, each kept by the service with the full board in it;
 the intrinsics calibrated from them pass their verdict (asserted in the step) and become the
 cell's camera calibration."""
@@ -10,9 +10,8 @@ import json
 
 import pytest
 
-from tests.ui import commissioning_flow as flow
 from tests.ui.browser_page import service_status
-from tests.ui.commissioned.shared import CellPage
+from tests.ui.commissioned.shared import VIEWS, CellPage
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 
@@ -20,7 +19,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 def test_the_views_from_the_page_calibrate_the_camera(intrinsics_from_views: CellPage) -> None:
     c = intrinsics_from_views
     kept = sorted((c.tmp / "state" / "views").glob("*.png"))
-    assert len(kept) == flow.VIEWS, kept
+    assert len(kept) == VIEWS, kept
     camera = json.loads((c.tmp / "state" / "camera.json").read_text())
     # Every view kept is used, none rejected; the rendered corners fit to a fraction of a
     # pixel (0.011 px in one run: the renderer's corners are exact but for the pixel grid).
