@@ -45,7 +45,7 @@ from omnisort_hw.service.listener import check_exposure
 from omnisort_hw.service.pool import DaemonPool
 from omnisort_hw.service.protocol import Emit
 from omnisort_hw.service.states import Job, State, StateMachine, Transition
-from omnisort_hw.service.status_reply import ServiceStatus
+from omnisort_hw.service.status_reply import ServiceRecord, ServiceStatus
 from omnisort_hw.service.systemd import Notifier
 from omnisort_hw.service.transport import Transport
 
@@ -91,6 +91,8 @@ class Service(Transport, JobRunner):
             "connections": 0,
             "slow_clients_dropped": 0,
         }
+        self.errors_by_code: dict[str, int] = {}
+        self.last_error: tuple[str, str, float] | None = None  # code, message, monotonic time
         self._admission = Admission(
             config.max_clients,
             config.max_clients_per_peer,
@@ -135,7 +137,8 @@ class Service(Transport, JobRunner):
             "service": self._service_record(),
         }
 
-    def _service_record(self) -> dict[str, Any]:
+    def _service_record(self) -> ServiceRecord:
+        last = self.last_error
         return {
             "version": __version__,
             "pid": os.getpid(),
@@ -144,7 +147,18 @@ class Service(Transport, JobRunner):
             "token_required": self.config.token_required,
             "clients": len(self._clients),
             "uptime_s": round(time.monotonic() - self._started, 3),
-            **self.counters,
+            "requests": self.counters["requests"],
+            "errors": self.counters["errors"],
+            "connections": self.counters["connections"],
+            "slow_clients_dropped": self.counters["slow_clients_dropped"],
+            "errors_by_code": dict(sorted(self.errors_by_code.items())),
+            "last_error": None
+            if last is None
+            else {
+                "code": last[0],
+                "message": last[1],
+                "age_s": round(time.monotonic() - last[2], 1),
+            },
         }
 
     def status_reply(self) -> dict[str, Any]:

@@ -134,7 +134,26 @@ def status_rows(status: dict[str, Any]) -> list[tuple[str, str]]:
                 f"{svc.get('requests', 0)} request(s), {svc.get('errors', 0)} error(s)",
             )
         )
+        errors = errors_text(svc)
+        if errors:
+            rows.append(("", errors))
     return rows
+
+
+def errors_text(svc: Mapping[str, Any]) -> str:
+    """The service's errors by code, most first, and the last one with its age: what a
+    rising error count is made of ('' when there were none)."""
+    by_code = svc.get("errors_by_code") or {}
+    if not by_code:
+        return ""
+    counts = ", ".join(f"{code} {n}" for code, n in sorted(by_code.items(), key=lambda kv: -kv[1]))
+    last = svc.get("last_error")
+    if not isinstance(last, Mapping):
+        return f"errors: {counts}"
+    return (
+        f"errors: {counts}; last, {last.get('age_s', 0):.0f} s ago: {last.get('code')}: "
+        + str(last.get("message", ""))[:160]
+    )
 
 
 @dataclass(frozen=True)

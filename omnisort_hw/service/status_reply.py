@@ -3,9 +3,39 @@ cell's devices and calibration (`cell.status_reply.CellStatus`), and whether mot
 What the operator interface and `omnisort ctl status` read. (No postponed annotations: a
 TypedDict reads `NotRequired` when its class is made.)"""
 
+from typing import TypedDict
+
 from omnisort_hw.cell.status_reply import CellStatus
 from omnisort_hw.core.records import Record
 from omnisort_hw.service.states import StateSnapshot
+
+
+class LastError(TypedDict):
+    """The last error the service answered: its code, message and how long ago (s)."""
+
+    code: str
+    message: str
+    age_s: float
+
+
+class ServiceRecord(TypedDict):
+    """The service itself: version, process, address, token rule, clients, uptime, and its
+    counters; every error answered is counted by its code, and the last one is kept, so a
+    rising count can be told apart (a page's refused detections, a client's bad requests)."""
+
+    version: str
+    pid: int
+    host: str
+    port: int
+    token_required: bool
+    clients: int
+    uptime_s: float
+    requests: int
+    errors: int
+    connections: int
+    slow_clients_dropped: int
+    errors_by_code: dict[str, int]
+    last_error: LastError | None
 
 
 class ServiceStatus(StateSnapshot):
@@ -14,7 +44,7 @@ class ServiceStatus(StateSnapshot):
 
     job: Record | None  # the running job: command, request id, running time, progress
     last_run: Record | None  # the journal's last job
-    service: Record  # version, pid, address, token rule, clients, uptime, counters
+    service: ServiceRecord
 
 
 class StatusReply(ServiceStatus, CellStatus):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from typing import TYPE_CHECKING, Any
 
 from omnisort_hw.service import protocol as proto
@@ -39,6 +40,8 @@ class Transport:
 
     config: ServiceConfig
     counters: dict[str, int]
+    errors_by_code: dict[str, int]
+    last_error: tuple[str, str, float] | None
     _admission: Admission
     _clients: set[asyncio.StreamWriter]
 
@@ -157,6 +160,10 @@ class Transport:
     ) -> None:
         if reply.get("ok") is False:
             self.counters["errors"] += 1
+            error = reply.get("error") or {}
+            code = str(error.get("code", "?"))
+            self.errors_by_code[code] = self.errors_by_code.get(code, 0) + 1
+            self.last_error = (code, str(error.get("message", "")), time.monotonic())
         data = proto.encode(reply)
         async with lock:
             if writer.is_closing():

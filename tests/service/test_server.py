@@ -31,6 +31,27 @@ def test_status_reports_state_devices_and_calibration(service: Harness) -> None:
     assert res["rrd"].endswith(".rrd")
 
 
+def test_errors_are_counted_by_code_with_the_last_one_shown(service: Harness) -> None:
+    """A rising error count says what it is made of: each code's count and the last error."""
+    from omnisort_hw.service.status_reading import status_rows
+
+    with service.client() as c:
+        before = c.call("status")["result"]["service"]
+        assert not c.call("nonsense")["ok"]
+        assert not c.call("capture", {"exposure_ms": "x"})["ok"]
+        st = c.call("status")["result"]
+    svc = st["service"]
+    assert svc["errors"] == before["errors"] + 2
+    by_code = before["errors_by_code"]
+    for code in ("unknown_command", "bad_argument"):
+        assert svc["errors_by_code"][code] == by_code.get(code, 0) + 1, svc["errors_by_code"]
+    last = svc["last_error"]
+    assert last["code"] == "bad_argument" and "exposure_ms" in last["message"], last
+    assert 0.0 <= last["age_s"] < 60.0
+    shown = [v for _, v in status_rows(st) if v.startswith("errors: ")]
+    assert shown and "unknown_command 1" in shown[0] and "last, " in shown[0], shown
+
+
 def test_capture_as_path_and_base64(service: Harness) -> None:
     import cv2
     import numpy as np

@@ -42,6 +42,13 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     page.click("sign-in")
     wait_for("the refusal", lambda: "wrong token" in page.text("message"), UI_S)
     assert "Read-only" in page.text("signed")
+    # The service's error count says what it is made of: by code, and the last one.
+    errors = wait_for(
+        "the errors row",
+        lambda: "last, " in (t := page.text("status-rows")) and t,
+        UI_S,
+    )
+    assert "unauthorized 1" in errors and "unauthorized: " in errors, errors
 
     page.type("token", TOKEN)
     page.click("sign-in")
