@@ -46,7 +46,7 @@ from omnisort_hw.errors import InputError, NotAvailableError, OmnisortError
 from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.gripper_load import assess
-from omnisort_hw.pipeline.replies import DetectReply, ImageReply
+from omnisort_hw.pipeline.replies import CaptureReply, DetectReply, ImageReply, LaserReply
 from omnisort_hw.pipeline.requests import DetectRequest
 from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
@@ -431,7 +431,7 @@ class Cell:
         self.runlog.event("laser/state", "on" if state else "off")
         return state
 
-    def laser(self, on: bool | None = None) -> dict[str, Any]:
+    def laser(self, on: bool | None = None) -> LaserReply:
         """Switch the laser when `on` is given; always read the state back."""
         laser = self._need("laser")
         if on is not None:
@@ -443,7 +443,7 @@ class Cell:
 
     def capture(
         self, encoding: str = "path", fmt: str = "png", laser: bool | None = None
-    ) -> dict[str, Any]:
+    ) -> CaptureReply:
         """Grab one image; return it as a file under `capture_dir` or as base64."""
         if laser is not None:
             self.set_laser(laser)
@@ -451,7 +451,7 @@ class Cell:
         ext = ".png" if fmt == "png" else ".jpg"
         data = _encoded(frame.image, fmt)
         h, w = frame.image.shape[:2]
-        result: dict[str, Any] = {
+        result: CaptureReply = {
             "sequence": int(frame.sequence),
             "wall_time": _iso(frame.wall_time),
             "width": int(w),

@@ -27,6 +27,8 @@ from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.replies import (
     AdoptReply,
     ExtrinsicsReply,
+    IntrinsicsReply,
+    LaserReply,
     LocateReply,
     MapReply,
     RegisterReply,
@@ -90,7 +92,7 @@ class CellHost(Protocol):
 
     def set_laser(self, on: bool) -> bool: ...
 
-    def laser(self, on: bool | None = None) -> dict[str, Any]: ...
+    def laser(self, on: bool | None = None) -> LaserReply: ...
 
     def measuring(self) -> AbstractContextManager[tuple[Any, Any]]: ...
 
@@ -142,15 +144,16 @@ class CellJobs:
 
     def calibrate_intrinsics(
         self, request: IntrinsicsRequest, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
+    ) -> IntrinsicsReply:
         """Intrinsic calibration from the request's checkerboard images, saved as camera.json.
 
         The images are taken to come from the camera attached now (its serial is stored).
         """
         from omnisort_hw.pipeline import intrinsics
 
-        result = intrinsics.run(self, request, cancel)
-        return {**result.reply(), "camera_serial": self.store.expected_serial}
+        reply = intrinsics.run(self, request, cancel).reply()
+        reply["camera_serial"] = self.store.expected_serial
+        return reply
 
     def calibrate_extrinsics(
         self, request: ExtrinsicsRequest, cancel: threading.Event | None = None

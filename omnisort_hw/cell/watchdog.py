@@ -35,7 +35,7 @@ from omnisort_hw.pipeline.drift_check import (
     load_reference,
     save_reference,
 )
-from omnisort_hw.pipeline.replies import DriftReply
+from omnisort_hw.pipeline.replies import AcknowledgeReply, DriftReply
 from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.runlog import RunLog
 
@@ -139,7 +139,7 @@ class DriftWatchdog:
             "last_error": st.get("last_error"),
         }
 
-    def acknowledge(self) -> dict[str, Any]:
+    def acknowledge(self) -> AcknowledgeReply:
         """An operator accepts the drift (e.g. checked the picks by hand): motion allowed again
         until the next check finds drift."""
         with self._lock:

@@ -71,6 +71,38 @@ class RegisterReply(PictureReply):
     verdict: VerdictReply
 
 
+class IntrinsicsReply(TypedDict):
+    """The intrinsic calibration: camera.json and its report; what camera.json records beside
+    the model (the fit per image, the board, the outer band's coverage, the cross-validation,
+    the projection uncertainty, the views given twice); the fit's figures; the verdict."""
+
+    path: str
+    report: str
+    uncertainty_png: NotRequired[str]
+    rms_px: float
+    per_image_rms_px: dict[str, float]
+    images_used: int
+    images_rejected: list[Record]
+    corners_rejected: int
+    corner_refinement: str
+    std: Record
+    poly_degree: int
+    board: Record
+    coverage: Record
+    cross_validation: Record
+    projection_uncertainty: Record
+    repeated_views: list[Record]
+    repeated_views_warning: NotRequired[str]
+    images_folder: NotRequired[str]
+    camera_serial: NotRequired[str | None]  # the service's: the camera it was stored for
+    created: str
+    outer_band_covered: float | None
+    center_uv: list[float]
+    model: Record
+    field_of_view_deg: dict[str, float | None]
+    verdict: VerdictReply
+
+
 class ExtrinsicsReply(PictureReply):
     path: str
     method: str
@@ -236,3 +268,33 @@ class HistoryReply(TypedDict):
 
     kind: str
     versions: list[VersionReply]
+
+
+CalibrateReply = IntrinsicsReply | ExtrinsicsReply
+"""`calibrate`'s reply: the intrinsics' or the extrinsics', as the request's `what` asks."""
+
+
+class LaserReply(TypedDict):
+    """`laser`: the switch's state as read back after any switching."""
+
+    on: bool
+
+
+class CaptureReply(TypedDict):
+    """`capture`: one frame, as a file under the capture folder or inline as base64."""
+
+    sequence: int
+    wall_time: str
+    width: int
+    height: int
+    format: str
+    bytes: int
+    path: NotRequired[str]
+    base64: NotRequired[str]
+
+
+class AcknowledgeReply(TypedDict):
+    """`acknowledge_drift`: whether a drift was there to accept, and that drift."""
+
+    acknowledged: bool
+    drift: Record | None

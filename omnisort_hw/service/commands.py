@@ -14,11 +14,15 @@ from collections.abc import Callable
 from typing import Any, cast
 
 from omnisort_hw.pipeline.replies import (
+    AcknowledgeReply,
     AdoptReply,
+    CalibrateReply,
+    CaptureReply,
     DetectReply,
     DriftReply,
     GeometryReply,
     HistoryReply,
+    LaserReply,
     LocateReply,
     MapReply,
     RegisterReply,
@@ -95,14 +99,14 @@ class CellCommands:
     def geometry(self, request: GeometryRequest | None = None) -> GeometryReply:
         return cast(GeometryReply, self.execute("geometry", wire_args(request)))
 
-    def capture(self, request: CaptureRequest | None = None) -> Result:
-        return self.execute("capture", wire_args(request))
+    def capture(self, request: CaptureRequest | None = None) -> CaptureReply:
+        return cast(CaptureReply, self.execute("capture", wire_args(request)))
 
-    def laser(self, request: LaserRequest | None = None) -> Result:
-        return self.execute("laser", wire_args(request))
+    def laser(self, request: LaserRequest | None = None) -> LaserReply:
+        return cast(LaserReply, self.execute("laser", wire_args(request)))
 
-    def calibrate(self, request: CalibrateRequest, on_event: OnEvent = None) -> Result:
-        return self.execute("calibrate", wire_args(request), on_event)
+    def calibrate(self, request: CalibrateRequest, on_event: OnEvent = None) -> CalibrateReply:
+        return cast(CalibrateReply, self.execute("calibrate", wire_args(request), on_event))
 
     def map(self, request: MapRequest | None = None, on_event: OnEvent = None) -> MapReply:
         return cast(MapReply, self.execute("map", wire_args(request), on_event))
@@ -127,8 +131,8 @@ class CellCommands:
     def adopt(self, request: AdoptRequest, on_event: OnEvent = None) -> AdoptReply:
         return cast(AdoptReply, self.execute("adopt", wire_args(request), on_event))
 
-    def acknowledge_drift(self) -> Result:
-        return self.execute("acknowledge_drift")
+    def acknowledge_drift(self) -> AcknowledgeReply:
+        return cast(AcknowledgeReply, self.execute("acknowledge_drift"))
 
     def stop(self) -> Result:
         return self.execute("stop")

@@ -259,6 +259,7 @@ REPLY_TYPES: dict[str, Any] = {
     "check": replies.DriftReply,
     "sort": replies.SortReply,
     "calibrate extrinsics": replies.ExtrinsicsReply,
+    "calibrate intrinsics": replies.IntrinsicsReply,
 }
 """The declared reply of each use case (`pipeline.replies`), held against the real one."""
 
