@@ -46,7 +46,14 @@ from omnisort_hw.errors import InputError, NotAvailableError, OmnisortError
 from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.gripper_load import assess
-from omnisort_hw.pipeline.replies import CaptureReply, DetectReply, ImageReply, LaserReply
+from omnisort_hw.pipeline.replies import (
+    CaptureReply,
+    DetectReply,
+    ImageReply,
+    LaserReply,
+    PictureFileReply,
+    ViewReply,
+)
 from omnisort_hw.pipeline.requests import DetectRequest
 from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
@@ -469,7 +476,7 @@ class Cell:
         result["path"] = str(path)
         return result
 
-    def view(self, width: int = 960, quality: int = 80) -> dict[str, Any]:
+    def view(self, width: int = 960, quality: int = 80) -> ViewReply:
         """A live picture for a screen: one fresh frame scaled to at most `width` px and
         JPEG-encoded (base64). Not logged (a screen asks often); refused (`busy`) rather than
         waited for while a command holds or wants the camera (`live_frame`)."""
@@ -497,7 +504,7 @@ class Cell:
         found = detection.run(self.jobs, request)
         return {**found.reply(), "picture": _jpeg(found.image, request.width, request.quality)}
 
-    def picture(self, path: str, width: int = 960, quality: int = 85) -> dict[str, Any]:
+    def picture(self, path: str, width: int = 960, quality: int = 85) -> PictureFileReply:
         """A picture this service wrote (a PNG in the calibration store's folder, as a reply's
         `overlay_png`), scaled to at most `width` px and JPEG-encoded (base64); any other file
         is refused (`bad_input`), so a client reads nothing else of the PC through it."""

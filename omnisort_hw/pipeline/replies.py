@@ -171,6 +171,28 @@ class ImageReply(TypedDict):
     base64: str
 
 
+class ViewReply(ImageReply):
+    """`view`: a live picture, with its frame's number and wall time."""
+
+    sequence: int
+    wall_time: str
+
+
+class PictureFileReply(ImageReply):
+    """`picture`: a PNG this service wrote, as a picture for a screen."""
+
+    path: str
+
+
+class StopReply(TypedDict):
+    """`stop` and `estop`: the job they ended (None: none ran), the state after, and the
+    problems met stopping the devices."""
+
+    stopped_job: str | None
+    state: str
+    problems: list[str]
+
+
 class DetectReply(TypedDict):
     """A calibration pattern in one frame: its layers, or why it was not found."""
 

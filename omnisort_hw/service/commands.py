@@ -25,8 +25,11 @@ from omnisort_hw.pipeline.replies import (
     LaserReply,
     LocateReply,
     MapReply,
+    PictureFileReply,
     RegisterReply,
     SortReply,
+    StopReply,
+    ViewReply,
     ViewsReply,
 )
 from omnisort_hw.pipeline.requests import (
@@ -81,11 +84,11 @@ class CellCommands:
     def describe(self) -> Result:
         return self.execute("describe")
 
-    def view(self, request: ViewRequest | None = None) -> Result:
-        return self.execute("view", wire_args(request))
+    def view(self, request: ViewRequest | None = None) -> ViewReply:
+        return cast(ViewReply, self.execute("view", wire_args(request)))
 
-    def picture(self, request: PictureRequest) -> Result:
-        return self.execute("picture", wire_args(request))
+    def picture(self, request: PictureRequest) -> PictureFileReply:
+        return cast(PictureFileReply, self.execute("picture", wire_args(request)))
 
     def detect(self, request: DetectRequest | None = None) -> DetectReply:
         return cast(DetectReply, self.execute("detect", wire_args(request)))
@@ -134,11 +137,11 @@ class CellCommands:
     def acknowledge_drift(self) -> AcknowledgeReply:
         return cast(AcknowledgeReply, self.execute("acknowledge_drift"))
 
-    def stop(self) -> Result:
-        return self.execute("stop")
+    def stop(self) -> StopReply:
+        return cast(StopReply, self.execute("stop"))
 
-    def estop(self) -> Result:
-        return self.execute("estop")
+    def estop(self) -> StopReply:
+        return cast(StopReply, self.execute("estop"))
 
     def reset(self, request: ResetRequest | None = None) -> Result:
         return self.execute("reset", wire_args(request))

@@ -18,6 +18,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
+from omnisort_hw.pipeline.replies import StopReply
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.error_replies import error_from_exception
 from omnisort_hw.service.handlers import HANDLERS, Context
@@ -51,7 +52,7 @@ class JobRunner:
 
         def _then_refresh(self, fn: Callable[[], R]) -> R: ...
 
-    def _stop(self) -> dict[str, Any]:
+    def _stop(self) -> StopReply:
         job = self._job
         if job is not None:
             job.stopped_by = "stop"
@@ -68,7 +69,7 @@ class JobRunner:
             "problems": problems,
         }
 
-    def _estop(self) -> dict[str, Any]:
+    def _estop(self) -> StopReply:
         job = self._job
         if job is not None:
             job.stopped_by = "estop"
