@@ -6,7 +6,7 @@ send is left out. Pure functions of the reply, so each door reads it the same wa
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
@@ -185,6 +185,29 @@ def pick_log(status: dict[str, Any]) -> list[PickRow]:
         for ev in run.get("progress") or []
         if isinstance(ev, dict) and isinstance(ev.get("cube"), int)
     ]
+
+
+@dataclass
+class PickHistory:
+    """The picks of every sort one page has seen, numbered across them: after a stop and a
+    resume the first sort's picks stay, and each row says which sort (1, 2, ...) it was,
+    counting the sorts that picked; a sort's own cube numbers start again at 0, as its location
+    numbered them. The last `keep` sorts are kept."""
+
+    keep: int = 20
+    runs: dict[str, list[PickRow]] = field(default_factory=dict)  # by start time, in order
+
+    def update(self, status: dict[str, Any]) -> list[tuple[int, int, PickRow]]:
+        """(pick number from 1, sort number from 1, the pick) of every sort seen so far, the
+        current or last one's as `status` has it now."""
+        run = status.get("last_run") or {}
+        if run.get("job") == "sort" and run.get("started"):
+            self.runs[str(run["started"])] = pick_log(status)
+            while len(self.runs) > self.keep:
+                del self.runs[next(iter(self.runs))]
+        picked = (picks for picks in self.runs.values() if picks)  # a refused sort: none
+        rows = [(k, row) for k, picks in enumerate(picked, 1) for row in picks]
+        return [(n, k, row) for n, (k, row) in enumerate(rows, 1)]
 
 
 def _when(text: Any) -> datetime | None:

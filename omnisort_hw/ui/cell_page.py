@@ -18,9 +18,9 @@ from typing import Any
 from nicegui import app, run, ui
 
 from omnisort_hw.service.status_reading import (
+    PickHistory,
     drift_alarm,
     motion_offered,
-    pick_log,
     picks_per_minute,
     sort_progress,
     status_rows,
@@ -48,6 +48,8 @@ STATE_COLORS = {
 PICK_COLUMNS = [
     {"name": k, "label": label, "field": k, "align": "left"}
     for k, label in (
+        ("n", "#"),
+        ("sort", "sort"),
         ("cube", "cube"),
         ("color", "colour"),
         ("bin", "bin"),
@@ -66,6 +68,7 @@ class CellPage:
         self.sort_fields: list[FormField] = []
         self.sort_inputs: dict[str, Any] = {}
         self._picks_shown: list[dict[str, Any]] = []
+        self.pick_history = PickHistory()  # this page's sorts, numbered across them
         self.simulator: SimulatorPanel | None = None
         self._stale: Callable[[], bool] | None = None  # when the message shown is stale
         self.start_button: Any = None
@@ -201,7 +204,7 @@ class CellPage:
             self.sort_form = ui.row().classes("items-center gap-4")
             self.sort_problems = tag(ui.label(""), "sort-problems").classes("text-red-700")
             self.picks = tag(
-                ui.table(columns=PICK_COLUMNS, rows=[], row_key="cube").props("dense flat"),
+                ui.table(columns=PICK_COLUMNS, rows=[], row_key="n").props("dense flat"),
                 "pick-log",
             ).classes("w-full")
 
@@ -293,9 +296,10 @@ class CellPage:
         )
         self.progress.props["indeterminate"] = bool(job) and not done_total
         self.progress.update()
-        picks = [asdict(p) for p in pick_log(status)]
-        for p in picks:
-            p["at"] = p["at"][11:19]
+        picks = [
+            {"n": n, "sort": k, **asdict(row), "at": row.at[11:19]}
+            for n, k, row in self.pick_history.update(status)
+        ]
         if picks != self._picks_shown:
             self._picks_shown = picks
             self.picks.rows = picks

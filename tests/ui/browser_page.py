@@ -120,7 +120,7 @@ class Page:
 
         rows = self.el("pick-log").find_elements(By.CSS_SELECTOR, "tbody tr")
         cells = [[td.text for td in r.find_elements(By.CSS_SELECTOR, "td")] for r in rows]
-        return [c for c in cells if len(c) == 6]
+        return [c for c in cells if len(c) == 8]  # #, sort, cube, colour, bin, outcome, ...
 
     def count(self, name: str, inner: str) -> int:
         from selenium.webdriver.common.by import By

@@ -117,7 +117,7 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     page.confirm()
     wait_for("the sort to start", lambda: service_status(svc.port)["state"] == "sorting", UI_S)
     rows = wait_for("the first pick in the log", page.pick_rows, 120, 0.25)
-    assert rows[0][3] == "sorted", rows
+    assert rows[0][:2] == ["1", "1"] and rows[0][5] == "sorted", rows
     wait_for("the picks per minute", lambda: "picks/min" in page.text("picks-per-min"), UI_S)
     page.shot("ui_cell")
 
@@ -163,3 +163,9 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     assert outcomes and all(o == "sorted" for o in outcomes), outcomes
     assert sorted_first + len(outcomes) == located, (sorted_first, outcomes, located)
     assert "0 skipped, 0 failed" in page.text("job-end"), page.text("job-end")
+    # The pick log keeps the stopped sort's picks and numbers on through the resumed one.
+    log = wait_for(
+        "both sorts in the log", lambda: len(r := page.pick_rows()) == located and r, UI_S
+    )
+    assert [r[0] for r in log] == [str(n) for n in range(1, located + 1)], log
+    assert [r[1] for r in log] == ["1"] * sorted_first + ["2"] * len(outcomes), log
