@@ -40,7 +40,7 @@ browser:
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
 	  $$SUDO apt-get install -y -qq --no-install-recommends chromium chromium-driver; }
 
-# The edit loop: lint, types and the quick test modules (under 5 s each in tests/timings.json),
+# The edit loop: lint, types and the quick test modules (under 4 s each in tests/timings.json),
 # stopping at the first failure.
 check: lint
 	$(BIN)/python -m pytest -q -x -n auto --dist loadfile --no-loadscope-reorder --quick
