@@ -713,6 +713,13 @@ def sized(scene: Scene, width: int | None, height: int | None = None) -> Scene:
     )
 
 
+def with_camera_effects(scene: Scene) -> Scene:
+    """The scene through the "real camera" with the colour camera's effects (crosstalk,
+    chromatic aberration, bloom, Bayer demosaicing: `camera_effects`), as a scene file's
+    `[degrade] enabled = true` and `effects = true` ask."""
+    return scene.replace(degrade={"enabled": True, "effects": True})
+
+
 def shipped_scenes() -> list[str]:
     """Names of the scenes shipped in `sim_backend/scenes`."""
     return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))

@@ -19,6 +19,12 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--fps", type=float, default=10.0, help="camera stream frame rate")
     ap.add_argument("--degraded", action="store_true", help='"real camera" mode for the stream')
     ap.add_argument(
+        "--effects",
+        action="store_true",
+        help="the stream through a real colour camera: crosstalk, chromatic aberration, bloom "
+        "and Bayer demosaicing on top of --degraded, which it implies (docs/real_light.md)",
+    )
+    ap.add_argument(
         "--unlock-delay",
         type=float,
         default=5.0,

@@ -113,21 +113,26 @@ def _sync_cubes(cell: Any, cubes: list[list[Any]]) -> None:
 
 
 def _render_worker(
-    scene: str, width: int, height: int, seed: int, degraded: bool, conn: Any
+    scene: str, width: int, height: int, seed: int, degraded: bool, effects: bool, conn: Any
 ) -> None:
     """Renderer process: apply each state to its own world, send back the BGR image (and, when
     the state asks for `truth`, the renderer's truth of it). With `degraded`, the camera's
     sensor model (`sim_backend.sensor`: shot and read noise, flicker, clipping, the same fixed
     parameters as the in-process camera) exposes each state's frame at the nominal 10 ms,
     uncompressed (the stream encodes it); the noise is drawn once per rendered state, not per
-    served frame."""
+    served frame. With `effects`, through the colour camera's effects as well
+    (`scene.with_camera_effects`)."""
     from sim_backend.devices import SimCell
     from sim_backend.exposed_frames import ExposedFrames
+    from sim_backend.scene import load_scene, with_camera_effects
     from sim_backend.scene_images import render_scene
     from sim_backend.sensor import Exposure
     from sim_backend.virtual_cell.held_board import held_board_scene
 
-    cell = SimCell.from_scene(scene, seed=seed, width=width, height=height)
+    world_scene = load_scene(scene)
+    if effects:
+        world_scene = with_camera_effects(world_scene)
+    cell = SimCell.from_scene(world_scene, seed=seed, width=width, height=height)
     world = cell.world
     sensor = ExposedFrames(world, cell.model, seed, cell.lighting) if degraded else None
     # The held board's pictures and truths, by pose (each rendered once).
@@ -194,7 +199,13 @@ class FrameSource:
     """The latest rendered frame and the state it shows; renders on demand in a subprocess."""
 
     def __init__(
-        self, cell: Any, controller: Any, scene: str, seed: int = 0, degraded: bool = False
+        self,
+        cell: Any,
+        controller: Any,
+        scene: str,
+        seed: int = 0,
+        degraded: bool = False,
+        effects: bool = False,
     ) -> None:
         self.cell, self.controller = cell, controller
         cam = cell.scene.camera
@@ -203,7 +214,7 @@ class FrameSource:
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(
             target=_render_worker,
-            args=(scene, self.width, self.height, seed, degraded, child),
+            args=(scene, self.width, self.height, seed, degraded, effects, child),
             name="virtual-cell-renderer",
             daemon=True,
         )

@@ -27,6 +27,7 @@ import numpy as np
 
 from omnisort_hw.sim_requests import SCENE_TARGETS
 from sim_backend.devices import SimArm, SimCell
+from sim_backend.scene import load_scene, with_camera_effects
 from sim_backend.sort_harness import SimVerifier
 from sim_backend.truth import mounting_truth
 from sim_backend.virtual_cell.camera_stream import (
@@ -70,12 +71,16 @@ class VirtualCell:
         unlock_delay_s: float = 5.0,
         gripper_output: tuple[str, int] = ("tool", 0),
         degraded: bool = False,
+        effects: bool = False,
     ) -> None:
         self.host = host
         size: dict[str, Any] = {
             k: v for k, v in (("width", width), ("height", height or width)) if v
         }
-        self.cell = SimCell.from_scene(scene, seed=seed, **size)
+        spec = load_scene(scene)
+        self.cell = SimCell.from_scene(
+            with_camera_effects(spec) if effects else spec, seed=seed, **size
+        )
         self.arm = SimArm(self.cell)
         self.arm.connect()
         self.verifier = SimVerifier(self.arm)
@@ -87,7 +92,7 @@ class VirtualCell:
         self.dashboard = DashboardServer(host, self.ctl, self.faults)
         self.script = ScriptServer(host, self.ctl, self.faults)
         self.laser = LaserModbusServer(host, self.cell, self.faults)
-        self.frames = FrameSource(self.cell, self.ctl, scene, seed, degraded)
+        self.frames = FrameSource(self.cell, self.ctl, scene, seed, degraded or effects, effects)
         self.camera = CameraStreamServer(host, self.frames, self.faults, fps=fps)
         self.control = Listener(host, CONTROL_PORT, self._control, "control")
         self.channel = ControlChannel(self)

@@ -35,6 +35,7 @@ def serve(args: argparse.Namespace) -> int:
             unlock_delay_s=args.unlock_delay,
             gripper_output=(group, int(pin)),
             degraded=args.degraded,
+            effects=args.effects,
         )
     except OSError as exc:
         print(f"cannot serve on {args.host}: {exc} (another virtual cell there?)", file=sys.stderr)
