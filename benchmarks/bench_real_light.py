@@ -114,14 +114,11 @@ def laser_off_renders(n: int = OFF_RENDERS, width: int = OFF_WIDTH) -> dict[str,
     board's black print, the arm's metal) rendered laser off through the colour camera's
     effects, `n` seeds: the points the extractor returns from one image (phantoms, every
     one), and what its chains held before the line rule (`core.laser_presence`) dropped them."""
-    from dataclasses import replace
-
     from omnisort_hw.core.laser_stripe import laser_stripe_points_stats
-    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene import load_scene, sized, with_camera_effects
     from sim_backend.scene_images import render_scene
 
-    scene = sized(load_scene("sorting"), width)
-    scene = replace(scene, degrade=replace(scene.degrade, enabled=True, effects=True))
+    scene = with_camera_effects(sized(load_scene("sorting"), width))
     now, without = [], []
     for k, seed in enumerate(range(1000, 1000 + n)):
         off, _ = render_scene(scene, seed=seed, laser_on=False, with_truth=False)

@@ -8,10 +8,10 @@ is (`core.laser_stripe`) is not: measured on real photographs of the development
 
 - **spots**: a red LED or a small coloured mark, found along both scan directions as a cross
   of 10 points 12 px across (its extent is its width);
-- **blobs**: a defocused or diffuse patch of laser light, whose speckle gives chains 120 to
-  150 px long whose points scatter 2.2 to 2.5 px RMS about their local line (points of a
-  line scatter by their sub-pixel noise: a median 0.1 px, at most 0.8 px, on the chains 32 px
-  and longer of the 62 photographs with a line).
+- **blobs**: a defocused or diffuse patch of laser light, whose speckle gives chains up to
+  150 px long whose points scatter 1.5 to 2.5 px RMS about their local line (points of a
+  line scatter by their sub-pixel noise: on the photographs with a line, the thinnest chain
+  32 px or longer of each is 0.0 to 0.63 px RMS, median 0.04 px).
 
 So an image shows a laser line when one of its chains is a **line**: at least
 `MIN_LINE_SCANS` scan lines long (the length the extractor already asks of a faint stripe's

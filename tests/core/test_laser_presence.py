@@ -10,8 +10,6 @@ needs 16 px."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
@@ -82,10 +80,9 @@ def test_with_a_line_the_spots_beside_it_stay() -> None:
 def effects(name: str) -> object:
     """The shipped scene at 480 px through the sensor with the colour camera's effects
     (crosstalk, chromatic aberration, bloom, Bayer demosaicing)."""
-    from sim_backend.scene import load_scene, sized
+    from sim_backend.scene import load_scene, sized, with_camera_effects
 
-    scene = sized(load_scene(name), SIZE)
-    return replace(scene, degrade=replace(scene.degrade, enabled=True, effects=True))
+    return with_camera_effects(sized(load_scene(name), SIZE))
 
 
 def test_a_laser_line_through_a_real_camera_is_still_a_line() -> None:

@@ -185,12 +185,9 @@ def test_a_dark_laser_through_a_real_colour_camera_is_no_laser_not_phantoms(seed
     """The cell's own path, laser on/off differences, on the cluttered sorting cell through the
     colour camera's effects (crosstalk, chromatic aberration, bloom, Bayer demosaicing) with a
     laser whose light never arrives: a typed error naming the laser, not a stripe of phantoms."""
-    from dataclasses import replace
+    from sim_backend.scene import load_scene, sized, with_camera_effects
 
-    from sim_backend.scene import load_scene, sized
-
-    scene = sized(load_scene("sorting"), WIDTH)
-    scene = replace(scene, degrade=replace(scene.degrade, enabled=True, effects=True))
+    scene = with_camera_effects(sized(load_scene("sorting"), WIDTH))
     cell = SimCell.from_scene(scene, seed=seed)
     cam = SimCamera(cell, degraded=True, exposure_ms=6.0, pixel_format="BGR3")
     laser = _CoveredLaser(cell)
