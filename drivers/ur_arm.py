@@ -79,6 +79,15 @@ SAFETY_MODES = {
     12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
     13: "SYSTEM_THREE_POSITION_ENABLING_STOP",
 }
+# The most ur-rtde passes to the controller (its UR_JOINT_VELOCITY_MAX 3.14 rad/s,
+# UR_JOINT_ACCELERATION_MAX 40 rad/s^2, UR_TOOL_VELOCITY_MAX 3 m/s, UR_TOOL_ACCELERATION_MAX
+# 150 m/s^2); a move above them is refused inside ur-rtde, so the caps may not exceed them.
+RTDE_CAPS = {
+    "max_joint_speed_deg_s": float(np.degrees(3.14)),
+    "max_joint_accel_deg_s2": float(np.degrees(40.0)),
+    "max_linear_speed_mm_s": 3000.0,
+    "max_linear_accel_mm_s2": 150000.0,
+}
 _EMERGENCY = {6, 7}
 _PROTECTIVE = {3, 4, 5, 8, 9, 12, 13}
 
@@ -101,7 +110,7 @@ class URArmConfig:
     joint_accel_deg_s2: float = 80.0
     linear_speed_mm_s: float = 250.0
     linear_accel_mm_s2: float = 1000.0
-    max_joint_speed_deg_s: float = 180.0
+    max_joint_speed_deg_s: float = 179.9
     max_joint_accel_deg_s2: float = 300.0
     max_linear_speed_mm_s: float = 1000.0
     max_linear_accel_mm_s2: float = 3000.0
@@ -146,6 +155,13 @@ class URArmConfig:
         ):
             require(getattr(self, key) > 0, s, key, f"must be > 0, got {getattr(self, key)}")
         require(self.gripper_settle_s >= 0, s, "gripper_settle_s", "must be >= 0")
+        for key, cap in RTDE_CAPS.items():
+            require(
+                getattr(self, key) <= cap,
+                s,
+                key,
+                f"must not exceed {cap:g}, the most ur-rtde sends (got {getattr(self, key)})",
+            )
         require(
             self.joint_speed_deg_s <= self.max_joint_speed_deg_s,
             s,

@@ -195,6 +195,10 @@ def _worker_main(conn: Any, host: str, state_timeout_s: float) -> None:
         except RuntimeError as exc:
             kind = "disconnected" if not session.is_connected() else "runtime"
             conn.send(("error", kind, str(exc)))
+        except ValueError as exc:
+            # ur-rtde's own range checks (a speed above its 3.14 rad/s, ...): the request is
+            # refused, the session goes on (uncaught, it ended the worker: "connection lost").
+            conn.send(("error", "runtime", str(exc)))
         if name == "close":
             # the caller has its answer; ur-rtde's disconnects sleep 0.5 s each (GIL released)
             threads = [

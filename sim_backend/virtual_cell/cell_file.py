@@ -164,7 +164,7 @@ def cell_file_text(
         "# the simulator; its state stream can pause longer than a real controller's 500 Hz",
         "# stream ever does (the default, 0.5 s, is for real arms).",
         "state_timeout_s = 2.0",
-        "max_joint_speed_deg_s = 180.0",
+        "max_joint_speed_deg_s = 179.9",
         "max_linear_speed_mm_s = 1000.0",
         f"workspace_min_mm = {_list([-reach, -reach, z_min])}",
         f"workspace_max_mm = {_list([reach, reach, reach])}",

@@ -300,6 +300,10 @@ def test_gripper_output_that_does_not_read_back_times_out() -> None:
         ({"workspace_min_mm": [0, 0, 500], "workspace_max_mm": [1, 1, 100]}, "workspace_min_mm"),
         ({"gripper_io": "tool", "gripper_pin": 2}, "gripper_pin"),
         ({"joint_speed_deg_s": 500.0}, "joint_speed_deg_s"),
+        # ur-rtde sends at most 3.14 rad/s (179.9 deg/s): a cap of 180 would let a move pass
+        # here that ur-rtde then refuses.
+        ({"max_joint_speed_deg_s": 180.0}, "max_joint_speed_deg_s"),
+        ({"max_linear_speed_mm_s": 3500.0}, "max_linear_speed_mm_s"),
         ({"poll_period_s": 0}, "poll_period_s"),
     ],
 )

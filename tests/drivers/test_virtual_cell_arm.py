@@ -11,7 +11,12 @@ import time
 import numpy as np
 import pytest
 
-from drivers.errors import DeviceDisconnectedError, DeviceTimeoutError, SafetyStopError
+from drivers.errors import (
+    DeviceDisconnectedError,
+    DeviceError,
+    DeviceTimeoutError,
+    SafetyStopError,
+)
 from drivers.ur_arm import URArm, URArmConfig
 from tests.drivers.contract import ArmContract
 from tests.sim.ur_rtde_client import wait_until
@@ -185,4 +190,23 @@ def test_dropped_connection_reconnects_without_moving(vc) -> None:
             assert vc.control("status")["motions"] == motions
             time.sleep(0.5)
             arm.move_joints(target)
+        np.testing.assert_allclose(arm.joint_positions(), target, atol=0.01)
+
+
+def test_a_move_that_ur_rtde_refuses_is_a_device_error_and_the_link_stays(vc) -> None:
+    """ur-rtde checks a move's speed itself (at most 3.14 rad/s) and raises ValueError: the
+    worker answers with a typed DeviceError naming the controller and keeps its session, where
+    it once died of it and the move came back as "connection lost"."""
+    with make_arm(vc.host) as arm:
+        before = arm.joint_positions()
+        motions = vc.control("status")["motions"]
+        q = list(np.radians(before + np.array([2.0, 0, 0, 0, 0, 0])))
+        with pytest.raises(DeviceError) as info:
+            arm._link.move_j(q, 3.2, 1.0)  # past the URArmConfig caps, straight to the link
+        assert not isinstance(info.value, DeviceDisconnectedError), info.value
+        assert "3.14" in str(info.value) and vc.host in str(info.value), info.value
+        assert arm._link.is_connected()
+        assert vc.control("status")["motions"] == motions, "a refused move reached the arm"
+        target = before + np.array([2.0, 0, 0, 0, 0, 0])
+        arm.move_joints(target, speed_deg_s=179.9)  # the cap itself goes through
         np.testing.assert_allclose(arm.joint_positions(), target, atol=0.01)

@@ -20,6 +20,7 @@ from sim_backend.virtual_cell.cell import CONTROL_PORT
 from sim_backend.virtual_cell.cell_file import cell_file_text
 from sim_backend.virtual_cell.held_board import HELD_SQUARE_MM
 from sim_backend.virtual_cell.launcher import VirtualCellProcess
+from tests.service.sim_cell import brisk_sort
 from tests.ui.browser_page import UI_S, Page, wait_for
 from tests.ui.ui_procs import PROJECT_ROOT, TOKEN
 
@@ -28,8 +29,9 @@ STEP_TIMEOUT_S = 300.0
 
 
 def virtual_cell_file(vc: VirtualCellProcess, tmp: Path, watchdog_period_s: float = 0.0) -> Path:
-    """The cell file of `vc` with no calibration yet, the tests' token, a brisk page with the
-    Simulator tab on the cell's control channel, and the drift watchdog's period (0: off)."""
+    """The cell file of `vc` with no calibration yet, the tests' token, a brisk sort (its moves
+    at `sim_cell.FAST_MOVES`), a brisk page with the Simulator tab on the cell's control
+    channel, and the drift watchdog's period (0: off)."""
     config = tmp / "cell.toml"
     config.write_text(
         cell_file_text(vc.host, state_dir="state", log_dir="logs")
@@ -37,6 +39,7 @@ def virtual_cell_file(vc: VirtualCellProcess, tmp: Path, watchdog_period_s: floa
         f'view_period_s = 0.5\nsim_control = "{vc.host}:{CONTROL_PORT}"\n'
         f"\n[watchdog]\nperiod_s = {watchdog_period_s}\n"
     )
+    brisk_sort(config)
     return config
 
 
