@@ -198,6 +198,8 @@ class JobProgress:
             bar.set_postfix_str(
                 f"cube {event['cube']} {event.get('status', '')} ({event.get('color', '?')})"
             )
+        elif isinstance(event.get("expected_s"), int | float):
+            bar.set_postfix_str(f", about {event['expected_s']:.0f} s (its last run here)")
         elif "running_s" not in event and "stage" not in event:
             bar.set_postfix_str(", ".join(f"{k} {v}" for k, v in event.items()))
         bar.refresh()

@@ -11,7 +11,8 @@ typed code, message and field. A job's progress events reach `on_event` as they 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, cast
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar, cast, overload
 
 from omnisort_hw.pipeline.replies import (
     AcknowledgeReply,
@@ -56,6 +57,8 @@ from omnisort_hw.service.status_reply import StatusReply
 
 Result = dict[str, Any]
 OnEvent = Callable[[dict[str, Any]], None] | None
+R = TypeVar("R")
+Q = TypeVar("Q")
 
 
 class CommandError(Exception):
@@ -148,3 +151,40 @@ class CellCommands:
 
     def shutdown(self) -> Result:
         return self.execute("shutdown")
+
+
+@dataclass(frozen=True)
+class Call(Generic[R]):
+    """One command to send later on a connection chosen then (a door that opens its own, as
+    the page's link and its job runner do): a `CellCommands` method, whose name is the
+    protocol's command, and its request record (None: the method's default). Made by
+    `call_of`, which checks the record against the method's, so no door names a command by a
+    string."""
+
+    method: Callable[..., R]
+    request: Any = None
+
+    @property
+    def command(self) -> str:
+        """The protocol's name of the command (`tests/service/test_typed_client.py` checks
+        that each method is named for its command)."""
+        return str(self.method.__name__)
+
+    def send(self, client: CellCommands) -> R:
+        """The command sent on `client`: the service's typed reply."""
+        if self.request is None:
+            return self.method(client)
+        return self.method(client, self.request)
+
+
+@overload
+def call_of(method: Callable[[CellCommands], R]) -> Call[R]: ...
+
+
+@overload
+def call_of(method: Callable[[CellCommands, Q], R], request: Q) -> Call[R]: ...
+
+
+def call_of(method: Callable[..., R], request: Any = None) -> Call[R]:
+    """The call of `method` (e.g. `CellCommands.laser`) with `request` (its record type)."""
+    return Call(method, request)

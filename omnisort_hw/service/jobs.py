@@ -129,7 +129,8 @@ class JobRunner:
                     proto.MOTION_REFUSED,
                     f"the cell is in fault ({self.states.reason}); clear the cause and send reset",
                 )
-            job = Job(req.cmd, req.id, State(spec.job_state or State.MOVING))
+            expected = self.cell.journal.expected_s(req.cmd, req.args)
+            job = Job(req.cmd, req.id, State(spec.job_state or State.MOVING), expected_s=expected)
             self._job = job
             resting = self.states.state
             self.states.set(job.state, f"{req.cmd} (request {req.id})")
@@ -173,9 +174,10 @@ class JobRunner:
                 beats.cancel()
 
     async def _heartbeats(self, job: Job, emit: Emit) -> None:
-        """`{"stage": "started"}`, then the running time every PROGRESS_PERIOD_S, so a client
-        shows a job that reports nothing (a calibration) as alive rather than silent."""
-        emit({"stage": "started", "cmd": job.cmd})
+        """`{"stage": "started"}` with what the last such job took here (`expected_s`), then
+        the running time every PROGRESS_PERIOD_S, so a client shows a job that reports nothing
+        (a calibration) as alive rather than silent, and for how long to expect it."""
+        emit({"stage": "started", "cmd": job.cmd, "expected_s": job.expected_s})
         while True:
             await asyncio.sleep(PROGRESS_PERIOD_S)
             emit({"running_s": round(time.monotonic() - job.started, 1)})

@@ -97,6 +97,19 @@ def _iso(wall: float) -> str:
     return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds")
 
 
+class JobRecord(TypedDict):
+    """The running job in `status`: its command and request, how long it has run, how long the
+    last such job took on this cell (None: none has yet), whether a stop was asked, and its
+    progress events."""
+
+    cmd: str
+    request_id: int | str | None
+    running_s: float
+    expected_s: float | None
+    cancelled: bool
+    progress: list[dict[str, Any]]
+
+
 @dataclass
 class Job:
     """The one long command running now."""
@@ -108,17 +121,19 @@ class Job:
     started: float = field(default_factory=time.monotonic)
     stopped_by: str | None = None
     progress: list[dict[str, Any]] = field(default_factory=list)
+    expected_s: float | None = None  # the last such job's duration on this cell, if any
 
     def report(self, event: dict[str, Any]) -> None:
         """Progress from the running job (e.g. each cube sorted); `status` shows it."""
         self.progress.append(dict(event))
         del self.progress[:-50]
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> JobRecord:
         return {
             "cmd": self.cmd,
             "request_id": self.request_id,
             "running_s": round(time.monotonic() - self.started, 3),
+            "expected_s": self.expected_s,
             "cancelled": self.cancel.is_set(),
             "progress": list(self.progress),
         }

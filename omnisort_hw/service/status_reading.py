@@ -62,14 +62,18 @@ def drift_text(last: dict[str, Any]) -> str:
     return text
 
 
-def _job(job: dict[str, Any] | None) -> str:
+def job_text(job: Mapping[str, Any] | None, last_event: bool = True) -> str:
+    """The running job in a line: command, request, running time against what the last such
+    job took on this cell, and (`last_event`) its last progress event."""
     if not job:
         return "none"
-    text = f"{job.get('cmd')} (request {job.get('request_id')}), {job.get('running_s', 0):.1f} s"
+    text = f"{job.get('cmd')} (request {job.get('request_id')}), {job.get('running_s', 0):.0f} s"
+    expected = job.get("expected_s")
+    if isinstance(expected, int | float):
+        text += f" of about {expected:.0f} s (its last run here)"
     progress = job.get("progress") or []
-    if progress:
-        last = progress[-1]
-        text += "; last: " + ", ".join(f"{k} {v}" for k, v in last.items())
+    if last_event and progress:
+        text += "; last: " + ", ".join(f"{k} {v}" for k, v in progress[-1].items())
     return text
 
 
@@ -93,7 +97,7 @@ def status_rows(status: dict[str, Any]) -> list[tuple[str, str]]:
     rows: list[tuple[str, str]] = []
     reason = f" ({status['reason']})" if status.get("reason") else ""
     rows.append(("state", f"{status.get('state', '?')}{reason}"))
-    rows.append(("job", _job(status.get("job"))))
+    rows.append(("job", job_text(status.get("job"))))
     cal = status.get("calibration") or {}
     drift = status.get("drift") or {}
     if motion_offered(status):

@@ -7,7 +7,7 @@ from typing import TypedDict
 
 from omnisort_hw.cell.status_reply import CellStatus
 from omnisort_hw.core.records import Record
-from omnisort_hw.service.states import StateSnapshot
+from omnisort_hw.service.states import JobRecord, StateSnapshot
 
 
 class LastError(TypedDict):
@@ -42,7 +42,7 @@ class ServiceStatus(StateSnapshot):
     """The state machine's snapshot (state, reason, since, the last ten transitions), the job
     running, the last run and the service itself."""
 
-    job: Record | None  # the running job: command, request id, running time, progress
+    job: JobRecord | None  # the running job
     last_run: Record | None  # the journal's last job
     service: ServiceRecord
 

@@ -15,11 +15,12 @@ import numpy as np
 from nicegui import run, ui
 
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.overlay_svg import sigma_rgb
 from omnisort_hw.ui.widgets import tag
 
 MM = 1e-3  # the scene's unit is the metre
+GEOMETRY = call_of(CellCommands.geometry)
 CUBE_COLOURS = {
     "red": "#d01818",
     "green": "#18a030",
@@ -86,7 +87,7 @@ class Cell3D:
             return
         self._busy = True
         try:
-            geometry = await run.io_bound(self.ctx.link.execute, "geometry", {}, None)
+            geometry = await run.io_bound(self.ctx.link.call, GEOMETRY)
         except (CommandError, ClientError) as exc:
             self.legend.text = f"no geometry: {exc}"
             return
@@ -94,11 +95,12 @@ class Cell3D:
             self._busy = False
         if geometry is None:
             return
-        results = self.ctx.jobs.results
-        key = (repr(geometry), id(results.get("map")), id(results.get("locate")))
+        mapped = self.ctx.jobs.result(CellCommands.map)
+        located = self.ctx.jobs.result(CellCommands.locate)
+        key = (repr(geometry), id(mapped), id(located))
         if key != self._key:
             self._key = key
-            self.draw(geometry, results.get("map") or {}, results.get("locate") or {})
+            self.draw(geometry, mapped or {}, located or {})
 
     # -- drawing --------------------------------------------------------------------------
 

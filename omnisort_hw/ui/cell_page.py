@@ -13,13 +13,15 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypeVar
 
 from nicegui import app, run, ui
 
+from omnisort_hw.pipeline.requests import LaserRequest, MapRequest
 from omnisort_hw.service.status_reading import (
     PickHistory,
     drift_alarm,
+    job_text,
     motion_offered,
     picks_per_minute,
     sort_progress,
@@ -28,14 +30,15 @@ from omnisort_hw.service.status_reading import (
 from omnisort_hw.ui.cell_3d import Cell3D
 from omnisort_hw.ui.commissioning import CommissioningPanel
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.link import Call, CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.operators import SignInError
 from omnisort_hw.ui.overlay_svg import cubes_overlay, map_overlay
 from omnisort_hw.ui.recovery import RecoveryPanel
-from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields, problems
+from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields
 from omnisort_hw.ui.sim_panel import SimulatorPanel
 from omnisort_hw.ui.widgets import confirm, tag
 
+R = TypeVar("R")
 STATE_COLORS = {
     "idle": "positive",
     "sorting": "primary",
@@ -210,7 +213,7 @@ class CellPage:
 
     def _fill_sort_form(self) -> None:
         """The sort form from the command's schema, once the session is signed in."""
-        schema = self.ctx.operators.schema("sort")
+        schema = self.ctx.operators.schema(CellCommands.sort)
         if schema is None or self.sort_fields:
             return
         self.sort_fields = form_fields(schema)
@@ -285,11 +288,7 @@ class CellPage:
 
     def _show_job(self, status: dict[str, Any]) -> None:
         job = status.get("job")
-        self.job_label.text = (
-            f"{job.get('cmd')} (request {job.get('request_id')}), {job.get('running_s', 0):.0f} s"
-            if job
-            else "none"
-        )
+        self.job_label.text = job_text(job, last_event=False)
         done_total = sort_progress(status)
         self.progress.value = (
             done_total[0] / done_total[1] if done_total and done_total[1] else (1.0 if job else 0)
@@ -327,8 +326,8 @@ class CellPage:
         overlays = [
             o
             for o in (
-                map_overlay(self.ctx.jobs.results.get("map", {}), pic.scale, unit),
-                cubes_overlay(self.ctx.jobs.results.get("locate", {}), pic.scale, unit),
+                map_overlay(self.ctx.jobs.result(CellCommands.map) or {}, pic.scale, unit),
+                cubes_overlay(self.ctx.jobs.result(CellCommands.locate) or {}, pic.scale, unit),
             )
             if o is not None
         ]
@@ -353,34 +352,32 @@ class CellPage:
             lambda: self.ctx.link.snapshot.reachable,
         )
 
-    async def _send(
-        self, cmd: str, args: dict[str, Any] | None = None, token: str | None = None
-    ) -> dict[str, Any] | None:
-        """One quick command; its result, or None with the refusal shown."""
+    async def _send(self, command: Call[R], token: str | None = None) -> R | None:
+        """One quick command; its reply, or None with the refusal shown."""
         if not self.ctx.link.snapshot.reachable:
-            self._unreachable(cmd)
+            self._unreachable(command.command)
             return None
         try:
-            return await run.io_bound(self.ctx.link.execute, cmd, args, token)
+            return await run.io_bound(self.ctx.link.call, command, token)
         except CommandError as exc:
-            self.say(f"{cmd}: {exc.code}: {exc.message}", "negative")
+            self.say(f"{command.command}: {exc.code}: {exc.message}", "negative")
         except ClientError as exc:
-            self.say(f"{cmd}: the service cannot be reached: {exc}", "negative")
+            self.say(f"{command.command}: the service cannot be reached: {exc}", "negative")
         return None
 
-    async def _operator_send(
-        self, cmd: str, args: dict[str, Any] | None = None
-    ) -> dict[str, Any] | None:
+    async def _operator_send(self, command: Call[R], token: str | None = None) -> R | None:
         """One quick command with this session's token; None, with why, when not sent."""
         token = self._token()
-        return None if token is None else await self._send(cmd, args, token)
+        if token is None:
+            return None
+        return await self._send(command, token)
 
     async def stop(self) -> None:
-        if await self._send("stop") is not None:
+        if await self._send(call_of(CellCommands.stop)) is not None:
             self.say("stop sent: the job and the arm stop", "warning")
 
     async def estop(self) -> None:
-        if await self._send("estop") is not None:
+        if await self._send(call_of(CellCommands.estop)) is not None:
             self.say("E-stop sent: everything stopped, the cell latched in fault", "warning")
 
     def _token(self) -> str | None:
@@ -413,7 +410,8 @@ class CellPage:
 
     async def laser(self, on: bool) -> None:
         async def act(token: str) -> None:
-            if await self._send("laser", {"on": on}, token) is not None:
+            job = call_of(CellCommands.laser, LaserRequest(on=on))
+            if await self._send(job, token) is not None:
                 self.say(f"laser {'on' if on else 'off'}")
 
         await self._operator(act)
@@ -422,14 +420,14 @@ class CellPage:
         async def act(token: str) -> None:
             if not await confirm("Accept the drift and allow motion again?"):
                 return
-            if await self._send("acknowledge_drift", None, token) is not None:
+            if await self._send(call_of(CellCommands.acknowledge_drift), token) is not None:
                 self.say("drift acknowledged: motion allowed again")
 
         await self._operator(act)
 
     async def reset(self) -> None:
         async def act(token: str) -> None:
-            if await self._send("reset", None, token) is not None:
+            if await self._send(call_of(CellCommands.reset), token) is not None:
                 self.say("reset: the cell left the stopped/fault state")
 
         await self._operator(act)
@@ -438,48 +436,47 @@ class CellPage:
         if self._token() is not None:
             self.recovery.open()
 
-    def _start_job(self, cmd: str, args: dict[str, Any]) -> bool:
+    def _start_job(self, job: Call[Any]) -> bool:
         """Start a job on the service for this operator; False, with the reason shown, when it
         was not sent. Motion is confirmed before this (`start_sort`), never here."""
         token = self._token()
         if token is None:
             return False
         if not self.ctx.link.snapshot.reachable:
-            self._unreachable(cmd)
+            self._unreachable(job.command)
             return False
         try:
-            self.ctx.jobs.start(cmd, args, token)
+            self.ctx.jobs.start(job, token, self.browser)
         except RuntimeError as exc:
-            self.say(f"{cmd}: not sent: {exc}", "negative")
+            self.say(f"{job.command}: not sent: {exc}", "negative")
             return False
         ended = self.ctx.jobs.ended
-        self.say(f"{cmd} started", until=lambda: self.ctx.jobs.ended > ended)
+        self.say(f"{job.command} started", until=lambda: self.ctx.jobs.ended > ended)
         return True
 
     def map_line(self) -> None:
-        self._start_job("map", {"points": True})
+        self._start_job(call_of(CellCommands.map, MapRequest(points=True)))
 
     def locate(self) -> None:
-        self._start_job("locate", {})
+        self._start_job(call_of(CellCommands.locate))
 
     async def start_sort(self) -> None:
         token = self._token()
-        schema = self.ctx.operators.schema("sort")
-        if token is None or schema is None:
+        if token is None or self.ctx.operators.schema(CellCommands.sort) is None:
             return
         typed = {name: field.value for name, field in self.sort_inputs.items()}
-        args = args_from_form(self.sort_fields, typed)
-        found = problems(schema, args)
+        job = self.ctx.operators.checked(CellCommands.sort, args_from_form(self.sort_fields, typed))
+        found = job if isinstance(job, list) else []
         self.sort_problems.text = "; ".join(found)
-        if found:
+        if isinstance(job, list):
             self.say(f"sort: not sent: {'; '.join(found)}", "negative")
             return
         snap = self.ctx.link.snapshot
         if snap.status is None:
-            self._unreachable("sort")
+            self._unreachable(job.command)
             return
-        if self.ctx.jobs.running is not None:
-            self.say(f"sort: not sent: {self.ctx.jobs.running} started here is still running")
+        if (busy := self.ctx.jobs.busy(self.browser)) is not None:
+            self.say(f"sort: not sent: {busy}")
             return
         if snap.status["state"] not in ("idle", "stopped"):
             self.say(f"sort: not sent: the cell is {snap.status['state']}", "negative")
@@ -487,7 +484,7 @@ class CellPage:
         if not await confirm("Start sorting? The arm will move."):
             self.say("sort: cancelled, nothing was sent")
             return
-        self._start_job("sort", args)
+        self._start_job(job)
 
 
 def cell_page(ctx: UiContext) -> None:

@@ -22,7 +22,7 @@ from typing import Any
 
 from nicegui import background_tasks, ui
 
-from omnisort_hw.pipeline.requests import DEFAULT_BOARD
+from omnisort_hw.pipeline.requests import DEFAULT_BOARD, DetectRequest, MapRequest
 from omnisort_hw.ui.calibration_views import (
     extrinsics_args,
     parameter_rows,
@@ -34,6 +34,7 @@ from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.guided_step import GuidedStep, verdict_text
 from omnisort_hw.ui.history_panel import HistoryPanel
 from omnisort_hw.ui.job_runner import JobWatch
+from omnisort_hw.ui.link import Call, CellCommands, Send, StartJob, call_of
 from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
 from omnisort_hw.ui.pictures import show_picture
 from omnisort_hw.ui.schema_form import typed_number
@@ -46,7 +47,7 @@ STEPS = (
     "Verification",
     "Saved versions",
 )
-Send = Callable[[str, dict[str, Any]], Awaitable[dict[str, Any] | None]]
+VERIFY = ("laser", "cubes")  # the verification's steps: the laser map, the cubes located
 BOARD_DOWN = (
     "put the board down, out of the camera's view, before the next step: the target and the "
     "floor board must be seen alone"
@@ -74,7 +75,7 @@ class CommissioningPanel:
         self,
         ctx: UiContext,
         token: Callable[[], str | None],
-        start_job: Callable[[str, dict[str, Any]], bool],
+        start_job: StartJob,
         send: Send,
         laser: Callable[[bool], Awaitable[None]],
         session: str,
@@ -94,18 +95,20 @@ class CommissioningPanel:
         self.steps = {
             "intrinsics": step("camera intrinsics", "intr-note", "Next", "intr-next"),
             "extrinsics": step("camera and laser plane", "extr-note", "Accept", "extr-next"),
-            "register_robot": step("robot registration", "reg-note", "Next", "reg-next"),
-            "map": step("laser map", "verify-map-note", None, "verify-map-accept"),
-            "locate": step("cube location", "verify-locate-note", None, "verify-locate-accept"),
+            "robot": step("robot registration", "reg-note", "Next", "reg-next"),
+            "laser": step("laser map", "verify-map-note", None, "verify-map-accept"),
+            "cubes": step("cube location", "verify-locate-note", None, "verify-locate-accept"),
         }
         self._what = ""  # the step whose job is being followed
         self.board_detection = LiveDetection(
             ctx, token, self._board_args, "intr-detect", self._coverage
         )
-        self.target_detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "extr-detect")
-        self.floor_detection = LiveDetection(ctx, token, lambda: {"what": "floor"}, "reg-detect")
+        self.target_detection = LiveDetection(ctx, token, DetectRequest, "extr-detect")
+        self.floor_detection = LiveDetection(
+            ctx, token, lambda: DetectRequest(what="floor"), "reg-detect"
+        )
         self.detections = (self.board_detection, self.target_detection, self.floor_detection)
-        self.history = HistoryPanel(send, lambda cmd, args: self._start("restore", cmd, args))
+        self.history = HistoryPanel(send, lambda job: self._start("restore", job))
 
     # -- building -------------------------------------------------------------------------
 
@@ -170,8 +173,8 @@ class CommissioningPanel:
         self.floor_detection.build()
         with ui.row().classes("items-center"):
             tag(ui.button("Register", on_click=self.register), "commission-register")
-            self.steps["register_robot"].build_buttons()
-        self.steps["register_robot"].build_note()
+            self.steps["robot"].build_buttons()
+        self.steps["robot"].build_note()
 
     def _build_verification(self) -> None:
         ui.label(
@@ -181,7 +184,7 @@ class CommissioningPanel:
         with ui.row().classes("items-center"):
             tag(ui.button("Map the laser line", on_click=self.verify_map), "verify-map")
             tag(ui.button("Locate the cubes", on_click=self.verify_locate), "verify-locate")
-        for what in ("map", "locate"):
+        for what in VERIFY:
             self.steps[what].build_note()
             self.steps[what].build_buttons()
         self.commissioned = tag(ui.label(""), "commissioned").classes("font-bold")
@@ -205,14 +208,14 @@ class CommissioningPanel:
 
     def _verified(self) -> None:
         """The verdict line once the map and the location have each passed or been accepted."""
-        if all(self.steps[k].accepted for k in ("map", "locate")):
+        if all(self.steps[k].accepted for k in VERIFY):
             self.commissioned.text = "Commissioned: every step passed; the cell may sort."
 
     def _board_size(self) -> str:
         return str(self.board.value or DEFAULT_BOARD)
 
-    def _board_args(self) -> dict[str, Any]:
-        return {"what": "board", "board": self._board_size()}
+    def _board_args(self) -> DetectRequest:
+        return DetectRequest(what="board", board=self._board_size())
 
     def _coverage(self, scale: float, unit: float) -> Overlay | None:
         return coverage_overlay(self.views, scale, unit) if self.views else None
@@ -226,13 +229,13 @@ class CommissioningPanel:
 
     async def _views(self, args: dict[str, Any]) -> None:
         """One `views` request, checked against its schema first; its reply shown."""
-        found = self.ctx.operators.problems("views", args)
-        if found:
-            self.views_note.text = "not sent: " + "; ".join(found)
+        job = self.ctx.operators.checked(CellCommands.views, args)
+        if isinstance(job, list):
+            self.views_note.text = "not sent: " + "; ".join(job)
             return
-        reply = await self.send("views", args)
+        reply = await self.send(job)
         if reply is not None:
-            self._show_views(reply)
+            self._show_views(dict(reply))
 
     async def add_view(self) -> None:
         await self._views({"action": "add", "board": self._board_size()})
@@ -251,17 +254,17 @@ class CommissioningPanel:
 
     # -- acting: the jobs -------------------------------------------------------------------
 
-    def _start(self, what: str, cmd: str, args: dict[str, Any], doing: str = "") -> bool:
-        """Start a step's job (`what`: the step; `restore` has none), its request checked
-        against the command's schema first (`GuidedStep.start`)."""
+    def _start(self, what: str, job: Call[Any] | list[str], doing: str = "") -> bool:
+        """Start a step's job (`what`: the step; `restore` has none), or (`job` a list: what
+        its command's schema found wrong with the form) show why not (`GuidedStep.start`)."""
         step = self.steps.get(what)
-        if step is None:
-            started = self.watch.start(cmd, args)
+        if step is not None:
+            started = step.start(self.watch, job, doing)
         else:
-            started = step.start(self.watch, self.ctx.operators.problems, cmd, args, doing)
+            started = not isinstance(job, list) and self.watch.start(job)
         if started:
             self._what = what
-            if what in ("map", "locate"):
+            if what in VERIFY:
                 self.commissioned.text = ""
         return started
 
@@ -273,21 +276,22 @@ class CommissioningPanel:
             "square_mm": typed_number(self.square.value),
         }
         doing = f"calibrating the lens from {self.views.get('count', 0)} views..."
-        self._start("intrinsics", "calibrate", args, doing)
+        self._start("intrinsics", self.ctx.operators.checked(CellCommands.calibrate, args), doing)
 
     def calibrate_extrinsics(self) -> None:
-        args = extrinsics_args(self.separation)
-        self._start("extrinsics", "calibrate", args, "calibrating camera and laser plane...")
+        job = self.ctx.operators.checked(CellCommands.calibrate, extrinsics_args(self.separation))
+        self._start("extrinsics", job, "calibrating camera and laser plane...")
 
     def register(self) -> None:
         doing = "registering the robot base from the floor board..."
-        self._start("register_robot", "register_robot", {}, doing)
+        self._start("robot", call_of(CellCommands.register_robot), doing)
 
     def verify_map(self) -> None:
-        self._start("map", "map", {"points": True}, "mapping the laser line...")
+        job = call_of(CellCommands.map, MapRequest(points=True))
+        self._start("laser", job, "mapping the laser line...")
 
     def verify_locate(self) -> None:
-        self._start("locate", "locate", {}, "locating the cubes...")
+        self._start("cubes", call_of(CellCommands.locate), "locating the cubes...")
 
     async def refresh(self) -> None:
         """When the job a step started has ended: show its reply and verdict, or its error."""
@@ -295,6 +299,8 @@ class CommissioningPanel:
             await self.load_views()
         end = self.watch.ended()
         if end is None:
+            if self.watch.waiting and self._what in self.steps:
+                self.steps[self._what].running(self.ctx.link.running_job())
             return
         what = self._what
         if what == "restore":
@@ -305,7 +311,7 @@ class CommissioningPanel:
         level = step.ended(end, self._lines(what, result))
         if result is not None:
             await self._show_pictures(what, result, step.note)
-        if what in ("map", "locate") and level == "pass":
+        if what in VERIFY and level == "pass":
             self._verified()
 
     def _lines(self, what: str, result: Mapping[str, Any] | None) -> list[str]:
@@ -315,9 +321,9 @@ class CommissioningPanel:
         if what == "intrinsics":
             failed = (result.get("verdict") or {}).get("level") == "fail"
             return intrinsics_lines(result) + ([] if failed else [BOARD_DOWN])
-        if what == "map":
+        if what == "laser":
             return [f"{result.get('points_on_plane', 0)} points on the laser plane"]
-        if what == "locate":
+        if what == "cubes":
             return [f"{result.get('count', 0)} cubes located"]
         return []
 

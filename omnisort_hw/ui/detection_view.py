@@ -6,12 +6,14 @@ target or a board: the recovery after a bump and the commissioning."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from dataclasses import replace
 
 from nicegui import run, ui
 
+from omnisort_hw.pipeline.replies import DetectReply
+from omnisort_hw.pipeline.requests import DetectRequest
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.overlay_svg import Overlay, detection_overlay
 from omnisort_hw.ui.widgets import tag
 
@@ -24,18 +26,18 @@ class LiveDetection:
         self,
         ctx: UiContext,
         token: Callable[[], str | None],
-        args: Callable[[], dict[str, Any]],
+        request: Callable[[], DetectRequest],
         name: str,
         extra: Callable[[float, float], Overlay | None] | None = None,
     ) -> None:
-        """`args`: the `detect` arguments at each ask (the pattern as the page sets it now);
+        """`request`: the `detect` request at each ask (the pattern as the page sets it now);
         `name`: the tests' name of its elements (`NAME-image`, `NAME-summary`); `extra`: a
         further overlay drawn under the detection, given the picture's scale and unit."""
-        self.ctx, self.token, self.args, self.name = ctx, token, args, name
+        self.ctx, self.token, self.request, self.name = ctx, token, request, name
         self.extra = extra
         self.active = False
         self.found: bool | None = None
-        self.last: dict[str, Any] | None = None
+        self.last: DetectReply | None = None
         self._busy = False
 
     def build(self) -> None:
@@ -53,10 +55,11 @@ class LiveDetection:
         if token is None:
             self.summary.text = "sign in as operator to see the detection"
             return
-        args = {**self.args(), "width": self.ctx.config.view_width_px}
+        request = replace(self.request(), width=self.ctx.config.view_width_px)
         self._busy = True
         try:
-            reply = await run.io_bound(self.ctx.link.execute, "detect", args, token)
+            job = call_of(CellCommands.detect, request)
+            reply = await run.io_bound(self.ctx.link.call, job, token)
         except CommandError as exc:
             self.found, self.summary.text = False, f"no detection: {exc.code}: {exc.message}"
             return
@@ -70,7 +73,7 @@ class LiveDetection:
             return
         self.show(reply)
 
-    def show(self, reply: dict[str, Any]) -> None:
+    def show(self, reply: DetectReply) -> None:
         picture = reply["picture"]
         scale, unit = float(picture["scale"]), picture["width"] / 960.0
         overlays = [self.extra(scale, unit) if self.extra else None]

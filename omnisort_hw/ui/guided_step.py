@@ -22,7 +22,9 @@ from nicegui import ui
 
 from omnisort_hw.pipeline.replies import Level
 from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.service.status_reading import job_text
 from omnisort_hw.ui.job_runner import JobEnd, JobWatch
+from omnisort_hw.ui.link import Call
 from omnisort_hw.ui.widgets import tag
 
 log = logging.getLogger(__name__)
@@ -80,6 +82,7 @@ class GuidedStep:
 
     def build_note(self) -> None:
         self.note = tag(ui.label(""), self.note_tag).classes("whitespace-pre-line")
+        self.clock = tag(ui.label(""), f"{self.note_tag}-running").classes("text-sm")
 
     def build_buttons(self) -> None:
         """The way on and the acceptance of a warning, hidden until an end allows them."""
@@ -102,25 +105,27 @@ class GuidedStep:
     def reset(self, text: str = "") -> None:
         """Back to before any end (a step opened again, or a job started: `text` says so)."""
         self.level, self.accepted_warning = None, False
-        self.note.text = text
+        self.note.text, self.clock.text = text, ""
         self._show_buttons()
 
-    waiting = reset
+    def waiting(self, doing: str) -> None:
+        """A job started: what it is doing (`running` shows how long it has run)."""
+        self.reset(doing)
 
-    def start(
-        self,
-        watch: JobWatch,
-        problems: Callable[[str, dict[str, Any]], list[str]],
-        cmd: str,
-        args: dict[str, Any],
-        doing: str,
-    ) -> bool:
-        """Send the step's job through `watch`, its request checked by `problems` (the
-        command's schema) first: the note says what is being done, or why nothing was sent."""
-        if found := problems(cmd, args):
-            self.refused("; ".join(found))
+    def running(self, job: Mapping[str, Any] | None) -> None:
+        """While the step's job runs, under its note: its running time and how long the last
+        such job took on this cell (the service's `status` job)."""
+        if self.level is None and job:
+            self.clock.text = job_text(job, last_event=False)
+
+    def start(self, watch: JobWatch, job: Call[Any] | list[str], doing: str) -> bool:
+        """Send the step's job through `watch`, or (`job` a list: the problems its command's
+        schema found with the form, `Operators.checked`) nothing: the note says what is being
+        done, or why nothing was sent."""
+        if isinstance(job, list):
+            self.refused("; ".join(job))
             return False
-        if not watch.start(cmd, args):
+        if not watch.start(job):
             return False
         self.waiting(doing)
         return True
@@ -142,7 +147,7 @@ class GuidedStep:
         elif level == "warn":
             text.append(WARNED)
         self.level, self.accepted_warning = level, False
-        self.note.text = "\n".join(line for line in text if line)
+        self.note.text, self.clock.text = "\n".join(line for line in text if line), ""
         self._show_buttons()
         return level
 

@@ -6,18 +6,19 @@ kept in its turn)."""
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
 from typing import Any
 
 from nicegui import ui
 
+from omnisort_hw.pipeline.replies import VersionReply
+from omnisort_hw.pipeline.requests import AdoptRequest, HistoryRequest
+from omnisort_hw.ui.link import CellCommands, Send, StartJob, call_of
 from omnisort_hw.ui.widgets import confirm, tag
 
 KINDS = ("system", "camera")
-Send = Callable[[str, dict[str, Any]], Awaitable[dict[str, Any] | None]]
 
 
-def version_label(version: dict[str, Any]) -> str:
+def version_label(version: VersionReply) -> str:
     """A version in a line: when it was saved, what it holds, or why it does not verify."""
     if "problem" in version:
         return f"DOES NOT VERIFY: {version['problem']}"
@@ -28,15 +29,11 @@ def version_label(version: dict[str, Any]) -> str:
 class HistoryPanel:
     """Both calibration files' versions, and going back to one."""
 
-    def __init__(
-        self,
-        send: Send,
-        start: Callable[[str, dict[str, Any]], bool],
-    ) -> None:
+    def __init__(self, send: Send, start: StartJob) -> None:
         """`send`: the page's quick command; `start`: its panel's way to start a job whose end
         comes back to `ended()`."""
         self.send, self.start = send, start
-        self.versions: dict[str, list[dict[str, Any]]] = {}
+        self.versions: dict[str, list[VersionReply]] = {}
 
     def build(self) -> None:
         ui.label(
@@ -66,7 +63,7 @@ class HistoryPanel:
     async def load(self) -> None:
         """Both files' versions, as the service lists them now."""
         for kind in KINDS:
-            reply = await self.send("history", {"kind": kind})
+            reply = await self.send(call_of(CellCommands.history, HistoryRequest(kind=kind)))
             if reply is None:
                 return
             versions = reply["versions"]
@@ -90,7 +87,7 @@ class HistoryPanel:
         ):
             self.note.text = "nothing was sent"
             return
-        if self.start("adopt", {kind: path}):
+        if self.start(call_of(CellCommands.adopt, AdoptRequest(**{kind: path}))):
             self.note.text = f"going back to {path}..."
 
     async def ended(self, ok: bool, message: str, result: dict[str, Any] | None) -> None:

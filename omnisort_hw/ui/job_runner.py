@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from omnisort_hw.pipeline.verdict import verdict_lines
-from omnisort_hw.ui.link import ClientError, CommandError, ServiceLink
+from omnisort_hw.ui.link import Call, ClientError, CommandError, ServiceLink
 
 JOB_TIMEOUT_S = 3600.0
 
@@ -45,7 +45,7 @@ class JobRunner:
     def __init__(self, link: ServiceLink, timeout_s: float = JOB_TIMEOUT_S) -> None:
         self.link, self.timeout_s = link, timeout_s
         self._lock = threading.Lock()
-        self._running: str | None = None
+        self._running: tuple[str, str] | None = None  # (command, browser session)
         self.last: JobEnd | None = None
         self.results: dict[str, Mapping[str, Any]] = {}  # the last result of each command
         self.ended = 0  # how many jobs have ended (a page redraws what depends on them)
@@ -54,21 +54,41 @@ class JobRunner:
     def running(self) -> str | None:
         """The command of the job this interface is waiting on, or None."""
         with self._lock:
-            return self._running
+            return self._running[0] if self._running else None
 
-    def start(self, cmd: str, args: dict[str, Any], token: str | None) -> None:
-        """Send the job and return; its end lands in `last`. RuntimeError if one is waiting."""
+    def busy(self, browser: str) -> str | None:
+        """Why `browser` cannot start a job now (one of this interface is still running, in
+        that browser or another), or None."""
         with self._lock:
-            if self._running is not None:
-                raise RuntimeError(f"{self._running} started here is still running")
-            self._running = cmd
+            return self._busy(browser)
+
+    def _busy(self, browser: str) -> str | None:
+        if self._running is None:
+            return None
+        cmd, by = self._running
+        where = "in this browser" if by == browser else "from another browser"
+        return f"{cmd} started {where} is still running"
+
+    def start(self, job: Call[Any], token: str | None, browser: str) -> None:
+        """Send the job for the page of `browser` (its session) and return; its end lands in
+        `last`. RuntimeError, with `busy()`'s reason, if one is still running."""
+        with self._lock:
+            if (why := self._busy(browser)) is not None:
+                raise RuntimeError(why)
+            self._running = (job.command, browser)
         threading.Thread(
-            target=self._run, args=(cmd, args, token), name=f"ui-{cmd}", daemon=True
+            target=self._run, args=(job, token), name=f"ui-{job.command}", daemon=True
         ).start()
 
-    def _run(self, cmd: str, args: dict[str, Any], token: str | None) -> None:
+    def result(self, command: Callable[..., Any]) -> Mapping[str, Any] | None:
+        """The last result of the job `command` (a `CellCommands` method), if one ended well."""
+        with self._lock:
+            return self.results.get(command.__name__)
+
+    def _run(self, job: Call[Any], token: str | None) -> None:
+        cmd = job.command
         try:
-            result = self.link.execute(cmd, args, token=token, timeout_s=self.timeout_s)
+            result = self.link.call(job, token=token, timeout_s=self.timeout_s)
             end = JobEnd(cmd, True, ended_text(cmd, result), result, time.monotonic())
         except CommandError as exc:
             end = JobEnd(cmd, False, f"{cmd}: {exc.code}: {exc.message}", None, time.monotonic())
@@ -91,7 +111,7 @@ class JobWatch:
     one way to start a job and notes how many jobs had ended, so a job that ends at once is
     not missed; `ended()` gives its end once."""
 
-    def __init__(self, jobs: JobRunner, start_job: Callable[[str, dict[str, Any]], bool]) -> None:
+    def __init__(self, jobs: JobRunner, start_job: Callable[[Call[Any]], bool]) -> None:
         self.jobs, self.start_job = jobs, start_job
         self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
 
@@ -99,11 +119,11 @@ class JobWatch:
     def waiting(self) -> str | None:
         return self._waiting[0] if self._waiting else None
 
-    def start(self, cmd: str, args: dict[str, Any]) -> bool:
+    def start(self, job: Call[Any]) -> bool:
         ended = self.jobs.ended
-        if not self.start_job(cmd, args):
+        if not self.start_job(job):
             return False
-        self._waiting = (cmd, ended)
+        self._waiting = (job.command, ended)
         return True
 
     def ended(self) -> JobEnd | None:

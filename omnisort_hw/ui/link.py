@@ -12,12 +12,39 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any, Protocol, TypeVar
 
 from omnisort_hw.service.client import Client, ClientError, CommandError
+from omnisort_hw.service.commands import Call, CellCommands, call_of
+from omnisort_hw.service.states import JobRecord
 from omnisort_hw.service.status_reply import StatusReply
 
-__all__ = ["ClientError", "CommandError", "Reader", "ServiceLink", "Snapshot"]
+__all__ = [
+    "Call",
+    "CellCommands",
+    "ClientError",
+    "CommandError",
+    "Reader",
+    "Send",
+    "ServiceLink",
+    "Snapshot",
+    "StartJob",
+    "call_of",
+]
+
+R = TypeVar("R")
+STATUS = call_of(CellCommands.status)
+
+
+class Send(Protocol):
+    """A page's way to send one quick command: its typed reply, or None with the refusal
+    shown on the page."""
+
+    async def __call__(self, command: Call[R], token: str | None = None) -> R | None: ...
+
+
+StartJob = Callable[[Call[Any]], bool]
+"""A page's way to start a job: False, with why shown, when it was not sent."""
 
 
 @dataclass(frozen=True)
@@ -41,11 +68,11 @@ class Reader:
         self._connect = connect
         self._client: Client | None = None
 
-    def execute(self, cmd: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
+    def call(self, command: Call[R]) -> R:
         try:
             if self._client is None:
                 self._client = self._connect()
-            return self._client.execute(cmd, args)
+            return command.send(self._client)
         except (ClientError, OSError, ValueError):
             self.close()
             raise
@@ -57,7 +84,7 @@ class Reader:
 
 
 class ServiceLink:
-    """The service at host:port: `snapshot` (read by a thread every `period_s`), `execute()`
+    """The service at host:port: `snapshot` (read by a thread every `period_s`), `call()`
     for one command on its own connection."""
 
     def __init__(
@@ -84,6 +111,11 @@ class ServiceLink:
         with self._lock:
             return self._snapshot
 
+    def running_job(self) -> JobRecord | None:
+        """The service's running job as last read (None: none, or the service unread)."""
+        status = self.snapshot.status
+        return status["job"] if status is not None else None
+
     def start(self) -> None:
         if self._thread is None:
             self._thread = threading.Thread(target=self._read_loop, name="ui-status", daemon=True)
@@ -100,7 +132,7 @@ class ServiceLink:
         while not self._stop.is_set():
             t0 = time.monotonic()
             try:
-                snap = Snapshot(cast(StatusReply, reader.execute("status")), None)
+                snap = Snapshot(reader.call(STATUS), None)
             except (ClientError, CommandError, OSError, ValueError) as exc:
                 snap = Snapshot(None, f"service unreachable at {self.address}: {exc}")
             with self._lock:
@@ -121,16 +153,8 @@ class ServiceLink:
             connect_timeout_s=self.connect_timeout_s,
         )
 
-    def execute(
-        self,
-        cmd: str,
-        args: dict[str, Any] | None = None,
-        token: str | None = None,
-        timeout_s: float | None = None,
-        on_event: Callable[[dict[str, Any]], None] | None = None,
-    ) -> dict[str, Any]:
-        """One command on a fresh connection: its result, or CommandError (the service's typed
-        error) or ClientError (unreachable, no reply in time, connection lost)."""
-        limit = timeout_s if timeout_s is not None else self.timeout_s
-        with self._client(token, limit) as client:
-            return client.execute(cmd, args, on_event=on_event, timeout_s=limit)
+    def call(self, command: Call[R], token: str | None = None, timeout_s: float | None = None) -> R:
+        """One command on a fresh connection: its typed reply, or CommandError (the service's
+        typed error) or ClientError (unreachable, no reply in time, connection lost)."""
+        with self._client(token, timeout_s if timeout_s is not None else self.timeout_s) as c:
+            return command.send(c)

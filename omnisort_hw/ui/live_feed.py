@@ -9,9 +9,10 @@ import collections
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
 
-from omnisort_hw.ui.link import ClientError, CommandError, ServiceLink
+from omnisort_hw.pipeline.replies import ViewReply
+from omnisort_hw.pipeline.requests import ViewRequest
+from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, ServiceLink, call_of
 
 
 @dataclass(frozen=True)
@@ -86,7 +87,7 @@ class LiveFeed:
                 continue
             t0 = time.monotonic()
             try:
-                self._store(reader.execute("view", {"width": self.width_px}))
+                self._store(reader.call(call_of(CellCommands.view, ViewRequest(self.width_px))))
             except CommandError as exc:
                 self.problem = f"no picture: {exc.code}: {exc.message}"
             except (ClientError, OSError, ValueError) as exc:
@@ -94,7 +95,7 @@ class LiveFeed:
             self._stop.wait(max(0.0, self.period_s - (time.monotonic() - t0)))
         reader.close()
 
-    def _store(self, reply: dict[str, Any]) -> None:
+    def _store(self, reply: ViewReply) -> None:
         self.picture = Picture(
             str(reply["base64"]),
             int(reply["width"]),

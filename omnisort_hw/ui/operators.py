@@ -5,10 +5,18 @@ browser, and a page only learns whether its session is signed in."""
 from __future__ import annotations
 
 import threading
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar
 
+from omnisort_hw.request_fields import build
+from omnisort_hw.service.commands import Call, CellCommands, call_of
+from omnisort_hw.service.protocol import COMMANDS
 from omnisort_hw.ui.link import ClientError, CommandError, ServiceLink
 from omnisort_hw.ui.schema_form import problems
+
+R = TypeVar("R")
+Q = TypeVar("Q")
+DESCRIBE = call_of(CellCommands.describe)
 
 
 class SignInError(Exception):
@@ -37,7 +45,7 @@ class Operators:
         if not self.allowed:
             raise SignInError("this screen is view-only ([ui] allow_operator = false)")
         try:
-            described = self.link.execute("describe", token=token.strip() or None)
+            described = self.link.call(DESCRIBE, token=token.strip() or None)
         except CommandError as exc:
             if exc.code == "unauthorized":
                 raise SignInError("wrong token: the service refused it") from None
@@ -52,14 +60,25 @@ class Operators:
         with self._lock:
             self._tokens.pop(browser, None)
 
-    def schema(self, command: str) -> dict[str, Any] | None:
-        """The `args` schema of `command`, as the service described it; None before a sign-in."""
+    def schema(self, command: Callable[..., Any]) -> dict[str, Any] | None:
+        """The `args` schema of `command` (a `CellCommands` method), as the service described
+        it; None before a sign-in."""
         with self._lock:
-            spec = self.commands.get(command)
+            spec = self.commands.get(command.__name__)
         return dict(spec["args"]) if spec else None
 
-    def problems(self, command: str, args: dict[str, Any]) -> list[str]:
+    def problems(self, command: Callable[..., Any], args: dict[str, Any]) -> list[str]:
         """What `command`'s schema finds wrong with `args`, each naming its field (nothing
         before a sign-in: the service refuses then)."""
         schema = self.schema(command)
         return problems(schema, args) if schema is not None else []
+
+    def checked(
+        self, command: Callable[[CellCommands, Q], R], args: dict[str, Any]
+    ) -> Call[R] | list[str]:
+        """The call of `command` (a `CellCommands` method) with a form's `args`, its request
+        record built from them once the schema finds nothing wrong; else what it found."""
+        if found := self.problems(command, args):
+            return found
+        request = COMMANDS[command.__name__].request
+        return Call(command, build(request, args) if request is not None else None)

@@ -8,8 +8,9 @@ from typing import Any
 
 from nicegui import run
 
+from omnisort_hw.pipeline.requests import PictureRequest
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.link import ClientError, CommandError
+from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 
 __all__ = ["ClientError", "CommandError", "fetch_picture", "show_picture"]
 
@@ -17,7 +18,8 @@ __all__ = ["ClientError", "CommandError", "fetch_picture", "show_picture"]
 async def fetch_picture(ctx: UiContext, token: str, path: str, width: int = 960) -> str | None:
     """The picture at `path` as a data URL (None when the interface is shutting down);
     CommandError or ClientError when the service does not send it."""
-    sent = await run.io_bound(ctx.link.execute, "picture", {"path": path, "width": width}, token)
+    job = call_of(CellCommands.picture, PictureRequest(path=path, width=width))
+    sent = await run.io_bound(ctx.link.call, job, token)
     if sent is None:
         return None
     return f"data:image/jpeg;base64,{sent['base64']}"

@@ -12,6 +12,7 @@ from typing import Any
 
 from nicegui import ui
 
+from omnisort_hw.pipeline.requests import DetectRequest
 from omnisort_hw.ui.calibration_views import (
     extrinsics_args,
     parameter_rows,
@@ -22,6 +23,7 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.guided_step import GuidedStep
 from omnisort_hw.ui.job_runner import JobWatch
+from omnisort_hw.ui.link import Call, CellCommands, call_of
 from omnisort_hw.ui.pictures import show_picture
 from omnisort_hw.ui.widgets import tag
 
@@ -35,7 +37,7 @@ class RecoveryPanel:
         self,
         ctx: UiContext,
         token: Callable[[], str | None],
-        start_job: Callable[[str, dict[str, Any]], bool],
+        start_job: Callable[[Call[Any]], bool],
         laser: Callable[[bool], Awaitable[None]],
         session: str,
     ) -> None:
@@ -45,9 +47,10 @@ class RecoveryPanel:
         self.ctx, self.token, self.laser = ctx, token, laser
         self.watch = JobWatch(ctx.jobs, start_job)
         self.active = False  # opened from the drift banner, until the operator closes it
-        self.detection = LiveDetection(ctx, token, lambda: {"what": "target"}, "recovery-target")
+        self._step = "camera"  # the step whose job was started last
+        self.detection = LiveDetection(ctx, token, DetectRequest, "recovery-target")
         self.steps = {
-            "calibrate": GuidedStep(
+            "camera": GuidedStep(
                 "recovery: camera and laser plane",
                 "calib-note",
                 "Accept",
@@ -55,7 +58,7 @@ class RecoveryPanel:
                 self._next,
                 session,
             ),
-            "register_robot": GuidedStep(
+            "robot": GuidedStep(
                 "recovery: robot registration",
                 "register-note",
                 "Next",
@@ -63,7 +66,7 @@ class RecoveryPanel:
                 self._next,
                 session,
             ),
-            "check": GuidedStep(
+            "verify": GuidedStep(
                 "recovery: drift check",
                 "check-note",
                 "Done",
@@ -98,25 +101,25 @@ class RecoveryPanel:
                         tag(ui.button("Target placed", on_click=self.placed), "placed")
                 with ui.step(STEPS[1]):
                     self.separation = separation_input("calib-separation")
-                    steps["calibrate"].build_note()
+                    steps["camera"].build_note()
                     self.params = parameter_table("calib-params")
                     self.residuals = tag(
                         ui.image().classes("w-full max-w-[960px]"), "calib-picture"
                     )
                     with ui.stepper_navigation():
                         tag(ui.button("Calibrate", on_click=self.calibrate), "calibrate")
-                        steps["calibrate"].build_buttons()
+                        steps["camera"].build_buttons()
                 with ui.step(STEPS[2]):
-                    steps["register_robot"].build_note()
+                    steps["robot"].build_note()
                     with ui.stepper_navigation():
                         tag(ui.button("Register", on_click=self.register), "register")
-                        steps["register_robot"].build_buttons()
+                        steps["robot"].build_buttons()
                         self._back("back-to-calib")
                 with ui.step(STEPS[3]):
-                    steps["check"].build_note()
+                    steps["verify"].build_note()
                     with ui.stepper_navigation():
                         tag(ui.button("Check", on_click=self.check), "check")
-                        steps["check"].build_buttons()
+                        steps["verify"].build_buttons()
                         self._back("back-to-register")
         self.card.set_visibility(False)
 
@@ -146,31 +149,36 @@ class RecoveryPanel:
         self.detection.active = False
         self.stepper.next()
 
-    def _start(self, cmd: str, args: dict[str, Any], doing: str) -> None:
-        self.steps[cmd].start(self.watch, self.ctx.operators.problems, cmd, args, doing)
+    def _start(self, step: str, job: Call[Any] | list[str], doing: str) -> None:
+        if self.steps[step].start(self.watch, job, doing):
+            self._step = step
 
     def calibrate(self) -> None:
-        args = extrinsics_args(self.separation)
-        self._start("calibrate", args, "calibrating from a capture of the target...")
+        job = self.ctx.operators.checked(CellCommands.calibrate, extrinsics_args(self.separation))
+        self._start("camera", job, "calibrating from a capture of the target...")
 
     def register(self) -> None:
-        self._start("register_robot", {}, "registering the robot from the floor board...")
+        job = call_of(CellCommands.register_robot)
+        self._start("robot", job, "registering the robot from the floor board...")
 
     def check(self) -> None:
-        self._start("check", {}, "checking the camera against the new calibration...")
+        job = call_of(CellCommands.check)
+        self._start("verify", job, "checking the camera against the new calibration...")
 
     async def refresh(self) -> None:
         """When the job a step started has ended: show its reply, or its error."""
         end = self.watch.ended()
         if end is None:
+            if self.watch.waiting:
+                self.steps[self._step].running(self.ctx.link.running_job())
             return
-        step = self.steps[end.cmd]
-        if end.cmd == "check" and end.ok and end.result is not None:
+        step = self.steps[self._step]
+        if self._step == "verify" and end.ok and end.result is not None:
             turned = "DRIFT" if end.result.get("drift") else "no drift"
             step.ended(end, [f"{turned}: turned {end.result.get('angle_deg', 0):.3f} deg"])
             return
         step.ended(end)
-        if end.cmd == "calibrate" and end.ok and end.result is not None:
+        if self._step == "camera" and end.ok and end.result is not None:
             self.params.rows = parameter_rows(end.result)
             self.params.update()
             await show_picture(

@@ -272,7 +272,11 @@ def test_whole_job_on_the_simulated_cell(tmp_path: Path) -> None:
             r = seen.pop("reply")
             # The progress events asked for came before the reply: started, then what the
             # sorter reports (the count located, then one line per cube outcome).
-            assert events and events[0] == {"stage": "started", "cmd": "sort"}, events[:3]
+            assert events and events[0] == {
+                "stage": "started",
+                "cmd": "sort",
+                "expected_s": None,
+            }, events[:3]
             assert not poll_errors, poll_errors
             assert "sorting" in seen["states"], seen
             if r["ok"]:

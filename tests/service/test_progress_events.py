@@ -33,7 +33,7 @@ def test_a_job_sends_its_events_before_the_reply(make_service) -> None:
     *events, reply = lines
     assert reply["ok"], reply
     assert events and all(e["event"] == "progress" and "ok" not in e for e in events)
-    assert events[0]["progress"] == {"stage": "started", "cmd": "move"}
+    assert events[0]["progress"] == {"stage": "started", "cmd": "move", "expected_s": None}
     times = [e["progress"]["running_s"] for e in events[1:]]
     assert times == sorted(times) and all(0 < t < 30 for t in times), times
 

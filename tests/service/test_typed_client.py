@@ -7,6 +7,7 @@ from __future__ import annotations
 import inspect
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -63,8 +64,15 @@ def test_typed_calls_against_the_service(make_service) -> None:
         assert c.laser(LaserRequest(on=True)) == {"on": True}
         assert c.laser() == {"on": True}  # omitted: read back
         events: list[dict] = []
+        t0 = time.monotonic()
         c.move(MoveRequest(joints_deg=(10.0, 0, 0, 0, 0, 0)), on_event=events.append)
-        assert events[0] == {"stage": "started", "cmd": "move"}, events
+        took = time.monotonic() - t0
+        assert events[0] == {"stage": "started", "cmd": "move", "expected_s": None}, events
+        # The next move is told what the last one took on this cell (rounded to 0.1 s).
+        again: list[dict] = []
+        c.move(MoveRequest(joints_deg=(0.0, 0, 0, 0, 0, 0)), on_event=again.append)
+        expected = again[0]["expected_s"]
+        assert 1.2 <= expected <= took + 0.05, (expected, took)
         with pytest.raises(CommandError) as refused:
             c.move(MoveRequest(joints_deg=(1.0, 2.0)))
         assert refused.value.code == "bad_argument"

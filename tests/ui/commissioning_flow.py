@@ -152,15 +152,29 @@ def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS
 
 
 def calibrated_extrinsics(
-    page: Page, separation_mm: float | None, step: tuple[str, str, str] | None = None
+    page: Page,
+    separation_mm: float | None,
+    step: tuple[str, str, str] | None = None,
+    expected: bool = False,
 ) -> str:
     """A calibration of the camera and laser plane with this wall separation typed (None: the
     field emptied, the cell file's); its note once it has ended. `step`: the (separation field,
-    button, note) of the flow, the Commission tab's by default."""
+    button, note) of the flow, the Commission tab's by default. `expected`: while it runs, the
+    step shows its running time against the last such calibration's on this cell."""
     field, button, note = step or ("extr-separation", "calibrate-extr", "extr-note")
     page.type(field, "" if separation_mm is None else f"{separation_mm:.1f}")
     page.click(button)
     wait_for("the job sent", lambda: page.text(note).endswith("..."), UI_S, 0.1)
+    if expected:
+
+        def clock() -> str:
+            assert page.text(note).endswith("..."), "ended before its running time was shown"
+            return page.text(f"{note}-running")
+
+        shown = wait_for("the running time", lambda: "its last run here" in clock(), UI_S, 0.1)
+        assert shown
+        line = page.text(f"{note}-running")
+        assert line.startswith("calibrate (request ") and " s of about " in line, line
     return str(
         wait_for(
             "the calibration",

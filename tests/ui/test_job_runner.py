@@ -1,0 +1,68 @@
+"""The interface's one job at a time, shared by every browser: a page that cannot start one is
+told whether the running job was started in its own browser or another (it once said "started
+here" to every browser), and the job is sent as a typed call. The peer is a real TCP listener
+on loopback that takes the request and answers when the test lets it."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+from collections.abc import Iterator
+
+import pytest
+
+from omnisort_hw.pipeline.requests import MapRequest
+from omnisort_hw.request_fields import wire_args
+from omnisort_hw.ui.job_runner import JobRunner
+from omnisort_hw.ui.link import CellCommands, ServiceLink, call_of
+from tests.ui.browser_page import wait_for
+
+WAIT_S = 10.0  # a guard against a hang, not a latency bound
+
+
+@pytest.fixture()
+def peer() -> Iterator[tuple[int, threading.Event, list[dict[str, object]]]]:
+    """A service stand-in at a loopback port: it records each request line and answers it
+    with an ok reply once `answer` is set."""
+    answer = threading.Event()
+    seen: list[dict[str, object]] = []
+    server = socket.create_server(("127.0.0.1", 0))
+    server.settimeout(WAIT_S)
+
+    def serve() -> None:
+        with server:
+            conn, _ = server.accept()
+            with conn, conn.makefile("rwb") as f:
+                request = json.loads(f.readline())
+                seen.append(request)
+                answer.wait(WAIT_S)
+                reply = {"id": request.get("id"), "ok": True, "result": {"points_on_plane": 7}}
+                f.write(json.dumps(reply).encode() + b"\n")
+                f.flush()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    yield server.getsockname()[1], answer, seen
+    answer.set()
+    thread.join(WAIT_S)
+
+
+def test_a_second_browser_is_told_the_job_is_another_browsers(peer) -> None:
+    port, answer, seen = peer
+    jobs = JobRunner(ServiceLink("127.0.0.1", port, timeout_s=WAIT_S))
+    assert jobs.busy("browser-a") is None
+    jobs.start(call_of(CellCommands.map, MapRequest(points=True)), "token", "browser-a")
+    wait_for("the request at the peer", lambda: seen, WAIT_S)
+    assert seen[0]["cmd"] == "map" and seen[0]["args"] == wire_args(MapRequest(points=True)), seen
+    assert jobs.running == "map"
+    assert jobs.busy("browser-a") == "map started in this browser is still running"
+    assert jobs.busy("browser-b") == "map started from another browser is still running"
+    with pytest.raises(RuntimeError, match="map started from another browser"):
+        jobs.start(call_of(CellCommands.locate), "token", "browser-b")
+    answer.set()
+    wait_for("the job's end", lambda: jobs.running is None, WAIT_S)
+    assert jobs.busy("browser-b") is None
+    assert jobs.last is not None and jobs.last.ok and jobs.last.cmd == "map"
+    assert jobs.result(CellCommands.map) == {"points_on_plane": 7}
+    assert jobs.result(CellCommands.locate) is None
