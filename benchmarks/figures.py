@@ -22,6 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import prose
+from benchmarks.figures_common import ANGLES, PARAM_HEADS, PARAMS
+from benchmarks.figures_common import table as _table
+from benchmarks.figures_real_light import real_light, real_light_camera, table3_effects
 from benchmarks.figures_uncertainty import uncertainty, uncertainty_rows
 
 HERE = Path(__file__).resolve().parent
@@ -30,9 +33,6 @@ DOCUMENTS = (ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")))
 ALLOWLIST = ROOT / "docs" / "figures_allowlist.txt"
 BLOCK = re.compile(r"(<!-- figures:(\w+) -->\n)(.*?)(<!-- /figures -->)", re.S)
 
-ANGLES = ("cam_roll_deg", "cam_pitch_deg", "cam_yaw_deg", "laser_roll_deg", "laser_pitch_deg")
-PARAMS = (*ANGLES, "laser_distance_mm")
-PARAM_HEADS = "cam roll ° | cam pitch ° | cam yaw ° | laser roll ° | laser pitch ° | laser d mm"
 TABLE3_ROWS = (
     ("joint", "**joint** (two-sided)"),
     ("paper", "paper (two-sided)"),
@@ -46,12 +46,6 @@ PUBLISHED = (
     ("published: method 1", (0.12, 0.06, 0.06, 0.12, 0.16), 33.99),
     ("published: method 2", (0.15, 0.11, 0.09, 0.08, 0.29), 25.41),
 )
-
-
-def _table(head: list[str], rows: list[list[Any]]) -> str:
-    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
-    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
 
 
 def _machine(r: dict[str, Any]) -> str:
@@ -699,111 +693,6 @@ def sweeps(r: dict[str, Any]) -> str:
     )
 
 
-def real_light(r: dict[str, Any]) -> str:
-    """The stripe extractor on real photographs: before the real-light rules and now."""
-    rl = r["real_light"]
-
-    def pct(v: Any) -> str:
-        return f"{100 * v:.0f} %" if isinstance(v, (int, float)) else "–"
-
-    def px(v: Any) -> str:
-        return f"{v:.1f} px" if isinstance(v, (int, float)) else "–"
-
-    rows: list[list[Any]] = []
-    for when in ("before", "now"):
-        for name, s in rl[when].items():
-            if name.startswith("_"):
-                continue
-            if name.endswith("(laser off)"):
-                rows.append(
-                    [
-                        when,
-                        name,
-                        s["photos"],
-                        f"{s['with_phantoms']} with phantoms "
-                        f"(at most {s['phantom_points_max']} points)",
-                        "",
-                        "",
-                        "",
-                    ]
-                )
-                continue
-            rows.append(
-                [
-                    when,
-                    name,
-                    s["photos"],
-                    pct(s["off_on_board_mean"]),
-                    pct(s["coverage_mean"]),
-                    px(s["clipped_median_px"]),
-                    pct(s["clipped_split_mean"]),
-                ]
-            )
-    renders = rl["now"].get("_laser_off_renders")
-    if renders is not None:  # the simulator's cluttered cell, laser off, through the effects
-        for when, key in (("without the line rule", "without_line_rule"), ("now", "now")):
-            s = renders[key]
-            rows.append(
-                [
-                    when,
-                    f"sorting cell renders, {renders['width_px']} px, colour camera (laser off)",
-                    s["renders"],
-                    f"{s['with_phantoms']} with phantoms (at most {s['phantom_points_max']} "
-                    "points)",
-                    "",
-                    "",
-                    "",
-                ]
-            )
-    head = [
-        "extractor",
-        "set",
-        "photos",
-        "off the stripe, on the board",
-        "coverage",
-        "clipped: from the run's centre",
-        "clipped lines measured twice",
-    ]
-    note = (
-        f"\nMeans over each set's photographs; the extractor took "
-        f"{rl['now']['_extract_s_mean']:.3f} s per photograph on average "
-        f"({rl.get('_machine', {}).get('cores', '?')} cores).\n"
-    )
-    return _table(head, rows) + note
-
-
-def real_light_camera(r: dict[str, Any]) -> str:
-    """The colour camera measured on the real photographs (`evaluation.camera_measures`)."""
-    cam = r["real_light"]["now"]["_camera"]
-
-    def p3(v: Any) -> str:
-        return " / ".join(f"{x:.2f}" for x in v) if v else "–"
-
-    rows: list[list[Any]] = []
-    for name, m in cam.items():
-        xt = m["crosstalk_p10_p50_p90"]
-        ca = m["chromatic_px_at_corner_p10_p50_p90"]
-        halo = m["halo_share_median"]
-        rows.append(
-            [
-                name,
-                f"{m['crosstalk_photos']}: "
-                + "; ".join(f"{k} {p3(v)}" for k, v in xt.items() if v is not None),
-                f"{m['chromatic_photos']}: red {p3(ca['red'])}; blue {p3(ca['blue'])}",
-                f"{m['halo_photos']}: " + (" / ".join(f"{x:.2f}" for x in halo) if halo else "–"),
-            ]
-        )
-    head = [
-        "set",
-        "crosstalk (photos: channel p10 / p50 / p90)",
-        "chromatic shift at the corner, px (photos: p10 / p50 / p90)",
-        "halo beside a clipped core, share of the clip at "
-        + ", ".join(str(d) for d in cam[next(iter(cam))]["halo_at_px"])
-        + " px (photos: medians)",
-    ]
-    return _table(head, rows)
-
-
 GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "summary": summary,
     "table3": table3,
@@ -825,6 +714,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "uncertainty": uncertainty,
     "real_light": real_light,
     "real_light_camera": real_light_camera,
+    "table3_effects": table3_effects,
 }
 
 

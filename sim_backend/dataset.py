@@ -29,7 +29,14 @@ from omnisort_hw.core.frames import camera_rotation
 from omnisort_hw.errors import InputError
 from omnisort_hw.fileio import atomic_write_json
 from sim_backend.patterns import CheckerPattern
-from sim_backend.scene import BoardSpec, Scene, SceneInfo, load_scene, sized
+from sim_backend.scene import (
+    BoardSpec,
+    Scene,
+    SceneInfo,
+    load_scene,
+    sized,
+    with_camera_effects,
+)
 from sim_backend.scene_images import camera_model_for, render_scene, write_render
 
 TABLE3_SCENES = ("two_sided", "three_sided", "checkerboards")
@@ -72,14 +79,19 @@ def table3_configs(n: int, seed: int, max_angle_deg: float = 10.0) -> list[Table
 
 
 def table3_bases(
-    width: int | None = None, tone_curve: str = "srgb", scenes: Sequence[str | Path] = TABLE3_SCENES
+    width: int | None = None,
+    tone_curve: str = "srgb",
+    scenes: Sequence[str | Path] = TABLE3_SCENES,
+    effects: bool = False,
 ) -> list[tuple[str, Scene]]:
     """(name, scene) of each target scene of the experiment, at `width`, with the simulated
-    camera's tone curve."""
-    return [
-        (Path(str(s)).stem, sized(load_scene(s), width).replace(render={"tone_curve": tone_curve}))
-        for s in scenes
-    ]
+    camera's tone curve; `effects`: through the colour camera's effects
+    (`scene.with_camera_effects`)."""
+    bases = []
+    for s in scenes:
+        scene = sized(load_scene(s), width).replace(render={"tone_curve": tone_curve})
+        bases.append((Path(str(s)).stem, with_camera_effects(scene) if effects else scene))
+    return bases
 
 
 def render_config(
@@ -154,21 +166,26 @@ def make_dataset(
     scenes: Sequence[str | Path] = TABLE3_SCENES,
     progress: bool = True,
     tone_curve: str = "srgb",
+    effects: bool = False,
 ) -> Path:
     """Render an experiment into `out_dir`; returns the path of `dataset.json`. `tone_curve`:
-    the simulated camera's ("srgb" as real cameras, or "linear"), recorded in the index."""
+    the simulated camera's ("srgb" as real cameras, or "linear"), recorded in the index;
+    `effects`: through the colour camera's effects (crosstalk, chromatic aberration, bloom,
+    Bayer demosaicing), which implies `degraded`, recorded too."""
     if experiment not in EXPERIMENTS:
         raise InputError(f"unknown experiment {experiment!r} (known: {', '.join(EXPERIMENTS)})")
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     out = Path(out_dir)
-    bases = table3_bases(width, tone_curve, scenes)
+    bases = table3_bases(width, tone_curve, scenes, effects)
+    degraded = degraded or effects
     params = {
         "experiment": experiment,
         "n": n,
         "seed": seed,
         "width": bases[0][1].camera.width,
         "degraded": degraded,
+        "effects": effects,
         "tone_curve": tone_curve,
     }
     problem = dataset_problem(out, params)

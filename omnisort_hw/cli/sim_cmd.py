@@ -36,6 +36,12 @@ def register(sub: Any) -> None:
     ds.add_argument("--out", type=output_folder, required=True)
     ds.add_argument("--width", type=int, default=None, help="square image size (default 1920)")
     ds.add_argument("--degraded", action="store_true", help='"real camera" mode')
+    ds.add_argument(
+        "--effects",
+        action="store_true",
+        help="through the colour camera's effects as well (crosstalk, chromatic aberration, "
+        "bloom, Bayer demosaicing); implies --degraded",
+    )
     ds.set_defaults(func=cmd_dataset)
 
     cv = ssub.add_parser(
@@ -94,6 +100,7 @@ def cmd_dataset(args: argparse.Namespace) -> int:
         seed=args.seed,
         width=_width(args.width),
         degraded=args.degraded,
+        effects=args.effects,
     )
     print(index)
     return 0

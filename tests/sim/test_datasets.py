@@ -49,6 +49,28 @@ def test_intrinsic_calibration_on_rendered_views_recovers_the_camera(tmp_path: P
     assert angle.max() < 0.05, angle.max()
 
 
+def test_a_table3_dataset_through_the_colour_camera(tmp_path: Path) -> None:
+    """`effects`: each image is its configuration's scene through `with_camera_effects` (the
+    same seed, the same bytes), recorded in the index, and not the plain degraded render."""
+    from sim_backend.dataset import render_config, table3_bases
+    from sim_backend.scene_images import png_bytes
+
+    index = json.loads(
+        make_dataset(
+            tmp_path / "fx", "table3", n=1, seed=11, width=240, progress=False, effects=True
+        ).read_text()
+    )
+    assert index["effects"] is True and index["degraded"] is True, index
+    cfg = table3_configs(1, 11)[0]
+    plain = tmp_path / "plain"
+    render_config(plain, cfg, table3_bases(240, scenes=("two_sided",)), 11, True)
+    name, base = table3_bases(240, scenes=("two_sided",), effects=True)[0]
+    image, _ = render_scene(cfg.apply(base), seed=11 * 100003 + cfg.index * 7, degraded=True)
+    written = (tmp_path / "fx" / cfg.folder / f"{name}.png").read_bytes()
+    assert written == png_bytes(image)
+    assert written != (plain / f"{name}.png").read_bytes()
+
+
 def test_table3_dataset_layout(tmp_path: Path) -> None:
     index_path = make_dataset(tmp_path, "table3", n=2, seed=11, width=240, progress=False)
     index = json.loads(index_path.read_text())
