@@ -17,20 +17,38 @@ from typing import Any
 from omnisort_hw.evaluation.table3 import evaluate_dataset
 
 BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
+DEVELOPMENT_SEEDS = (0,)
+
+
+def unseen_seeds() -> tuple[list[int], int]:
+    """The seeds nothing was tuned on (OMNISORT_BENCH_UNSEEN_SEEDS, comma-separated, default
+    "11,12"; the development seed is refused) and the configurations each
+    (OMNISORT_BENCH_UNSEEN_N, default 12)."""
+    seeds = [int(s) for s in os.environ.get("OMNISORT_BENCH_UNSEEN_SEEDS", "11,12").split(",") if s]
+    if any(s in DEVELOPMENT_SEEDS for s in seeds):
+        raise ValueError(f"OMNISORT_BENCH_UNSEEN_SEEDS: {DEVELOPMENT_SEEDS} is the tuning seed")
+    return seeds, int(os.environ.get("OMNISORT_BENCH_UNSEEN_N", "12"))
 
 
 def table3_figures(
-    n: int, seed: int, degraded: bool, assume: str | None = None, effects: bool = False
+    n: int,
+    seed: int,
+    degraded: bool,
+    assume: str | None = None,
+    effects: bool = False,
+    degrade: dict[str, Any] | None = None,
+    label: str = "",
 ) -> dict[str, Any]:
     """Each method's MAE, mean time, z RMS and failures on the Table 3 dataset of these
-    parameters (rendered into build/bench/ once; `effects`: through the colour camera)."""
+    parameters (rendered into build/bench/ once; `effects`: through the colour camera;
+    `degrade`: [degrade] keys over the scenes', named `label` in the dataset's folder)."""
     from omnisort_hw.core.radiometry import ToneCurve
     from sim_backend.dataset import make_dataset
 
     suffix = "-effects" if effects else ("-degraded" if degraded else "")
-    data = BUILD / f"table3-n{n}-seed{seed}-srgb{suffix}"
+    data = BUILD / (f"table3-n{n}-seed{seed}-srgb{suffix}" + (f"-{label}" if label else ""))
     if not (data / "dataset.json").is_file():
-        make_dataset(data, "table3", n, seed, degraded=degraded, progress=True, effects=effects)
+        make_dataset(data, "table3", n, seed, degraded=degraded, effects=effects, degrade=degrade)
     tone = ToneCurve.parse(assume) if assume else None
     result = evaluate_dataset(data, progress=True, tone=tone)
     out: dict[str, Any] = {}

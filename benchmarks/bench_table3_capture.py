@@ -25,13 +25,13 @@ import os
 from pathlib import Path
 from typing import Any
 
+from benchmarks.bench_table3 import unseen_seeds
 from omnisort_hw.evaluation.table3_capture import evaluate_captures, evaluate_kept
 from sim_backend.dataset import table3_configs
 
 BUILD = Path(__file__).resolve().parent.parent / "build" / "bench"
 GOAL_DEG = 0.01
 GOAL_MM = 0.1
-DEVELOPMENT_SEEDS = (0,)
 
 
 def _goal(mae: dict[str, float]) -> bool:
@@ -41,10 +41,7 @@ def _goal(mae: dict[str, float]) -> bool:
 
 def _unseen(frames: int, width: int) -> dict[str, Any]:
     """joint (and the others) on the unseen seeds, with the goal's verdict per seed."""
-    seeds = [int(s) for s in os.environ.get("OMNISORT_BENCH_UNSEEN_SEEDS", "11,12").split(",") if s]
-    if any(s in DEVELOPMENT_SEEDS for s in seeds):
-        raise ValueError(f"OMNISORT_BENCH_UNSEEN_SEEDS: {DEVELOPMENT_SEEDS} is the tuning seed")
-    n = int(os.environ.get("OMNISORT_BENCH_UNSEEN_N", "12"))
+    seeds, n = unseen_seeds()
     out: dict[str, Any] = {"configurations": n, "goal_deg": GOAL_DEG, "goal_mm": GOAL_MM}
     for seed in seeds:
         name = f"table3-capture-n{n}-seed{seed}-f{frames}-w{width}"

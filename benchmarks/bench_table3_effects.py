@@ -13,14 +13,33 @@ datasets are kept in build/bench/ and reused (bench_table3's naming, suffix `-ef
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
-from benchmarks.bench_table3 import table3_figures
+from benchmarks.bench_table3 import table3_figures, unseen_seeds
+from sim_backend.scene import DegradeSpec
 
 GOAL_RATIO = 2.0
-DEVELOPMENT_SEEDS = (0,)
+_SPEC = DegradeSpec()
+_FX = {"enabled": True, "effects": True}
+_OFF = {"chromatic_red_px": (0.0, 0.0), "chromatic_blue_px": (0.0, 0.0), "bloom": (0.0, 0.0)}
+ABLATION: dict[str, dict[str, Any]] = {
+    # The sensor alone (noise, blur, vignetting, JPEG...), then the crosstalk (always there
+    # with the effects: the laser's colour as the sensor sees it) with one effect at a time.
+    "sensor only": {"enabled": True},
+    "crosstalk": {**_FX, **_OFF, "bayer": False},
+    "crosstalk + chromatic": {
+        **_FX,
+        **_OFF,
+        "chromatic_red_px": _SPEC.chromatic_red_px,
+        "chromatic_blue_px": _SPEC.chromatic_blue_px,
+        "bayer": False,
+    },
+    "crosstalk + bloom": {**_FX, **_OFF, "bloom": _SPEC.bloom, "bayer": False},
+    "crosstalk + Bayer": {**_FX, **_OFF, "bayer": True},
+}
+"""Each effect on its own over the crosstalk, on the first unseen seed: which one costs the
+joint calibration its accuracy (the ranges are `scene.DegradeSpec`'s defaults)."""
 
 
 def ratios(clean: dict[str, float], other: dict[str, float]) -> dict[str, float | None]:
@@ -29,10 +48,7 @@ def ratios(clean: dict[str, float], other: dict[str, float]) -> dict[str, float 
 
 
 def run(shared: Path) -> dict[str, Any]:
-    seeds = [int(s) for s in os.environ.get("OMNISORT_BENCH_UNSEEN_SEEDS", "11,12").split(",") if s]
-    if any(s in DEVELOPMENT_SEEDS for s in seeds):
-        raise ValueError(f"OMNISORT_BENCH_UNSEEN_SEEDS: {DEVELOPMENT_SEEDS} is the tuning seed")
-    n = int(os.environ.get("OMNISORT_BENCH_UNSEEN_N", "12"))
+    seeds, n = unseen_seeds()
     out: dict[str, Any] = {"configurations": n, "seeds": seeds, "goal_ratio": GOAL_RATIO}
     for seed in seeds:
         clean = table3_figures(n, seed, degraded=False)
@@ -53,4 +69,15 @@ def run(shared: Path) -> dict[str, Any]:
             and entry.get("joint_effects_failures", 1) == 0
         )
         out[str(seed)] = entry
+    seed = seeds[0]
+    clean = table3_figures(n, seed, degraded=False)["joint_mae"]
+    ablation: dict[str, Any] = {"seed": seed}
+    for i, (name, degrade) in enumerate(ABLATION.items()):
+        figures = table3_figures(n, seed, degraded=True, degrade=degrade, label=f"ablation{i}")
+        ablation[name] = {
+            "joint_mae": figures["joint_mae"],
+            "joint_ratio": ratios(clean, figures["joint_mae"]),
+            "joint_failures": figures["joint_failures"],
+        }
+    out["ablation"] = ablation
     return out

@@ -131,6 +131,27 @@ def table3_effects(r: dict[str, Any]) -> str:
                 [f"seed {seed}, {label}, ratio"]
                 + [f"{ratio[p]:.2f}x" if ratio[p] is not None else "–" for p in PARAMS]
             )
+    ablation = t.get("ablation", {})
+    for name, a in ablation.items():
+        if not isinstance(a, dict):
+            continue
+        seed, ratio = ablation["seed"], a["joint_ratio"]
+        rows.append(
+            [f"seed {seed}, joint, {name} ({a['joint_failures']} failed)"]
+            + [f"{a['joint_mae'][p]:.4f}" for p in PARAMS]
+        )
+        rows.append(
+            [f"seed {seed}, joint, {name}: ratio"]
+            + [f"{ratio[p]:.2f}x" if ratio[p] is not None else "–" for p in PARAMS]
+        )
+    sensor = ablation.get("sensor only")
+    if isinstance(sensor, dict) and str(ablation.get("seed")) in t:
+        seed = ablation["seed"]
+        fx = t[str(seed)]["joint_effects_mae"]
+        rows.append(
+            [f"seed {seed}, joint, colour camera over sensor only"]
+            + [f"{fx[p] / sensor['joint_mae'][p]:.2f}x" for p in PARAMS]
+        )
     verdicts = ", ".join(
         f"seed {s}: {'met' if t[str(s)]['joint_within_goal'] else 'NOT met'}, "
         f"{t[str(s)].get('joint_effects_failures', '?')} failed" + " of " + str(t["configurations"])

@@ -83,14 +83,19 @@ def table3_bases(
     tone_curve: str = "srgb",
     scenes: Sequence[str | Path] = TABLE3_SCENES,
     effects: bool = False,
+    degrade: Mapping[str, Any] | None = None,
 ) -> list[tuple[str, Scene]]:
     """(name, scene) of each target scene of the experiment, at `width`, with the simulated
     camera's tone curve; `effects`: through the colour camera's effects
-    (`scene.with_camera_effects`)."""
+    (`scene.with_camera_effects`); `degrade`: [degrade] keys over the scene's (an effect's
+    range set to zero leaves it out)."""
     bases = []
     for s in scenes:
         scene = sized(load_scene(s), width).replace(render={"tone_curve": tone_curve})
-        bases.append((Path(str(s)).stem, with_camera_effects(scene) if effects else scene))
+        scene = with_camera_effects(scene) if effects else scene
+        bases.append(
+            (Path(str(s)).stem, scene.replace(degrade=dict(degrade)) if degrade else scene)
+        )
     return bases
 
 
@@ -167,18 +172,20 @@ def make_dataset(
     progress: bool = True,
     tone_curve: str = "srgb",
     effects: bool = False,
+    degrade: Mapping[str, Any] | None = None,
 ) -> Path:
     """Render an experiment into `out_dir`; returns the path of `dataset.json`. `tone_curve`:
     the simulated camera's ("srgb" as real cameras, or "linear"), recorded in the index;
     `effects`: through the colour camera's effects (crosstalk, chromatic aberration, bloom,
-    Bayer demosaicing), which implies `degraded`, recorded too."""
+    Bayer demosaicing), which implies `degraded`, recorded too; `degrade`: [degrade] keys over
+    the scenes' (e.g. one effect's range set to zero), recorded."""
     if experiment not in EXPERIMENTS:
         raise InputError(f"unknown experiment {experiment!r} (known: {', '.join(EXPERIMENTS)})")
     if n < 1:
         raise InputError(f"--n must be at least 1, got {n}")
     out = Path(out_dir)
-    bases = table3_bases(width, tone_curve, scenes, effects)
-    degraded = degraded or effects
+    bases = table3_bases(width, tone_curve, scenes, effects, degrade)
+    degraded = degraded or effects or bool(degrade and degrade.get("enabled"))
     params = {
         "experiment": experiment,
         "n": n,
@@ -188,6 +195,8 @@ def make_dataset(
         "effects": effects,
         "tone_curve": tone_curve,
     }
+    if degrade:
+        params["degrade"] = {k: list(v) if isinstance(v, tuple) else v for k, v in degrade.items()}
     problem = dataset_problem(out, params)
     if problem:
         raise InputError(problem)

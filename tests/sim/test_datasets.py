@@ -71,6 +71,21 @@ def test_a_table3_dataset_through_the_colour_camera(tmp_path: Path) -> None:
     assert written != (plain / f"{name}.png").read_bytes()
 
 
+def test_a_table3_dataset_with_one_effect_left_out(tmp_path: Path) -> None:
+    """`degrade`: [degrade] keys over the scenes' (here the mosaic left out), recorded in the
+    index; the camera's truth holds the effects drawn, without it."""
+    degrade = {"enabled": True, "effects": True, "bayer": False, "bloom": (0.0, 0.0)}
+    index = json.loads(
+        make_dataset(
+            tmp_path, "table3", n=1, seed=11, width=240, progress=False, degrade=degrade
+        ).read_text()
+    )
+    assert index["degraded"] is True and index["degrade"]["bloom"] == [0.0, 0.0], index
+    truth = json.loads((tmp_path / "config_000" / "two_sided.truth.json").read_text())
+    drawn = truth["degraded"]["effects"]
+    assert drawn["bayer"] is False and drawn["bloom"] == 0.0, drawn
+
+
 def test_table3_dataset_layout(tmp_path: Path) -> None:
     index_path = make_dataset(tmp_path, "table3", n=2, seed=11, width=240, progress=False)
     index = json.loads(index_path.read_text())
