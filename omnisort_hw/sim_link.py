@@ -14,6 +14,7 @@ import threading
 from typing import Any
 
 from omnisort_hw.request_fields import wire_args
+from omnisort_hw.sim_requests import command_of
 
 DEFAULT_TIMEOUT_S = 10.0
 MOVE_TIMEOUT_S = 120.0  # a change the reply waits to see in a picture, or the arm to stand
@@ -81,3 +82,8 @@ class SimLink:
         """The command `cmd` with its request record's arguments (a `sim_requests` record, or
         None: its defaults)."""
         return self.control(cmd, timeout_s, **wire_args(request))
+
+    def send(self, request: Any, timeout_s: float = DEFAULT_TIMEOUT_S) -> dict[str, Any]:
+        """The command a request record is declared for (`sim_requests.command_of`), sent with
+        its arguments: no caller names a command by a string."""
+        return self.execute(command_of(request), request, timeout_s)

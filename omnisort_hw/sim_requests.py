@@ -67,6 +67,17 @@ class NoArgs:
 
 
 @dataclass(frozen=True)
+class TruthRequest:
+    """The renderer's truth: cube poses in S, the bin each is in, collisions, the camera's
+    rotation and the laser plane as system.json holds them, the joints and the gripper."""
+
+
+@dataclass(frozen=True)
+class DescribeRequest:
+    """Each command and the JSON Schema of its arguments."""
+
+
+@dataclass(frozen=True)
 class DropRequest:
     """A face's connections closed, as a cable pulled."""
 
@@ -229,13 +240,8 @@ SIM_COMMANDS: dict[str, SimCommand] = {
     c.name: c
     for c in (
         SimCommand("status", NoArgs, "the controller's modes, the laser, renders, late ticks"),
-        SimCommand(
-            "truth",
-            NoArgs,
-            "cube poses in S, the bin each is in, collisions, the camera's rotation and the "
-            "laser plane as system.json holds them, the joints and the gripper",
-        ),
-        SimCommand("describe", NoArgs, "each command and the JSON Schema of its arguments"),
+        SimCommand("truth", TruthRequest),
+        SimCommand("describe", DescribeRequest),
         SimCommand("protective_stop", NoArgs, "a protective stop, as a safety sensor triggers it"),
         SimCommand("emergency_stop", NoArgs, "an emergency stop"),
         SimCommand("release_emergency_stop", NoArgs, "the emergency stop button pulled out again"),
@@ -254,6 +260,18 @@ SIM_COMMANDS: dict[str, SimCommand] = {
         SimCommand("render", RenderRequest),
     )
 }
+
+
+_COMMAND_OF = {c.request: c.name for c in SIM_COMMANDS.values() if c.request is not NoArgs}
+
+
+def command_of(request: Any) -> str:
+    """The command a request record (or its class) is declared for; ValueError for `NoArgs`,
+    which several commands share."""
+    cls = request if isinstance(request, type) else type(request)
+    if cls not in _COMMAND_OF:
+        raise ValueError(f"{cls.__name__} names no single control-channel command")
+    return _COMMAND_OF[cls]
 
 
 def describe_sim() -> dict[str, Any]:

@@ -365,7 +365,7 @@ class CellPage:
             self.say(f"{command.command}: the service cannot be reached: {exc}", "negative")
         return None
 
-    async def _operator_send(self, command: Call[R], token: str | None = None) -> R | None:
+    async def _operator_send(self, command: Call[R]) -> R | None:
         """One quick command with this session's token; None, with why, when not sent."""
         token = self._token()
         if token is None:

@@ -47,7 +47,7 @@ STEPS = (
     "Verification",
     "Saved versions",
 )
-VERIFY = ("laser", "cubes")  # the verification's steps: the laser map, the cubes located
+VERIFY = ("laser-map", "cube-location")  # the verification's steps
 BOARD_DOWN = (
     "put the board down, out of the camera's view, before the next step: the target and the "
     "floor board must be seen alone"
@@ -96,8 +96,10 @@ class CommissioningPanel:
             "intrinsics": step("camera intrinsics", "intr-note", "Next", "intr-next"),
             "extrinsics": step("camera and laser plane", "extr-note", "Accept", "extr-next"),
             "robot": step("robot registration", "reg-note", "Next", "reg-next"),
-            "laser": step("laser map", "verify-map-note", None, "verify-map-accept"),
-            "cubes": step("cube location", "verify-locate-note", None, "verify-locate-accept"),
+            "laser-map": step("laser map", "verify-map-note", None, "verify-map-accept"),
+            "cube-location": step(
+                "cube location", "verify-locate-note", None, "verify-locate-accept"
+            ),
         }
         self._what = ""  # the step whose job is being followed
         self.board_detection = LiveDetection(
@@ -288,10 +290,10 @@ class CommissioningPanel:
 
     def verify_map(self) -> None:
         job = call_of(CellCommands.map, MapRequest(points=True))
-        self._start("laser", job, "mapping the laser line...")
+        self._start("laser-map", job, "mapping the laser line...")
 
     def verify_locate(self) -> None:
-        self._start("cubes", call_of(CellCommands.locate), "locating the cubes...")
+        self._start("cube-location", call_of(CellCommands.locate), "locating the cubes...")
 
     async def refresh(self) -> None:
         """When the job a step started has ended: show its reply and verdict, or its error."""
@@ -321,9 +323,9 @@ class CommissioningPanel:
         if what == "intrinsics":
             failed = (result.get("verdict") or {}).get("level") == "fail"
             return intrinsics_lines(result) + ([] if failed else [BOARD_DOWN])
-        if what == "laser":
+        if what == "laser-map":
             return [f"{result.get('points_on_plane', 0)} points on the laser plane"]
-        if what == "cubes":
+        if what == "cube-location":
             return [f"{result.get('count', 0)} cubes located"]
         return []
 

@@ -37,10 +37,10 @@ STATUS = call_of(CellCommands.status)
 
 
 class Send(Protocol):
-    """A page's way to send one quick command: its typed reply, or None with the refusal
-    shown on the page."""
+    """A page's way to send one quick command with its session's token: its typed reply, or
+    None with the refusal shown on the page."""
 
-    async def __call__(self, command: Call[R], token: str | None = None) -> R | None: ...
+    async def __call__(self, command: Call[R]) -> R | None: ...
 
 
 StartJob = Callable[[Call[Any]], bool]

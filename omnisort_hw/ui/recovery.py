@@ -47,10 +47,10 @@ class RecoveryPanel:
         self.ctx, self.token, self.laser = ctx, token, laser
         self.watch = JobWatch(ctx.jobs, start_job)
         self.active = False  # opened from the drift banner, until the operator closes it
-        self._step = "camera"  # the step whose job was started last
+        self._step = "recalibration"  # the step whose job was started last
         self.detection = LiveDetection(ctx, token, DetectRequest, "recovery-target")
         self.steps = {
-            "camera": GuidedStep(
+            "recalibration": GuidedStep(
                 "recovery: camera and laser plane",
                 "calib-note",
                 "Accept",
@@ -101,14 +101,14 @@ class RecoveryPanel:
                         tag(ui.button("Target placed", on_click=self.placed), "placed")
                 with ui.step(STEPS[1]):
                     self.separation = separation_input("calib-separation")
-                    steps["camera"].build_note()
+                    steps["recalibration"].build_note()
                     self.params = parameter_table("calib-params")
                     self.residuals = tag(
                         ui.image().classes("w-full max-w-[960px]"), "calib-picture"
                     )
                     with ui.stepper_navigation():
                         tag(ui.button("Calibrate", on_click=self.calibrate), "calibrate")
-                        steps["camera"].build_buttons()
+                        steps["recalibration"].build_buttons()
                 with ui.step(STEPS[2]):
                     steps["robot"].build_note()
                     with ui.stepper_navigation():
@@ -155,7 +155,7 @@ class RecoveryPanel:
 
     def calibrate(self) -> None:
         job = self.ctx.operators.checked(CellCommands.calibrate, extrinsics_args(self.separation))
-        self._start("camera", job, "calibrating from a capture of the target...")
+        self._start("recalibration", job, "calibrating from a capture of the target...")
 
     def register(self) -> None:
         job = call_of(CellCommands.register_robot)
@@ -178,7 +178,7 @@ class RecoveryPanel:
             step.ended(end, [f"{turned}: turned {end.result.get('angle_deg', 0):.3f} deg"])
             return
         step.ended(end)
-        if self._step == "camera" and end.ok and end.result is not None:
+        if self._step == "recalibration" and end.ok and end.result is not None:
             self.params.rows = parameter_rows(end.result)
             self.params.update()
             await show_picture(

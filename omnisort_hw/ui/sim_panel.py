@@ -257,7 +257,7 @@ class SimulatorPanel:
             self.picture.set_source(pic.data_url)
         self._ticks += 1
         if self._ticks % 4 == 1 and not self._busy:
-            truth = await self._control("truth", quiet=True)
+            truth = await self._control(sr.TruthRequest(), quiet=True)
             if truth is not None:
                 self._show_truth(truth)
 
@@ -297,16 +297,15 @@ class SimulatorPanel:
 
     # -- acting ---------------------------------------------------------------------------
 
-    async def _control(
-        self, cmd: str, request: Any = None, quiet: bool = False
-    ) -> dict[str, Any] | None:
-        """One control-channel command with its request record; its result, or None with why
-        in the note."""
+    async def _control(self, request: Any, quiet: bool = False) -> dict[str, Any] | None:
+        """The control-channel command of a request record (`SimLink.send`); its result, or
+        None with why in the note."""
         self._busy = True
         try:
-            return await run.io_bound(self.sim.execute, cmd, request, MOVE_TIMEOUT_S)
+            return await run.io_bound(self.sim.send, request, MOVE_TIMEOUT_S)
         except SimControlError as exc:
             if not quiet:
+                cmd = sr.command_of(request)
                 self.note.text = f"{cmd}: refused by the virtual cell {exc.address}: {exc.message}"
             return None
         finally:
@@ -316,19 +315,20 @@ class SimulatorPanel:
         """What the channel's schema of `cmd` (its `describe`, asked once) finds wrong with
         `args`, each naming its field."""
         if not self._schemas:
-            described = await self._control("describe")
+            described = await self._control(sr.DescribeRequest())
             if described is None:
                 return ["the control channel did not describe its commands"]
             self._schemas = {k: v["args"] for k, v in described["commands"].items()}
         return problems(self._schemas[cmd], args)
 
     async def _act(
-        self, cmd: str, done: str, args: dict[str, Any], moves: str | None = None
+        self, request: type[Any], done: str, args: dict[str, Any], moves: str | None = None
     ) -> dict[str, Any] | None:
-        """A signed-in operator's command: checked against the channel's schema (nothing sent
-        when it refuses, each problem naming its field), confirmed when it `moves` the arm (the
-        question), sent as its request record, then the note and the truth after it. `args`:
-        what was typed (None: not given)."""
+        """A signed-in operator's command, named by its request record's class: checked
+        against the channel's schema (nothing sent when it refuses, each problem naming its
+        field), confirmed when it `moves` the arm (the question), sent as the record, then the
+        note and the truth after it. `args`: what was typed (None: not given)."""
+        cmd = sr.command_of(request)
         if self.token() is None:
             self.note.text = f"{cmd}: sign in as operator first: nothing was sent"
             return None
@@ -341,12 +341,12 @@ class SimulatorPanel:
             self.note.text = "cancelled: nothing was sent"
             return None
         self.note.text = f"{cmd} ..."
-        result = await self._control(cmd, build(sr.SIM_COMMANDS[cmd].request, given))
+        result = await self._control(build(request, given))
         if result is None:
             return None
         shown = "" if result.get("shown", True) else " (no picture shows it yet)"
         self.note.text = done.format(**{**given, **result}) + shown
-        truth = await self._control("truth", quiet=True)
+        truth = await self._control(sr.TruthRequest(), quiet=True)
         if truth is not None:
             self._show_truth(truth)
         return result
@@ -358,19 +358,19 @@ class SimulatorPanel:
             "yaw_deg": typed_number(self.yaw.value),
         }
         await self._act(
-            "camera",
+            sr.CameraRequest,
             "camera mounted at roll {roll_deg:g}, pitch {pitch_deg:g}, yaw {yaw_deg:g} deg",
             args,
         )
 
     async def knock(self) -> None:
         args = {"angle_deg": typed_number(self.knock_angle.value), "axis": self.knock_axis.value}
-        await self._act("knock", "camera knocked by {angle_deg:g} deg about {axis}", args)
+        await self._act(sr.KnockRequest, "camera knocked by {angle_deg:g} deg about {axis}", args)
 
     async def hold_board(self) -> None:
         view = int(self.board_view.value)
         await self._act(
-            "board",
+            sr.BoardRequest,
             "board put down" if view < 0 else f"board held at pose {view}",
             {"view": None if view < 0 else view},
         )
@@ -398,7 +398,7 @@ class SimulatorPanel:
         }
         state = "on" if args["on"] else "off"
         await self._act(
-            "laser",
+            sr.LaserRequest,
             f"laser {state} at roll {{roll_deg:g}}, pitch {{pitch_deg:g}} deg, "
             "{distance_mm:g} mm",
             args,
@@ -406,7 +406,7 @@ class SimulatorPanel:
 
     async def set_target(self) -> None:
         if not self.target_on.value:
-            await self._act("target", "target taken away", {"on": False})
+            await self._act(sr.TargetRequest, "target taken away", {"on": False})
             return
         args = {
             "kind": self.target_kind.value,
@@ -414,7 +414,7 @@ class SimulatorPanel:
             "y_mm": typed_number(self.target_y.value),
             "yaw_deg": typed_number(self.target_yaw.value),
         }
-        await self._act("target", "target {kind} set", args)
+        await self._act(sr.TargetRequest, "target {kind} set", args)
 
     async def cube(self, action: str) -> None:
         args: dict[str, Any] = {"action": action}
@@ -426,10 +426,10 @@ class SimulatorPanel:
             args["yaw_deg"] = typed_number(self.cube_yaw.value)
         if action == "add":
             args["color"] = self.cube_color.value
-        await self._act("cube", f"cube {action}: done, cube {{index}}", args)
+        await self._act(sr.CubeRequest, f"cube {action}: done, cube {{index}}", args)
 
     async def read_joints(self) -> None:
-        truth = await self._control("truth")
+        truth = await self._control(sr.TruthRequest())
         if truth is not None:
             for field, q in zip(self.joints, truth["joints_deg"], strict=True):
                 field.value = f"{float(q):.2f}"
@@ -438,7 +438,7 @@ class SimulatorPanel:
     async def move_joints(self) -> None:
         args = {"q_deg": [typed_number(f.value) for f in self.joints]}
         done = "arm at the joints asked ({seconds:.1f} s)"
-        await self._act("joints", done, args, "Move the arm to these joints")
+        await self._act(sr.JointsRequest, done, args, "Move the arm to these joints")
 
     async def move_to(self) -> None:
         args = {
@@ -446,19 +446,21 @@ class SimulatorPanel:
             for k, f in zip(("x_mm", "y_mm", "z_mm"), self.xyz, strict=True)
         }
         done = "tool at the point asked ({seconds:.1f} s)"
-        await self._act("move_to", done, args, "Move the tool to this point")
+        await self._act(sr.MoveToRequest, done, args, "Move the tool to this point")
 
     async def gripper(self, closed: bool) -> None:
         await self._act(
-            "gripper",
+            sr.GripperRequest,
             "gripper closed, holding: {holding}" if closed else "gripper open",
             {"closed": closed},
             "Close the gripper" if closed else "Open the gripper",
         )
 
     async def render(self) -> None:
-        await self._act("render", "written: {images}", {"folder": self.folder.value or None})
+        await self._act(
+            sr.RenderRequest, "written: {images}", {"folder": self.folder.value or None}
+        )
 
     async def render_views(self) -> None:
         folder = self.folder.value or None
-        await self._act("render", "written: {images}", {"folder": folder, "views": True})
+        await self._act(sr.RenderRequest, "written: {images}", {"folder": folder, "views": True})

@@ -51,7 +51,7 @@ class ControlChannel:
 
     # ---- the cell's state ---------------------------------------------------------------------
 
-    def _describe(self, req: sr.NoArgs) -> dict[str, Any]:
+    def _describe(self, req: sr.DescribeRequest) -> dict[str, Any]:
         return sr.describe_sim()
 
     def _status(self, req: sr.NoArgs) -> dict[str, Any]:
@@ -64,7 +64,7 @@ class ControlChannel:
             "rtde_packages_sent": vc.rtde.sent,
         }
 
-    def _truth(self, req: sr.NoArgs) -> dict[str, Any]:
+    def _truth(self, req: sr.TruthRequest) -> dict[str, Any]:
         return self.vc.truth()
 
     # ---- safety and faults ---------------------------------------------------------------------

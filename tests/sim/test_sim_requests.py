@@ -61,3 +61,18 @@ def test_the_schema_and_the_channel_agree(
 
 def test_a_colour_the_renderer_does_not_paint_is_not_offered() -> None:
     assert set(sr.SIM_COLORS) == set(NAMED_COLORS)
+
+
+def test_each_record_names_its_command() -> None:
+    """The Simulator tab sends records (`SimLink.send`), never a command's name: each command
+    with arguments of its own, and truth and describe, is found from its record; the record
+    several argument-less commands share names none."""
+    for name, spec in sr.SIM_COMMANDS.items():
+        if spec.request is sr.NoArgs:
+            continue
+        assert sr.command_of(spec.request) == name
+    assert sr.command_of(sr.TruthRequest()) == "truth"
+    assert sr.command_of(sr.DescribeRequest()) == "describe"
+    assert sr.command_of(sr.KnockRequest(angle_deg=0.3)) == "knock"
+    with pytest.raises(ValueError, match="NoArgs"):
+        sr.command_of(sr.NoArgs)
