@@ -103,11 +103,11 @@ class JobJournal:
 
     def expected_s(self, job: str, args: dict[str, Any]) -> float | None:
         """How long the last job of this kind that ended done took on this cell (s), or None
-        (none has yet)."""
-        with self._lock:
-            took = (self._record or {}).get("took_s") or {}
-            value = took.get(job_kind(job, args))
-            return float(value) if isinstance(value, int | float) else None
+        (none has yet). Read from the published copy, without the lock: the service asks on its
+        event loop, which must not wait for a write's fsyncs."""
+        took = (self._published or {}).get("took_s") or {}
+        value = took.get(job_kind(job, args))
+        return float(value) if isinstance(value, int | float) else None
 
     def start(self, job: str, request_id: int | str | None, args: dict[str, Any]) -> None:
         """A new job begins; an unresolved cube in flight is carried over (still unresolved),

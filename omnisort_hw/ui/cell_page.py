@@ -466,10 +466,9 @@ class CellPage:
             return
         typed = {name: field.value for name, field in self.sort_inputs.items()}
         job = self.ctx.operators.checked(CellCommands.sort, args_from_form(self.sort_fields, typed))
-        found = job if isinstance(job, list) else []
-        self.sort_problems.text = "; ".join(found)
+        self.sort_problems.text = "; ".join(job) if isinstance(job, list) else ""
         if isinstance(job, list):
-            self.say(f"sort: not sent: {'; '.join(found)}", "negative")
+            self.say(f"sort: not sent: {self.sort_problems.text}", "negative")
             return
         snap = self.ctx.link.snapshot
         if snap.status is None:

@@ -23,7 +23,7 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.guided_step import GuidedStep
 from omnisort_hw.ui.job_runner import JobWatch
-from omnisort_hw.ui.link import Call, CellCommands, call_of
+from omnisort_hw.ui.link import Call, CellCommands, StartJob, call_of
 from omnisort_hw.ui.pictures import show_picture
 from omnisort_hw.ui.widgets import tag
 
@@ -37,7 +37,7 @@ class RecoveryPanel:
         self,
         ctx: UiContext,
         token: Callable[[], str | None],
-        start_job: Callable[[Call[Any]], bool],
+        start_job: StartJob,
         laser: Callable[[bool], Awaitable[None]],
         session: str,
     ) -> None:

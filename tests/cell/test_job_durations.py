@@ -4,6 +4,7 @@ and `status`'s job line gives it beside the running time."""
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -37,9 +38,12 @@ def test_the_last_done_job_of_each_kind_is_what_to_expect(tmp_path: Path) -> Non
 
 
 def test_the_job_line_gives_the_running_time_against_the_last_run() -> None:
+    # The running time is the clock's: whole seconds, which a loaded machine may push on by one.
     job = Job("calibrate", 7, State.CALIBRATING, expected_s=41.6)
-    job.started -= 12.2
+    job.started -= 12.0
     line = job_text(job.describe())
-    assert line.startswith("calibrate (request 7), 12 s of about 42 s (its last run here)"), line
+    assert re.fullmatch(
+        r"calibrate \(request 7\), 1[23] s of about 42 s \(its last run here\)", line
+    ), line
     first = job_text(Job("map", 8, State.MAPPING).describe())
-    assert first == "map (request 8), 0 s", first
+    assert re.fullmatch(r"map \(request 8\), [01] s", first), first
