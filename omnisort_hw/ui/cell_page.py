@@ -34,7 +34,8 @@ from omnisort_hw.ui.link import Call, CellCommands, ClientError, CommandError, c
 from omnisort_hw.ui.operators import SignInError
 from omnisort_hw.ui.overlay_svg import cubes_overlay, map_overlay
 from omnisort_hw.ui.recovery import RecoveryPanel
-from omnisort_hw.ui.schema_form import FormField, args_from_form, form_fields
+from omnisort_hw.ui.schema_form import form_fields
+from omnisort_hw.ui.schema_widgets import SchemaForm
 from omnisort_hw.ui.sim_panel import SimulatorPanel
 from omnisort_hw.ui.widgets import confirm, tag
 
@@ -68,8 +69,7 @@ class CellPage:
 
     def __init__(self, ctx: UiContext, browser: str) -> None:
         self.ctx, self.browser = ctx, browser
-        self.sort_fields: list[FormField] = []
-        self.sort_inputs: dict[str, Any] = {}
+        self.sort_fields: SchemaForm | None = None  # drawn once signed in
         self._picks_shown: list[dict[str, Any]] = []
         self.pick_history = PickHistory()  # this page's sorts, numbered across them
         self.simulator: SimulatorPanel | None = None
@@ -214,21 +214,10 @@ class CellPage:
     def _fill_sort_form(self) -> None:
         """The sort form from the command's schema, once the session is signed in."""
         schema = self.ctx.operators.schema(CellCommands.sort)
-        if schema is None or self.sort_fields:
+        if schema is None or self.sort_fields is not None:
             return
-        self.sort_fields = form_fields(schema)
         with self.sort_form:
-            for f in self.sort_fields:
-                if f.kind == "bool":
-                    field: Any = ui.checkbox(f.label, value=bool(f.default))
-                elif f.kind in ("int", "number"):
-                    text = "" if f.default is None else f"{f.default:g}"
-                    field = ui.input(f.label, value=text).classes("w-40")
-                elif f.kind == "choice":
-                    field = ui.select(list(f.choices), label=f.label, value=f.default)
-                else:
-                    field = ui.input(f.label + (" (a, b)" if f.kind == "list" else ""))
-                self.sort_inputs[f.name] = tag(field.tooltip(f.help), f"sort-{f.name}")
+            self.sort_fields = SchemaForm(form_fields(schema), "sort")
             self.start_button = tag(ui.button("Start sort", on_click=self.start_sort), "start-sort")
 
     # -- reading --------------------------------------------------------------------------
@@ -462,10 +451,9 @@ class CellPage:
 
     async def start_sort(self) -> None:
         token = self._token()
-        if token is None or self.ctx.operators.schema(CellCommands.sort) is None:
+        if token is None or self.sort_fields is None:
             return
-        typed = {name: field.value for name, field in self.sort_inputs.items()}
-        job = self.ctx.operators.checked(CellCommands.sort, args_from_form(self.sort_fields, typed))
+        job = self.ctx.operators.checked(CellCommands.sort, self.sort_fields.args())
         self.sort_problems.text = "; ".join(job) if isinstance(job, list) else ""
         if isinstance(job, list):
             self.say(f"sort: not sent: {self.sort_problems.text}", "negative")

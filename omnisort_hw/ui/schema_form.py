@@ -17,12 +17,13 @@ class FormField:
     """One argument as a form offers it."""
 
     name: str
-    kind: str  # bool, int, number, choice, list, text
+    kind: str  # bool, int, number, numbers (a fixed count of numbers), choice, list, text
     label: str  # the name, with its unit and bounds
     help: str
     default: Any = None
     choices: tuple[str, ...] = ()
     required: bool = False
+    length: int = 0  # a `numbers` field's count
 
 
 def _branch(prop: Mapping[str, Any]) -> Mapping[str, Any]:
@@ -40,14 +41,17 @@ def _bounds(b: Mapping[str, Any], unit: str | None) -> str:
 
 
 def form_fields(schema: Mapping[str, Any]) -> list[FormField]:
-    """The fields of an `args` schema, in its order. Vectors and matrices are left out: no
-    form of this interface offers them (the page's commands take none)."""
+    """The fields of an `args` schema, in its order. A fixed count of numbers (a joint vector)
+    is one `numbers` field; open-ended vectors and matrices are left out: no form of this
+    interface offers them."""
     required = set(schema.get("required", ()))
     out = []
     for name, prop in (schema.get("properties") or {}).items():
         b = _branch(prop)
         t, xkind = b.get("type"), prop.get("x-kind")
         unit = prop.get("x-unit")
+        items = b.get("items") or {}
+        length = 0
         if "enum" in b:
             kind, choices = "choice", tuple(str(c) for c in b["enum"])
         elif t == "boolean":
@@ -58,11 +62,19 @@ def form_fields(schema: Mapping[str, Any]) -> list[FormField]:
             kind, choices = "number", ()
         elif t == "array" and xkind == "str_list":
             kind, choices = "list", ()
+        elif (
+            t == "array"
+            and items.get("type") == "number"
+            and b.get("maxItems") is not None
+            and b.get("minItems") == b.get("maxItems")
+        ):
+            kind, choices, length = "numbers", (), int(b["maxItems"])
+            b = items  # the bounds shown are each number's
         elif t == "string":
             kind, choices = "text", ()
         else:
             continue
-        label = name + (_bounds(b, unit) if kind in ("int", "number") else "")
+        label = name + (_bounds(b, unit) if kind in ("int", "number", "numbers") else "")
         out.append(
             FormField(
                 name,
@@ -72,6 +84,7 @@ def form_fields(schema: Mapping[str, Any]) -> list[FormField]:
                 prop.get("default"),
                 choices,
                 name in required,
+                length,
             )
         )
     return out
@@ -104,6 +117,9 @@ def args_from_form(fields: list[FormField], typed: Mapping[str, Any]) -> dict[st
         value = typed.get(f.name)
         if f.kind in ("int", "number"):
             value = typed_number(value, f.kind == "int")
+        elif f.kind == "numbers" and isinstance(value, list | tuple):
+            numbers = [typed_number(v) for v in value]
+            value = None if all(v is None for v in numbers) else numbers
         if value is None or (isinstance(value, str) and not value.strip()):
             continue
         if f.kind == "list" and isinstance(value, str):
@@ -135,4 +151,17 @@ def problems(schema: Mapping[str, Any], args: Mapping[str, Any]) -> list[str]:
             if real:
                 detail = real[0].message
         out.append(f"{field}: {detail}")
+    return out
+
+
+def inapplicable(schema: Mapping[str, Any], args: Mapping[str, Any]) -> set[str]:
+    """The fields the schema allows only as null given the rest of `args` (its `if`/`then`
+    rules: a cube's place when it is removed, a picture's name when the board's poses are
+    rendered), which a form that holds them leaves out."""
+    out: set[str] = set()
+    for rule in schema.get("allOf", ()):
+        cond, then = rule.get("if"), rule.get("then") or {}
+        if cond is None or not Draft202012Validator(cond).is_valid(dict(args)):
+            continue
+        out |= {k for k, v in (then.get("properties") or {}).items() if v == {"type": "null"}}
     return out

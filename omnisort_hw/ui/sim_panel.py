@@ -18,6 +18,7 @@ would show them, through its camera, laser and arm. Only a signed-in operator ac
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Callable
 from typing import Any
 
@@ -26,11 +27,12 @@ from nicegui import run, ui
 from omnisort_hw import sim_requests as sr
 from omnisort_hw.request_fields import build
 from omnisort_hw.sim_link import MOVE_TIMEOUT_S, SimControlError, SimLink
+from omnisort_hw.sim_replies import SimTruth
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.schema_form import problems, typed_number
-from omnisort_hw.ui.widgets import confirm, number_input, tag
+from omnisort_hw.ui.schema_form import form_fields, problems, typed_number
+from omnisort_hw.ui.schema_widgets import SchemaForm
+from omnisort_hw.ui.widgets import confirm, tag
 
-COLOURS = sr.SIM_COLORS[:4]  # the cubes the colour table sorts
 CUBE_COLUMNS = [
     {"name": k, "label": label, "field": k, "align": "left"}
     for k, label in (
@@ -41,65 +43,64 @@ CUBE_COLUMNS = [
         ("bin", "in bin"),
     )
 ]
+DECIDED_BY_BUTTONS = {"cube": ("action",), "gripper": ("closed",), "render": ("views",)}
+"""Arguments a form leaves to its buttons (Move, Add, Remove; Close, Open; one picture or the
+board's poses)."""
 
 
-def truth_lines(truth: dict[str, Any]) -> list[str]:
+def truth_lines(truth: SimTruth) -> list[str]:
     """The virtual cell's truth as a person reads it: the camera's mounting, the laser plane,
     the arm and the gripper."""
-    cam, laser = truth.get("camera_rotation") or {}, truth.get("laser_plane") or {}
+    cam, laser, target = truth.camera, truth.laser, truth.target
     lines = [
-        "camera: roll {:.3f}, pitch {:.3f}, yaw {:.3f} deg".format(
-            cam.get("roll_deg", 0.0), cam.get("pitch_deg", 0.0), cam.get("yaw_deg", 0.0)
-        ),
-        "laser: {}, roll {:.2f}, pitch {:.2f} deg, {:.1f} mm below the camera".format(
-            "on" if truth.get("laser_on") else "off",
-            laser.get("roll_deg", 0.0),
-            laser.get("pitch_deg", 0.0),
-            laser.get("distance_mm", 0.0),
+        f"camera: roll {cam.roll_deg:.3f}, pitch {cam.pitch_deg:.3f}, yaw {cam.yaw_deg:.3f} deg",
+        f"laser: {'on' if truth.laser_on else 'off'}, roll {laser.roll_deg:.2f}, "
+        f"pitch {laser.pitch_deg:.2f} deg, {laser.distance_mm:.1f} mm below the camera",
+        "target: away"
+        if target is None
+        else "target: {}, centre {:.0f}, {:.0f} mm, yaw {:.1f} deg".format(
+            target.kind, *target.center_mm, target.yaw_deg
         ),
     ]
-    target = truth.get("target")
-    lines.append(
-        "target: away"
-        if not target
-        else "target: {}, centre {:.0f}, {:.0f} mm, yaw {:.1f} deg".format(
-            target["kind"], *target["center_mm"], target["yaw_deg"]
-        )
-    )
-    if truth.get("joints_deg"):
-        lines.append("arm joints: " + ", ".join(f"{q:.1f}" for q in truth["joints_deg"]) + " deg")
-    if truth.get("tcp_B_mm"):
-        lines.append("tool at " + ", ".join(f"{v:.1f}" for v in truth["tcp_B_mm"]) + " mm (base)")
+    if truth.joints_deg:
+        lines.append("arm joints: " + ", ".join(f"{q:.1f}" for q in truth.joints_deg) + " deg")
+    lines.append("tool at " + ", ".join(f"{v:.1f}" for v in truth.tcp_B_mm) + " mm (base)")
     lines.append(
         "gripper: "
-        + ("closed" if truth.get("gripper_closed") else "open")
-        + (", holding a cube" if truth.get("held") else "")
+        + ("closed" if truth.gripper_closed else "open")
+        + (", holding a cube" if truth.held else "")
     )
-    if truth.get("collisions"):
-        lines.append(f"collisions: {len(truth['collisions'])}")
+    if truth.collisions:
+        lines.append(f"collisions: {truth.collisions}")
     return lines
 
 
-def cube_rows(truth: dict[str, Any]) -> list[dict[str, Any]]:
+def cube_rows(truth: SimTruth) -> list[dict[str, Any]]:
+    """The cubes table's rows."""
     return [
         {
-            "index": c["index"],
-            "color": c["color"],
-            "x": round(c["center_S_mm"][0], 1),
-            "y": round(c["center_S_mm"][1], 1),
-            "bin": c.get("bin") or "",
+            "index": c.index,
+            "color": c.color,
+            "x": round(c.center_S_mm[0], 1),
+            "y": round(c.center_S_mm[1], 1),
+            "bin": c.bin or "",
         }
-        for c in truth.get("cubes") or []
+        for c in truth.cubes
     ]
 
 
-def _number(label: str, value: float, name: str, width: str = "w-24") -> Any:
-    return number_input(label, name, value).classes(width)
+class _Shown(dict[str, Any]):
+    """A note's values: what was not given was left as it was."""
+
+    def __missing__(self, key: str) -> str:
+        return "as it was"
 
 
 class SimulatorPanel:
     """The Simulator tab's controls; `refresh()` (a timer) shows the live picture and, every
-    few seconds while the tab is shown, the truth."""
+    few seconds while the tab is shown, the truth. Each command's fields are drawn from the
+    channel's own `describe` (`SchemaForm`) once the tab is first shown; the buttons are the
+    panel's."""
 
     def __init__(self, ctx: UiContext, sim: SimLink, token: Callable[[], str | None]) -> None:
         """`token`: this session's (None, with why shown, when not signed in)."""
@@ -110,18 +111,57 @@ class SimulatorPanel:
         self._shown = -1
         self._filled = False  # the forms start from the cell as it is, once
         self._schemas: dict[str, Any] = {}  # each command's, from the channel's describe
+        self._slots: dict[str, Any] = {}  # each command's row, where its fields are drawn
+        self.forms: dict[str, SchemaForm] = {}
+        self._describing = asyncio.Lock()
 
     # -- building -------------------------------------------------------------------------
 
     def build(self) -> None:
         with ui.row().classes("w-full items-start gap-4 no-wrap"):
             with ui.column().classes("gap-2 w-[34rem]"):
-                self._build_camera()
-                self._build_laser()
-                self._build_target()
-                self._build_cubes()
-                self._build_arm()
-                self._build_render()
+                self._card("Camera", [("camera", "Mount", "sim-mount", self.mount)])
+                self._card("Knock", [("knock", "Knock", "sim-knock", self.knock)], "amber-9")
+                self._card(
+                    "Board held for the views",
+                    [
+                        ("board", "Hold", "sim-board", self.hold_board),
+                        ("", "Next pose", "sim-board-next", self.next_board),
+                        ("", "Put down", "sim-board-down", self.put_board_down),
+                    ],
+                )
+                self._card("Laser", [("laser", "Set", "sim-laser", self.set_laser)])
+                self._card("Calibration target", [("target", "Set", "sim-target", self.set_target)])
+                self._card(
+                    "Cubes",
+                    [
+                        ("cube", "Move", "sim-cube-move", lambda: self.cube("move")),
+                        ("", "Add", "sim-cube-add", lambda: self.cube("add")),
+                        ("", "Remove", "sim-cube-remove", lambda: self.cube("remove")),
+                    ],
+                )
+                self._card(
+                    "Arm (from the pendant)",
+                    [
+                        ("joints", "Move joints", "sim-joints", self.move_joints),
+                        ("", "Read joints", "sim-read", self.read_joints),
+                    ],
+                )
+                self._card("Tool", [("move_to", "Move to", "sim-move-to", self.move_to)])
+                self._card(
+                    "Gripper",
+                    [
+                        ("", "Close gripper", "sim-close", lambda: self.gripper(True)),
+                        ("", "Open gripper", "sim-open", lambda: self.gripper(False)),
+                    ],
+                )
+                self._card(
+                    "Pictures with their truth",
+                    [
+                        ("render", "Render", "sim-render", self.render),
+                        ("", "Render the board's poses", "sim-render-views", self.render_views),
+                    ],
+                )
             with ui.column().classes("gap-2 grow min-w-0"):
                 self.note = tag(ui.label(""), "sim-note").classes("whitespace-pre-line")
                 self.picture = tag(
@@ -133,111 +173,44 @@ class SimulatorPanel:
                     "sim-cubes",
                 )
 
-    def _build_camera(self) -> None:
+    def _card(
+        self,
+        title: str,
+        buttons: list[tuple[str, str, str, Callable[[], Any]]],
+        color: str | None = None,
+    ) -> None:
+        """A card with its title, a row for each command's fields (`(command, label, name,
+        action)`; "" for a button of the command before) and its buttons."""
         with ui.card().classes("w-full"):
-            ui.label("Camera").classes("text-lg")
+            ui.label(title).classes("text-lg")
+            for cmd, _, _, _ in buttons:
+                if cmd:
+                    self._slots[cmd] = ui.row().classes("items-center")
             with ui.row().classes("items-center"):
-                self.roll = _number("roll, deg", 0.0, "sim-roll")
-                self.pitch = _number("pitch, deg", 0.0, "sim-pitch")
-                self.yaw = _number("yaw, deg", 0.0, "sim-yaw")
-                tag(ui.button("Mount", on_click=self.mount), "sim-mount")
-            with ui.row().classes("items-center"):
-                self.knock_angle = _number("knock, deg", 0.3, "sim-knock-angle")
-                self.knock_axis = tag(
-                    ui.select(["x", "y", "z"], value="x", label="about").classes("w-24"),
-                    "sim-knock-axis",
-                )
-                tag(ui.button("Knock", on_click=self.knock, color="amber-9"), "sim-knock")
-            with ui.row().classes("items-center"):
-                self.board_view = tag(
-                    ui.select(
-                        {-1: "none", **{k: f"pose {k}" for k in range(sr.HELD_VIEWS)}},
-                        value=-1,
-                        label="board held",
-                    ).classes("w-36"),
-                    "sim-board-view",
-                )
-                tag(ui.button("Hold", on_click=self.hold_board), "sim-board")
-                tag(
-                    ui.button("Next pose", on_click=self.next_board).props("flat"),
-                    "sim-board-next",
-                )
-                tag(
-                    ui.button("Put down", on_click=self.put_board_down).props("flat"),
-                    "sim-board-down",
-                )
+                for i, (_, label, name, action) in enumerate(buttons):
+                    button = ui.button(label, on_click=action)
+                    if i > 0:
+                        button.props("flat")
+                    elif color is not None:
+                        button.props(f"color={color}")
+                    tag(button, name)
 
-    def _build_laser(self) -> None:
-        with ui.card().classes("w-full"):
-            ui.label("Laser").classes("text-lg")
-            with ui.row().classes("items-center"):
-                self.laser_on = tag(ui.checkbox("on", value=True), "sim-laser-on")
-                self.laser_roll = _number("roll, deg", 0.0, "sim-laser-roll")
-                self.laser_pitch = _number("pitch, deg", 0.0, "sim-laser-pitch")
-                self.laser_distance = _number("distance, mm", 800.0, "sim-laser-distance")
-                tag(ui.button("Set", on_click=self.set_laser), "sim-laser")
-
-    def _build_target(self) -> None:
-        with ui.card().classes("w-full"):
-            ui.label("Calibration target").classes("text-lg")
-            with ui.row().classes("items-center"):
-                self.target_on = tag(ui.checkbox("in the cell", value=True), "sim-target-on")
-                self.target_kind = tag(
-                    ui.select(list(sr.SIM_TARGETS), value="two-sided", label="kind").classes(
-                        "w-32"
-                    ),
-                    "sim-target-kind",
-                )
-                self.target_x = _number("x, mm", 0.0, "sim-target-x")
-                self.target_y = _number("y, mm", 650.0, "sim-target-y")
-                self.target_yaw = _number("yaw, deg", 0.0, "sim-target-yaw")
-                tag(ui.button("Set", on_click=self.set_target), "sim-target")
-
-    def _build_cubes(self) -> None:
-        with ui.card().classes("w-full"):
-            ui.label("Cubes").classes("text-lg")
-            with ui.row().classes("items-center"):
-                self.cube_index = _number("cube", 0, "sim-cube-index", "w-16")
-                self.cube_color = tag(
-                    ui.select(list(COLOURS), value="red", label="colour").classes("w-28"),
-                    "sim-cube-color",
-                )
-                self.cube_x = _number("x, mm", 0.0, "sim-cube-x")
-                self.cube_y = _number("y, mm", 900.0, "sim-cube-y")
-                self.cube_yaw = _number("yaw, deg", 0.0, "sim-cube-yaw")
-            with ui.row().classes("items-center"):
-                tag(ui.button("Move", on_click=lambda: self.cube("move")), "sim-cube-move")
-                tag(ui.button("Add", on_click=lambda: self.cube("add")), "sim-cube-add")
-                tag(ui.button("Remove", on_click=lambda: self.cube("remove")), "sim-cube-remove")
-
-    def _build_arm(self) -> None:
-        with ui.card().classes("w-full"):
-            ui.label("Arm (from the pendant)").classes("text-lg")
-            with ui.row().classes("items-center"):
-                self.joints = [_number(f"q{i + 1}", 0.0, f"sim-q{i + 1}", "w-16") for i in range(6)]
-            with ui.row().classes("items-center"):
-                tag(ui.button("Read joints", on_click=self.read_joints).props("flat"), "sim-read")
-                tag(ui.button("Move joints", on_click=self.move_joints), "sim-joints")
-            with ui.row().classes("items-center"):
-                self.xyz = [
-                    _number(f"{a}, mm (base)", v, f"sim-{a}")
-                    for a, v in (("x", -300.0), ("y", -350.0), ("z", 300.0))
-                ]
-                tag(ui.button("Move to", on_click=self.move_to), "sim-move-to")
-            with ui.row().classes("items-center"):
-                tag(ui.button("Close gripper", on_click=lambda: self.gripper(True)), "sim-close")
-                tag(ui.button("Open gripper", on_click=lambda: self.gripper(False)), "sim-open")
-
-    def _build_render(self) -> None:
-        with ui.card().classes("w-full"):
-            ui.label("Pictures with their truth").classes("text-lg")
-            with ui.row().classes("items-center"):
-                self.folder = tag(ui.input("folder").classes("w-64"), "sim-folder")
-                tag(ui.button("Render", on_click=self.render), "sim-render")
-                tag(
-                    ui.button("Render the board's poses", on_click=self.render_views).props("flat"),
-                    "sim-render-views",
-                )
+    async def _forms(self) -> bool:
+        """The channel's schemas read (its `describe`, once) and each command's fields drawn
+        from its own; False, with why in the note, when the channel did not describe them."""
+        async with self._describing:  # the timer and a button may both ask first
+            if self._schemas:
+                return True
+            described = await self._control(sr.DescribeRequest())
+            if described is None:
+                return False
+            self._schemas = {k: v["args"] for k, v in described["commands"].items()}
+            for cmd, slot in self._slots.items():
+                skip = DECIDED_BY_BUTTONS.get(cmd, ())
+                fields = [f for f in form_fields(self._schemas[cmd]) if f.name not in skip]
+                with slot:
+                    self.forms[cmd] = SchemaForm(fields, f"sim-{cmd}", "w-36")
+        return True
 
     # -- reading --------------------------------------------------------------------------
 
@@ -256,12 +229,15 @@ class SimulatorPanel:
             self._shown = pic.sequence
             self.picture.set_source(pic.data_url)
         self._ticks += 1
-        if self._ticks % 4 == 1 and not self._busy:
-            truth = await self._control(sr.TruthRequest(), quiet=True)
-            if truth is not None:
-                self._show_truth(truth)
+        if self._ticks % 4 == 1 and not self._busy and await self._forms():
+            await self._show_truth()
 
-    def _show_truth(self, truth: dict[str, Any]) -> None:
+    async def _show_truth(self, quiet: bool = True) -> SimTruth | None:
+        """The virtual cell's truth asked and shown (the forms filled from it the first time)."""
+        reply = await self._control(sr.TruthRequest(), quiet=quiet)
+        if reply is None:
+            return None
+        truth = SimTruth.from_wire(reply)
         if not self._filled:
             self._fill(truth)
         self.truth.text = "\n".join(truth_lines(truth))
@@ -269,31 +245,43 @@ class SimulatorPanel:
         if rows != self.cubes.rows:
             self.cubes.rows = rows
             self.cubes.update()
+        return truth
 
-    def _fill(self, truth: dict[str, Any]) -> None:
+    def _fill(self, truth: SimTruth) -> None:
         """The forms set to the virtual cell as it is: the camera's mounting, the laser, the
-        joints (so a first Set or Move changes only what the person changes)."""
+        target, the joints and the tool (so a first Set or Move changes only what the person
+        changes)."""
         self._filled = True
-        cam, laser = truth.get("camera_rotation") or {}, truth.get("laser_plane") or {}
-        for field, value in (
-            (self.roll, cam.get("roll_deg")),
-            (self.pitch, cam.get("pitch_deg")),
-            (self.yaw, cam.get("yaw_deg")),
-            (self.laser_roll, laser.get("roll_deg")),
-            (self.laser_pitch, laser.get("pitch_deg")),
-            (self.laser_distance, laser.get("distance_mm")),
-            *zip(self.joints, truth.get("joints_deg") or [], strict=False),
-        ):
-            if value is not None:
-                field.value = f"{round(float(value), 3):g}"
-        self.laser_on.value = bool(truth.get("laser_on"))
-        target = truth.get("target")
-        self.target_on.value = target is not None
+        cam, laser, target = truth.camera, truth.laser, truth.target
+        values: dict[str, dict[str, Any]] = {
+            "camera": {
+                "roll_deg": cam.roll_deg,
+                "pitch_deg": cam.pitch_deg,
+                "yaw_deg": cam.yaw_deg,
+            },
+            "laser": {
+                "on": truth.laser_on,
+                "roll_deg": laser.roll_deg,
+                "pitch_deg": laser.pitch_deg,
+                "distance_mm": laser.distance_mm,
+            },
+            "target": {"on": target is not None},
+            "joints": {"q_deg": truth.joints_deg},
+            "move_to": dict(zip(("x_mm", "y_mm", "z_mm"), truth.tcp_B_mm, strict=True)),
+        }
         if target is not None:
-            self.target_kind.value = target["kind"]
-            x, y = target["center_mm"]
-            self.target_x.value, self.target_y.value = f"{x:g}", f"{y:g}"
-            self.target_yaw.value = f"{target['yaw_deg']:g}"
+            x, y = target.center_mm
+            values["target"] |= {
+                "kind": target.kind,
+                "x_mm": x,
+                "y_mm": y,
+                "yaw_deg": target.yaw_deg,
+            }
+        for cmd, fields in values.items():
+            form = self.forms.get(cmd)
+            for name, value in fields.items():
+                if form is not None and name in form.inputs:
+                    form.set(name, value)
 
     # -- acting ---------------------------------------------------------------------------
 
@@ -311,29 +299,24 @@ class SimulatorPanel:
         finally:
             self._busy = False
 
-    async def _problems(self, cmd: str, args: dict[str, Any]) -> list[str]:
-        """What the channel's schema of `cmd` (its `describe`, asked once) finds wrong with
-        `args`, each naming its field."""
-        if not self._schemas:
-            described = await self._control(sr.DescribeRequest())
-            if described is None:
-                return ["the control channel did not describe its commands"]
-            self._schemas = {k: v["args"] for k, v in described["commands"].items()}
-        return problems(self._schemas[cmd], args)
-
     async def _act(
-        self, request: type[Any], done: str, args: dict[str, Any], moves: str | None = None
+        self, request: type[Any], done: str, moves: str | None = None, **fixed: Any
     ) -> dict[str, Any] | None:
-        """A signed-in operator's command, named by its request record's class: checked
-        against the channel's schema (nothing sent when it refuses, each problem naming its
-        field), confirmed when it `moves` the arm (the question), sent as the record, then the
-        note and the truth after it. `args`: what was typed (None: not given)."""
+        """A signed-in operator's command, named by its request record's class, with its form's
+        arguments and `fixed` (what the button decides): checked against the channel's schema
+        (nothing sent when it refuses, each problem naming its field), confirmed when it
+        `moves` the arm (the question), sent as the record, then the note and the truth after
+        it."""
         cmd = sr.command_of(request)
         if self.token() is None:
             self.note.text = f"{cmd}: sign in as operator first: nothing was sent"
             return None
-        given = {k: v for k, v in args.items() if v is not None}
-        found = await self._problems(cmd, given)
+        if not await self._forms():
+            return None
+        schema = self._schemas[cmd]
+        form = self.forms.get(cmd)
+        given = form.args(schema, **fixed) if form is not None else dict(fixed)
+        found = problems(schema, given)
         if found:
             self.note.text = f"{cmd}: not sent: " + "; ".join(found)
             return None
@@ -345,122 +328,86 @@ class SimulatorPanel:
         if result is None:
             return None
         shown = "" if result.get("shown", True) else " (no picture shows it yet)"
-        self.note.text = done.format(**{**given, **result}) + shown
-        truth = await self._control(sr.TruthRequest(), quiet=True)
-        if truth is not None:
-            self._show_truth(truth)
+        self.note.text = done.format_map(_Shown({**given, **result})) + shown
+        await self._show_truth()
         return result
 
     async def mount(self) -> None:
-        args = {
-            "roll_deg": typed_number(self.roll.value),
-            "pitch_deg": typed_number(self.pitch.value),
-            "yaw_deg": typed_number(self.yaw.value),
-        }
-        await self._act(
-            sr.CameraRequest,
-            "camera mounted at roll {roll_deg:g}, pitch {pitch_deg:g}, yaw {yaw_deg:g} deg",
-            args,
-        )
+        done = "camera mounted at roll {roll_deg:g}, pitch {pitch_deg:g}, yaw {yaw_deg:g} deg"
+        await self._act(sr.CameraRequest, done)
 
     async def knock(self) -> None:
-        args = {"angle_deg": typed_number(self.knock_angle.value), "axis": self.knock_axis.value}
-        await self._act(sr.KnockRequest, "camera knocked by {angle_deg:g} deg about {axis}", args)
+        await self._act(sr.KnockRequest, "camera knocked by {angle_deg:g} deg about {axis}")
 
     async def hold_board(self) -> None:
-        view = int(self.board_view.value)
-        await self._act(
-            sr.BoardRequest,
-            "board put down" if view < 0 else f"board held at pose {view}",
-            {"view": None if view < 0 else view},
-        )
+        if await self._forms():
+            held = self._view() is not None
+            await self._act(
+                sr.BoardRequest, "board held at pose {view}" if held else "board put down"
+            )
+
+    def _view(self) -> int | None:
+        """The board's pose typed (None: none, or not a whole number)."""
+        value = typed_number(self.forms["board"].typed()["view"], integer=True)
+        return value if isinstance(value, int) else None
 
     async def next_board(self) -> None:
         """The board moved on to its next pose, as a person walks it through the field; after
         the last, the first again (said in the note)."""
-        view = (int(self.board_view.value) + 1) % sr.HELD_VIEWS
-        wrapped = view == 0 and int(self.board_view.value) == sr.HELD_VIEWS - 1
-        self.board_view.value = view
+        if not await self._forms():
+            return
+        top = int(self._schemas["board"]["properties"]["view"]["anyOf"][0]["maximum"])
+        now = self._view()
+        view = 0 if now is None else (now + 1) % (top + 1)
+        self.forms["board"].set("view", view)
         await self.hold_board()
-        if wrapped:
-            self.note.text += f" (all {sr.HELD_VIEWS} poses shown: the first again)"
+        if view == 0 and now == top:
+            self.note.text += f" (all {top + 1} poses shown: the first again)"
 
     async def put_board_down(self) -> None:
-        self.board_view.value = -1
-        await self.hold_board()
+        if await self._forms():
+            self.forms["board"].set("view", "")
+            await self._act(sr.BoardRequest, "board put down")
 
     async def set_laser(self) -> None:
-        args = {
-            "on": bool(self.laser_on.value),
-            "roll_deg": typed_number(self.laser_roll.value),
-            "pitch_deg": typed_number(self.laser_pitch.value),
-            "distance_mm": typed_number(self.laser_distance.value),
-        }
-        state = "on" if args["on"] else "off"
         await self._act(
             sr.LaserRequest,
-            f"laser {state} at roll {{roll_deg:g}}, pitch {{pitch_deg:g}} deg, "
-            "{distance_mm:g} mm",
-            args,
+            "laser on: {on}; roll {roll_deg}, pitch {pitch_deg} deg, {distance_mm} mm",
         )
 
     async def set_target(self) -> None:
-        if not self.target_on.value:
-            await self._act(sr.TargetRequest, "target taken away", {"on": False})
+        form = self.forms.get("target")
+        if form is not None and not form.typed()["on"]:
+            await self._act(sr.TargetRequest, "target taken away", on=False)
             return
-        args = {
-            "kind": self.target_kind.value,
-            "x_mm": typed_number(self.target_x.value),
-            "y_mm": typed_number(self.target_y.value),
-            "yaw_deg": typed_number(self.target_yaw.value),
-        }
-        await self._act(sr.TargetRequest, "target {kind} set", args)
+        await self._act(sr.TargetRequest, "target {kind} set")
 
     async def cube(self, action: str) -> None:
-        args: dict[str, Any] = {"action": action}
-        if action != "add":
-            args["index"] = typed_number(self.cube_index.value, integer=True)
-        if action != "remove":
-            args["x_mm"] = typed_number(self.cube_x.value)
-            args["y_mm"] = typed_number(self.cube_y.value)
-            args["yaw_deg"] = typed_number(self.cube_yaw.value)
-        if action == "add":
-            args["color"] = self.cube_color.value
-        await self._act(sr.CubeRequest, f"cube {action}: done, cube {{index}}", args)
+        await self._act(sr.CubeRequest, f"cube {action}: done, cube {{index}}", action=action)
 
     async def read_joints(self) -> None:
-        truth = await self._control(sr.TruthRequest())
-        if truth is not None:
-            for field, q in zip(self.joints, truth["joints_deg"], strict=True):
-                field.value = f"{float(q):.2f}"
-            self._show_truth(truth)
+        truth = await self._show_truth(quiet=False)
+        if truth is not None and "joints" in self.forms:
+            self.forms["joints"].set("q_deg", truth.joints_deg)
 
     async def move_joints(self) -> None:
-        args = {"q_deg": [typed_number(f.value) for f in self.joints]}
         done = "arm at the joints asked ({seconds:.1f} s)"
-        await self._act(sr.JointsRequest, done, args, "Move the arm to these joints")
+        await self._act(sr.JointsRequest, done, "Move the arm to these joints")
 
     async def move_to(self) -> None:
-        args = {
-            k: typed_number(f.value)
-            for k, f in zip(("x_mm", "y_mm", "z_mm"), self.xyz, strict=True)
-        }
         done = "tool at the point asked ({seconds:.1f} s)"
-        await self._act(sr.MoveToRequest, done, args, "Move the tool to this point")
+        await self._act(sr.MoveToRequest, done, "Move the tool to this point")
 
     async def gripper(self, closed: bool) -> None:
         await self._act(
             sr.GripperRequest,
             "gripper closed, holding: {holding}" if closed else "gripper open",
-            {"closed": closed},
             "Close the gripper" if closed else "Open the gripper",
+            closed=closed,
         )
 
     async def render(self) -> None:
-        await self._act(
-            sr.RenderRequest, "written: {images}", {"folder": self.folder.value or None}
-        )
+        await self._act(sr.RenderRequest, "written: {images}", views=False)
 
     async def render_views(self) -> None:
-        folder = self.folder.value or None
-        await self._act(sr.RenderRequest, "written: {images}", {"folder": folder, "views": True})
+        await self._act(sr.RenderRequest, "written: {images}", views=True)

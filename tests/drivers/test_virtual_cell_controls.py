@@ -15,7 +15,9 @@ import pytest
 from jsonschema import Draft202012Validator
 
 from omnisort_hw.core.frames import laser_normal
+from omnisort_hw.sim_replies import SimTruth
 from omnisort_hw.sim_requests import SIM_COMMANDS
+from omnisort_hw.ui.sim_panel import cube_rows, truth_lines
 from sim_backend.virtual_cell.launcher import VirtualCellError
 from tests.sim.virtual_cell_fixture import streamed_frame, virtual_cell
 
@@ -182,3 +184,36 @@ def test_the_target_taken_away_moved_and_changed(vc, tmp_path: Path) -> None:
     assert blue_at(image, after["markers_px"]) > 3 * max(blue_at(image, before["markers_px"]), 5)
     assert three["target"]["kind"] == "three-sided"
     assert back["target"] == {"kind": "two-sided", "center_mm": [0.0, 650.0], "yaw_deg": 0.0}
+
+
+def test_the_truth_reads_as_the_simulator_tabs_records(vc) -> None:
+    """`truth` as the Simulator tab reads it (`SimTruth.from_wire`): every field the wire
+    holds, the lines and cube rows the tab shows from them, and the target taken away."""
+    raw = vc.control("truth")
+    truth = SimTruth.from_wire(raw)
+    cam = raw["camera_rotation"]
+    assert (truth.camera.roll_deg, truth.camera.pitch_deg, truth.camera.yaw_deg) == (
+        cam["roll_deg"],
+        cam["pitch_deg"],
+        cam["yaw_deg"],
+    )
+    assert truth.laser.distance_mm == raw["laser_plane"]["distance_mm"]
+    assert truth.laser_on is raw["laser_on"]
+    assert list(truth.joints_deg) == raw["joints_deg"] and len(truth.joints_deg) == 6
+    assert list(truth.tcp_B_mm) == raw["tcp_B_mm"]
+    assert [(c.index, c.color, list(c.center_S_mm)) for c in truth.cubes] == [
+        (c["index"], c["color"], c["center_S_mm"]) for c in raw["cubes"]
+    ]
+    assert truth.target is not None and list(truth.target.center_mm) == raw["target"]["center_mm"]
+    lines = truth_lines(truth)
+    assert lines[0] == (
+        f"camera: roll {cam['roll_deg']:.3f}, pitch {cam['pitch_deg']:.3f}, "
+        f"yaw {cam['yaw_deg']:.3f} deg"
+    )
+    assert [r["index"] for r in cube_rows(truth)] == [c["index"] for c in raw["cubes"]]
+    vc.control("target", timeout_s=60.0, on=False)
+    try:
+        away = SimTruth.from_wire(vc.control("truth"))
+        assert away.target is None and "target: away" in truth_lines(away)
+    finally:
+        vc.control("target", timeout_s=60.0, kind="two-sided", x_mm=0.0, y_mm=650.0, yaw_deg=0.0)

@@ -26,6 +26,7 @@ from tests.ui.browser_page import UI_S, Page, service_status, wait_for
 from tests.ui.commissioning_flow import ctl, sim_note_after
 
 KNOCK_DEG = 0.3
+TOOL_B_MM = (-300.0, -350.0, 300.0)  # where the tool is sent, in the robot base's frame
 
 
 def in_simulator_tab(
@@ -53,10 +54,13 @@ def in_simulator_tab(
 
     # A knock beyond what a knock is: refused in the page by the channel's schema, not sent.
     mounted = vc.truth()["camera_rotation"]
-    page.type("sim-knock-angle", "1000")
+    page.type("sim-knock-angle_deg", "1000")
     out["refused_knock"] = sim_note_after(page, "sim-knock", "knock: not sent")
+    # A joint that is not a number: refused by the same schema, before the confirmation.
+    page.type("sim-joints-q_deg-2", "abc")
+    out["refused_joints"] = sim_note_after(page, "sim-joints", "joints: not sent")
     out["mounted_unchanged"] = vc.truth()["camera_rotation"] == mounted
-    page.type("sim-knock-angle", f"{KNOCK_DEG}")
+    page.type("sim-knock-angle_deg", f"{KNOCK_DEG}")
     sim_note_after(page, "sim-knock", "camera knocked")
     knocked_at = time.monotonic()
     out["alarm"] = wait_for("the drift banner", banner, 3 * period_s + 120.0, 0.1)
@@ -66,7 +70,7 @@ def in_simulator_tab(
     out["drift"] = service_status(port)["drift"]
 
     out["knocked"] = streamed_frame(vc.host)
-    page.type("sim-roll", "5")
+    page.type("sim-camera-roll_deg", "5")
     sim_note_after(page, "sim-mount", "camera mounted at roll 5")
     wait_for("the truth shown", lambda: "roll 5.000" in page.text("sim-truth"), UI_S)
     out["streamed"] = streamed_frame(vc.host)
@@ -75,15 +79,17 @@ def in_simulator_tab(
     out["rendered_truth"] = json.loads((tmp / "renders" / "rolled.truth.json").read_text())
 
     page.type("sim-cube-index", "1")
-    page.type("sim-cube-x", "0")
-    page.type("sim-cube-y", "1000")
-    page.type("sim-cube-yaw", "10")
+    page.type("sim-cube-x_mm", "0")
+    page.type("sim-cube-y_mm", "1000")
+    page.type("sim-cube-yaw_deg", "10")
     sim_note_after(page, "sim-cube-move", "cube move: done")
     out["cubes"] = vc.truth()["cubes"]
-    page.type("sim-target-x", "40")
-    page.type("sim-target-y", "680")
+    page.type("sim-target-x_mm", "40")
+    page.type("sim-target-y_mm", "680")
     sim_note_after(page, "sim-target", "target two-sided set")
     out["target"] = vc.truth()["target"]
+    for axis, value in zip("xyz", TOOL_B_MM, strict=True):
+        page.type(f"sim-move_to-{axis}_mm", f"{value:g}")
     page.click("sim-move-to")
     page.confirm()
     wait_for("the move", lambda: page.text("sim-note").startswith("tool at the point"), 120, 0.2)
@@ -97,6 +103,8 @@ def check(out: dict[str, Any]) -> None:
     refused = out["refused_knock"]
     assert "angle_deg" in refused and "maximum of 10" in refused, refused
     assert out["mounted_unchanged"], "a refused knock turned the camera"
+    joints = out["refused_joints"]
+    assert "q_deg.2: 'abc' is not of type 'number'" in joints, joints
     # Within one period: the first check that takes its frame after the knock finds it. At
     # most one check ends after the knock without finding it, the one under way when the
     # camera was knocked (its frame taken before), so at most two checks in all.
@@ -124,4 +132,4 @@ def check(out: dict[str, Any]) -> None:
 
     assert np.allclose(out["cubes"][1]["center_S_mm"][:2], [0.0, 1000.0], atol=0.5)
     assert out["target"] == {"kind": "two-sided", "center_mm": [40.0, 680.0], "yaw_deg": 0.0}
-    assert np.allclose(out["tool"], [-300.0, -350.0, 300.0], atol=1e-6), out["tool"]
+    assert np.allclose(out["tool"], TOOL_B_MM, atol=1e-6), out["tool"]
