@@ -54,7 +54,7 @@ from omnisort_hw.pipeline.replies import (
     PictureFileReply,
     ViewReply,
 )
-from omnisort_hw.pipeline.requests import DetectRequest
+from omnisort_hw.pipeline.requests import DetectRequest, MoveRequest
 from omnisort_hw.pipeline.sort import resolve_sorting
 from omnisort_hw.runlog import RunLog
 
@@ -531,15 +531,7 @@ class Cell:
         self.store.check_motion_allowed()
         self.drift.check_motion_allowed()
 
-    def move(
-        self,
-        joints_deg: Sequence[float] | None = None,
-        pose: Sequence[float] | None = None,
-        matrix: Sequence[Sequence[float]] | None = None,
-        speed_deg_s: float | None = None,
-        speed_mm_s: float | None = None,
-        cancel: threading.Event | None = None,
-    ) -> dict[str, Any]:
+    def move(self, request: MoveRequest, cancel: threading.Event | None = None) -> dict[str, Any]:
         """Move to a joint target (joint space) or a Cartesian target (straight TCP line).
 
         Refused before anything reaches the arm when the calibration is not usable or the arm
@@ -547,9 +539,7 @@ class Cell:
         """
         arm = self._need("arm")
         self.check_motion_allowed()
-        return self._mover.move(
-            arm, self.runlog, joints_deg, pose, matrix, speed_deg_s, speed_mm_s, cancel
-        )
+        return self._mover.move(arm, self.runlog, request, cancel)
 
     def stop_motion(self) -> list[str]:
         """Stop the arm now (never refused); returns the problems met."""

@@ -36,7 +36,7 @@ from omnisort_hw.pipeline.replies import (
 )
 from omnisort_hw.pipeline.requests import (
     AdoptRequest,
-    ExtrinsicsRequest,
+    CalibrateRequest,
     IntrinsicsRequest,
     LocateRequest,
     MapRequest,
@@ -156,7 +156,7 @@ class CellJobs:
         return reply
 
     def calibrate_extrinsics(
-        self, request: ExtrinsicsRequest, cancel: threading.Event | None = None
+        self, request: CalibrateRequest, cancel: threading.Event | None = None
     ) -> ExtrinsicsReply:
         """Camera rotation and laser plane from one image of the calibration target (a fresh
         capture with the laser on, or the request's image), saved as system.json. The previous

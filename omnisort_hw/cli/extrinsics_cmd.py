@@ -74,8 +74,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from omnisort_hw.pipeline import extrinsics
     from omnisort_hw.runlog import RunLog
 
-    calibrate = request_from(CalibrateRequest, args, "extrinsics calibrate", fixed=EXTRINSICS)
-    request = calibrate.extrinsics()
+    request = request_from(CalibrateRequest, args, "extrinsics calibrate", fixed=EXTRINSICS)
     with RunLog(args.log) as log:
         rig = FileRig(
             config=args.config,

@@ -53,9 +53,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         CalibrateRequest, args, "intrinsics calibrate", fixed=INTRINSICS, skip=("folder",)
     )
     folders = {p.resolve().parent for p in args.images}  # kept in camera.json, as the service
-    request = replace(calibrate, folder=str(folders.pop()) if len(folders) == 1 else None)
-    request = request.intrinsics(tuple(args.images))
-    board_spec(request.board, request.square_mm, "--board/--square")  # before any image
+    asked = replace(calibrate, folder=str(folders.pop()) if len(folders) == 1 else None)
+    board_spec(asked.board, asked.square_mm, "--board/--square")  # before any image
+    request = asked.intrinsics(tuple(args.images))
     with (
         tqdm(
             total=len(request.images),

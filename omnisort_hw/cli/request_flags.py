@@ -3,14 +3,15 @@ back from the parsed flags, with the same checks as the protocol's (`request_fie
 
 The CLI declares by hand only what belongs to its door: which files to read and write
 (`--system`, `--config`, `--out`, `--json`, `--log`); every argument of the use case comes from
-the record. `image` is a positional argument, a bool a switch, a list comma separated.
+the record. `image` is a positional argument, a bool a switch, a list or a vector comma
+separated.
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Collection, Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from omnisort_hw.request_fields import (
     Arg,
@@ -56,6 +57,15 @@ def _help(arg: Arg, default: Any, offered: Collection[str]) -> str:
     return text.replace("%", "%%")
 
 
+def split_numbers(text: str) -> list[float]:
+    """A vector flag's `a,b,c` as numbers (their count and bounds are the declaration's to
+    check)."""
+    try:
+        return [float(item) for item in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"comma-separated numbers, got {text!r}") from None
+
+
 def add_request_arguments(
     parser: argparse.ArgumentParser,
     cls: type[RequestClass],
@@ -82,21 +92,26 @@ def add_request_arguments(
             kw["type"] = int if arg.kind == "int" else float
         elif arg.kind == "str_list":
             kw.update(type=split_items, metavar="A,B,...")
-        elif arg.kind in ("vector", "matrix4"):
-            raise TypeError(f"{arg.name}: no use case's CLI has a {arg.kind} argument")
+        elif arg.kind == "vector":
+            kw.update(type=split_numbers, metavar=",".join(["N"] * (arg.length or 1)))
+        elif arg.kind == "matrix4":
+            raise TypeError(f"{arg.name}: no use case's CLI has a 4x4 matrix argument")
         if arg.choices:
             kw["choices"] = arg.choices
         parser.add_argument(arg.cli_flag, dest=arg.name, **kw)
 
 
+R = TypeVar("R", bound=RequestClass)
+
+
 def request_from(
-    cls: type[RequestClass],
+    cls: type[R],
     args: argparse.Namespace,
     command: str,
     *,
     fixed: Mapping[str, Any] = {},
     skip: Collection[str] = (),
-) -> Any:
+) -> R:
     """The request `cls` of the parsed flags (and `fixed`), checked as the protocol checks it
     (bounds, lengths, the rules between arguments); InputError names the flag. `skip`: the
     arguments this command gives in its own way (never missing)."""
@@ -110,4 +125,5 @@ def request_from(
                 arg, command, value, label=arg.cli_flag, cell_paths=False
             )
     check_rules(cls, command, values, labels, supplied=skip)
-    return build(cls, values)
+    request: R = build(cls, values)
+    return request

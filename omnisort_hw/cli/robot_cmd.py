@@ -27,13 +27,10 @@ from omnisort_hw.cli.cell_file import load_cell
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
+from omnisort_hw.config.registration_settings import RegistrationSettings
 from omnisort_hw.errors import ConfigError, InputError
-from omnisort_hw.pipeline.requests import (
-    DEFAULT_BOARD,
-    LocateRequest,
-    RegisterRequest,
-    SortRequest,
-)
+from omnisort_hw.pipeline.requests import LocateRequest, RegisterRequest, SortRequest
+from omnisort_hw.request_fields import args_of
 
 
 def register(sub: Any) -> None:
@@ -49,23 +46,9 @@ def register(sub: Any) -> None:
         type=Path,
         default=None,
         help="cell.toml: without an image, capture with its camera (laser off); its "
-        "[registration] gives the defaults of --board, --square, --offset, --fit, --camera-height",
+        "[registration] gives what the flags below do not",
     )
-    reg.add_argument("--board", default=None, help="inner corners COLSxROWS (default 9x6)")
-    reg.add_argument("--square", type=float, default=None, help="square size, mm")
-    reg.add_argument(
-        "--offset",
-        default=None,
-        help="X,Y,Z,RX,RY,RZ: the board frame in the robot base frame (mm, deg, Z-Y-X)",
-    )
-    reg.add_argument(
-        "--fit",
-        choices=("auto", "level", "free"),
-        default=None,
-        help="board on a level floor in S, free 6-DOF, or auto: weighed by the calibration's "
-        "camera roll/pitch 1-sigma (default)",
-    )
-    reg.add_argument("--camera-height", type=float, default=None, help="nominal, mm (default 1200)")
+    add_request_arguments(reg, RegistrationSettings)
     reg.add_argument("--json", action="store_true", help="print the result as one JSON object")
     reg.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     reg.set_defaults(func=cmd_register)
@@ -137,37 +120,21 @@ def _numbers(text: str, n: int, what: str) -> tuple[float, ...]:
 
 
 def _registration(args: argparse.Namespace) -> Any:
-    """The registration settings: the flags, else `[registration]` of --config, else defaults."""
-    from omnisort_hw.config.sorting import RegistrationConfig
-    from omnisort_hw.core.checkerboard import BoardSpec
+    """The registration settings (`RegistrationConfig`): the flags over `[registration]` of
+    --config (or, without one, the flags alone), checked as the cell file's section is."""
+    from omnisort_hw.config.sorting import registration_config
 
     base = None
     if args.config is not None:
         cell, _ = load_cell(args.config, devices=False)
         base = cell.registration
-    if base is None:
-        for flag, value in (("--square", args.square), ("--offset", args.offset)):
-            if value is None:
-                raise InputError(f"{flag} is needed (or a [registration] section in --config)")
-        board_text, square = args.board or DEFAULT_BOARD, args.square
-        fit, height = args.fit, args.camera_height  # None: RegistrationConfig's defaults
-    else:
-        board_text = args.board or f"{base.board.cols}x{base.board.rows}"
-        square = args.square if args.square is not None else base.board.square_mm
-        fit = args.fit or base.fit
-        height = args.camera_height if args.camera_height is not None else base.camera_height_mm
-    try:
-        board = BoardSpec.parse(board_text, square)
-    except ValueError as exc:
-        raise InputError(f"--board/--square: {exc}") from None
-    offset = base.offset if args.offset is None and base is not None else _offset(args.offset)
-    given = {"fit": fit, "camera_height_mm": height}
-    return RegistrationConfig(board, offset, **{k: v for k, v in given.items() if v is not None})
-
-
-def _offset(text: str) -> tuple[float, float, float, float, float, float]:
-    x, y, z, rx, ry, rz = _numbers(text, 6, "--offset")
-    return (x, y, z, rx, ry, rz)
+    values = base.settings() if base is not None else {}
+    flags = {a.name: a.cli_flag for a in args_of(RegistrationSettings)}
+    values |= {name: getattr(args, name) for name in flags if getattr(args, name) is not None}
+    hint = "" if base is not None else " (or a [registration] section in --config)"
+    return registration_config(
+        values, "register-robot", lambda a: flags[a.name], InputError, missing_hint=hint
+    )
 
 
 def cmd_register(args: argparse.Namespace) -> int:

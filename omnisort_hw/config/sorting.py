@@ -10,20 +10,23 @@ the keys the section sets still win (`SortSection.resolve`).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from omnisort_hw.config.registration_settings import FITS, RegistrationSettings
 from omnisort_hw.core.checkerboard import BoardSpec
+from omnisort_hw.core.choices import DEFAULT_BOARD
 from omnisort_hw.core.cube_location import ColorTable
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.kinematics import get_model
 from omnisort_hw.core.pick_planning import BinSpec, ObstacleSpec, SortConfig
 from omnisort_hw.core.registration import pose_from_offset, tilt_prior_from_std
-from omnisort_hw.errors import ConfigError
+from omnisort_hw.errors import ConfigError, OmnisortError
+from omnisort_hw.request_fields import Arg, ArgumentError, args_of, check_value
 
 
 @dataclass(frozen=True)
@@ -43,8 +46,16 @@ class RegistrationConfig:
         """The board-tilt prior for `register_robot` (see `core.registration`)."""
         return tilt_prior(self.fit, calib)
 
-
-FITS = ("auto", "level", "free")
+    def settings(self) -> dict[str, Any]:
+        """The record as `[registration]` keys (what a command's flags are laid over)."""
+        b = self.board
+        return {
+            "board": f"{b.cols}x{b.rows}",
+            "square_mm": b.square_mm,
+            "offset": list(self.offset),
+            "fit": self.fit,
+            "camera_height_mm": self.camera_height_mm,
+        }
 
 
 def tilt_prior(fit: str, calib: SystemCalibration) -> float | None:
@@ -93,7 +104,7 @@ _SORT_NUMBERS = (
     "max_sigma_mm",
     "capture_tolerance_mm",
 )
-REGISTRATION_KEYS = frozenset({"board", "square_mm", "offset", "fit", "camera_height_mm"})
+REGISTRATION_KEYS = frozenset(a.name for a in args_of(RegistrationSettings))
 SORT_KEYS = {
     *_SORT_NUMBERS,
     "from_scene",
@@ -192,28 +203,49 @@ def parse_sort_config(
 
 def parse_registration_config(data: Mapping[str, Any]) -> RegistrationConfig:
     """`[registration]`: board = "9x6", square_mm, offset = [X, Y, Z, RX, RY, RZ], fit."""
-    path = "[registration]"
-    unknown = sorted(set(data) - REGISTRATION_KEYS)
+    return registration_config(data, "[registration]", lambda a: f"[registration].{a.name}")
+
+
+def registration_config(
+    values: Mapping[str, Any],
+    where: str,
+    label: Callable[[Arg], str],
+    error: type[OmnisortError] = ConfigError,
+    missing_hint: str = "",
+) -> RegistrationConfig:
+    """The record of `[registration]` values checked against `RegistrationSettings`; each
+    problem an `error` (ConfigError for the file, InputError for flags) that starts with the
+    key as `label` gives it (`[registration].square_mm`, or `--square`). `where`: what the
+    values came from, for an unknown key; `missing_hint`: where else a missing one is given."""
+    declared = {a.name: a for a in args_of(RegistrationSettings)}
+    unknown = sorted(set(values) - set(declared))
     if unknown:
-        known = ", ".join(sorted(REGISTRATION_KEYS))
-        raise ConfigError(f"{path}.{unknown[0]}: unknown key (known: {known})")
-    for key in ("square_mm", "offset"):
-        if key not in data:
-            raise ConfigError(f"{path}.{key}: missing")
+        known = ", ".join(sorted(declared))
+        raise error(f"{where}.{unknown[0]}: unknown key (known: {known})")
+    checked: dict[str, Any] = {}
+    for name, arg in declared.items():
+        value = values.get(name)
+        if value is None:
+            continue
+        try:
+            checked[name] = check_value(arg, where, value, label=label(arg), cell_paths=False)
+        except ArgumentError as exc:
+            detail = str(exc).split(f"argument {label(arg)} ", 1)[-1]
+            raise error(f"{label(arg)}: {detail}") from None
+    for name in ("square_mm", "offset"):
+        if name not in checked:
+            arg = declared[name]
+            raise error(f"{label(arg)} is needed{missing_hint}: {arg.help}")
     try:
-        board = BoardSpec.parse(
-            str(data.get("board", "9x6")), _number(data, "square_mm", 0, path, 0)
-        )
+        board = BoardSpec.parse(checked.get("board", DEFAULT_BOARD), checked["square_mm"])
     except ValueError as exc:
-        raise ConfigError(f"{path}.board: {exc}") from None
-    fit = data.get("fit", "auto")
-    if fit not in FITS:
-        raise ConfigError(f"{path}.fit: one of {', '.join(FITS)}, got {fit!r}")
+        raise error(f"{label(declared['board'])}: {exc}") from None
+    x, y, z, rx, ry, rz = checked["offset"]
     return RegistrationConfig(
         board,
-        _floats(data["offset"], 6, f"{path}.offset"),  # type: ignore[arg-type]
-        str(fit),
-        _number(data, "camera_height_mm", 1200.0, path, 1.0),
+        (x, y, z, rx, ry, rz),
+        checked.get("fit", "auto"),
+        checked.get("camera_height_mm", 1200.0),
     )
 
 

@@ -14,6 +14,8 @@ METHODS = tuple(dict.fromkeys(m for methods in METHODS_FOR.values() for m in met
 """Every method, once each."""
 REFINEMENTS = ("auto", "saddle", "plane")
 """How an intrinsic calibration refines its board corners."""
+DEFAULT_BOARD = "9x6"
+"""Inner corners COLSxROWS of a checkerboard when none is named (the paper's boards)."""
 SQUARE_RANGE_MM = (1.0, 1000.0)
 """What a checkerboard's square can be: below 1 mm no fisheye pixel resolves it at a cell's
 distances; 1 m squares make a 9x6 board 10 m x 7 m, larger than a cell (a square given in

@@ -18,6 +18,7 @@ import numpy as np
 from drivers.base import Arm, pose_matrix
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import plan_joint_move
+from omnisort_hw.pipeline.requests import MoveRequest
 from omnisort_hw.pipeline.rig import raise_if_cancelled
 from omnisort_hw.runlog import RunLog
 
@@ -31,18 +32,13 @@ class ArmMover:
         self._motion_count = 0
 
     def move(
-        self,
-        arm: Arm,
-        rl: RunLog,
-        joints_deg: Sequence[float] | None = None,
-        pose: Sequence[float] | None = None,
-        matrix: Sequence[Sequence[float]] | None = None,
-        speed_deg_s: float | None = None,
-        speed_mm_s: float | None = None,
-        cancel: threading.Event | None = None,
+        self, arm: Arm, rl: RunLog, request: MoveRequest, cancel: threading.Event | None = None
     ) -> dict[str, Any]:
-        """Move to `joints_deg` (joint space), or to `matrix` / `pose` ([x, y, z mm, rotation
-        vector deg]) along a straight TCP line; returns the joints and TCP pose reached."""
+        """Move to the request's `joints_deg` (joint space), or to its `matrix` / `pose` ([x, y,
+        z mm, rotation vector deg]) along a straight TCP line; returns the joints and TCP pose
+        reached."""
+        joints_deg, pose, matrix = request.joints_deg, request.pose, request.matrix
+        speed_deg_s, speed_mm_s = request.speed_deg_s, request.speed_mm_s
         arm.safety_status().raise_if_stopped(arm.name)
         raise_if_cancelled(cancel)
         start = np.asarray(arm.joint_positions(), float)

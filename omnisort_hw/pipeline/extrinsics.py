@@ -1,7 +1,7 @@
 """Extrinsic calibration: one target image -> features -> camera rotation and laser plane.
 
 One use case for the CLI (`omnisort extrinsics calibrate`) and the service (`calibrate`),
-`run(rig, ExtrinsicsRequest)`; the evaluation calls `run_extrinsics` on its renders.
+`run(rig, CalibrateRequest)`; the evaluation calls `run_extrinsics` on its renders.
 
 Picks the extractor for the target and the method (the best one for the target by default),
 checks the image against the camera model, and logs what it saw and produced.
@@ -29,7 +29,7 @@ from omnisort_hw.errors import InputError, NoLaserLineError
 from omnisort_hw.pipeline.cell_acquisition import acquire
 from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.replies import ExtrinsicsReply
-from omnisort_hw.pipeline.requests import ExtrinsicsRequest
+from omnisort_hw.pipeline.requests import CalibrateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.scale_check import ScaleCheck, check_scale
 from omnisort_hw.pipeline.verdict import Check, Verdict, graded
@@ -176,7 +176,7 @@ def run_extrinsics(
 
 
 def run(
-    rig: Rig, request: ExtrinsicsRequest, cancel: threading.Event | None = None
+    rig: Rig, request: CalibrateRequest, cancel: threading.Event | None = None
 ) -> ExtrinsicsResult:
     """Calibrate from the request's image, or from a measurement capture (its averaged board
     frames for the edges and markers, its on/off pairs for the stripe), with the rig's camera

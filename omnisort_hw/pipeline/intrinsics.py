@@ -230,7 +230,8 @@ def run(
     """Calibrate from the request's images (every one readable, or nothing is done), save the
     model as the rig's camera.json and the report beside it. `on_detected` (a progress bar)
     is called per image where the rig calibrates in its own process."""
-    board = request.board_spec()
+    asked = request.calibrate
+    board = asked.board_spec()
     rig.runlog.event(
         "calibration/intrinsics", f"{len(request.images)} images, board {board.cols}x{board.rows}"
     )
@@ -239,15 +240,15 @@ def run(
         calibrate_files,
         list(request.images),
         board,
-        request.degree,
-        request.refinement,
+        asked.degree,
+        asked.refinement or "auto",
         cancel=cancel,
         what="calibration",
         **extra,
     )
     raise_if_cancelled(cancel, "calibration")
-    if request.folder is not None:
-        cal.record["images_folder"] = request.folder
+    if asked.folder is not None:
+        cal.record["images_folder"] = asked.folder
     saved = rig.save_camera(cal.result.model, cal.record)
     return IntrinsicsResult(cal, saved, cal.write_report(saved))
 

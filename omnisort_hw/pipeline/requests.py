@@ -13,15 +13,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from omnisort_hw.core.choices import METHODS, REFINEMENTS, SQUARE_RANGE_MM, TARGETS
+from omnisort_hw.core.choices import (
+    DEFAULT_BOARD,
+    METHODS,
+    REFINEMENTS,
+    SQUARE_RANGE_MM,
+    TARGETS,
+)
 from omnisort_hw.errors import InputError
 from omnisort_hw.request_fields import GIVEN, param
 
 if TYPE_CHECKING:
     from omnisort_hw.core.checkerboard import BoardSpec
 
-DEFAULT_BOARD = "9x6"
-"""Inner corners COLSxROWS of a checkerboard when none is named (the paper's boards)."""
 DETECT_PATTERNS = ("target", "board", "floor")
 VIEW_ACTIONS = ("list", "add", "remove", "clear")
 DEFAULT_SQUARE_MM = 97.0
@@ -49,6 +53,21 @@ def _width_px() -> Any:
     return param(960, lo=64, hi=4096, unit="px", help="the picture's width at most")
 
 
+def _quality(default: int) -> Any:
+    """The JPEG quality of a picture sent to a client."""
+    return param(default, lo=10, hi=95, help="JPEG quality")
+
+
+def _board(only_when: tuple[Any, ...]) -> Any:
+    """The `board` argument: a checkerboard's inner corners (the default's when omitted)."""
+    return param(
+        None,
+        max_chars=16,
+        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
+        only_when=only_when,
+    )
+
+
 def _image(help: str = IMAGE_HELP) -> Any:
     """The `image` argument: a path on the cell PC, or a capture when omitted."""
     return param(None, kind="path", help=help, flag="image")
@@ -71,12 +90,7 @@ class CalibrateRequest:
         only_when=_INTRINSICS,
         required_when=_INTRINSICS,
     )
-    board: str | None = param(
-        None,
-        max_chars=16,
-        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
-        only_when=(("target", (None, "checkerboards")),),
-    )
+    board: str | None = _board((("target", (None, "checkerboards")),))
     square_mm: float | None = param(
         None,
         unit="mm",
@@ -128,58 +142,23 @@ class CalibrateRequest:
 
     def intrinsics(self, images: tuple[Path, ...]) -> IntrinsicsRequest:
         """The intrinsics request of these images (the folder's, or the CLI's list)."""
-        return IntrinsicsRequest(
-            images,
-            float(self.square_mm or 0.0),
-            board=self.board,
-            degree=self.degree,
-            refinement=self.refinement or "auto",
-            folder=self.folder,
-        )
+        return IntrinsicsRequest(self, images)
 
-    def extrinsics(self) -> ExtrinsicsRequest:
-        return ExtrinsicsRequest(
-            image=self.image,
-            target=self.target,
-            method=self.method,
-            separation_mm=self.separation_mm,
-            board=self.board,
-            square_mm=self.square_mm,
-            target_file=self.target_file,
-        )
+    def board_spec(self) -> BoardSpec:
+        """The checkerboard: the intrinsics' views (the square is needed), or the extrinsic
+        checkerboards target's (9x6 of 97 mm unless given)."""
+        default = DEFAULT_SQUARE_MM if self.what == "extrinsics" else 0.0
+        return board_spec(self.board, self.square_mm or default, "board/square_mm")
 
 
 @dataclass(frozen=True)
 class IntrinsicsRequest:
-    """Calibrate the fisheye intrinsics from checkerboard images (made by `CalibrateRequest`)."""
+    """A `calibrate what=intrinsics` request with the images it names: its folder's (the
+    service), or the command line's list (the CLI). Its arguments are the calibrate request's,
+    declared there once."""
 
+    calibrate: CalibrateRequest
     images: tuple[Path, ...]
-    square_mm: float
-    board: str | None = None
-    degree: int | None = None
-    refinement: str = "auto"
-    folder: str | None = None  # where the images came from, kept in camera.json
-
-    def board_spec(self) -> BoardSpec:
-        return board_spec(self.board, self.square_mm, "board/square_mm")
-
-
-@dataclass(frozen=True)
-class ExtrinsicsRequest:
-    """Calibrate camera rotation and laser plane from one image of a target (or a capture);
-    made by `CalibrateRequest`."""
-
-    image: str | None = None
-    target: str | None = None
-    method: str | None = None
-    separation_mm: float | None = None
-    board: str | None = None
-    square_mm: float | None = None
-    target_file: str | None = None  # a target description (TOML): the wall target as measured
-
-    def board_spec(self) -> BoardSpec:
-        """The checkerboards target's boards (9x6 of 97 mm unless given)."""
-        return board_spec(self.board, self.square_mm or DEFAULT_SQUARE_MM, "board/square_mm")
 
 
 @dataclass(frozen=True)
@@ -257,7 +236,7 @@ class ViewRequest:
     file written, nothing switched, nothing logged."""
 
     width: int = _width_px()
-    quality: int = param(80, lo=10, hi=95, help="JPEG quality")
+    quality: int = _quality(80)
 
 
 @dataclass(frozen=True)
@@ -277,12 +256,7 @@ class DetectRequest:
         help="which target (default: the cell file's [target] kind)",
         only_when=(("what", (None, "target")),),
     )
-    board: str | None = param(
-        None,
-        max_chars=16,
-        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
-        only_when=(("what", (None, "target", "board")),),
-    )
+    board: str | None = _board((("what", (None, "target", "board")),))
     image: str | None = param(
         None,
         kind="path",
@@ -291,7 +265,7 @@ class DetectRequest:
         flag="image",
     )
     width: int = _width_px()
-    quality: int = param(80, lo=10, hi=95, help="JPEG quality")
+    quality: int = _quality(80)
 
 
 @dataclass(frozen=True)
@@ -301,12 +275,7 @@ class ViewsRequest:
     them."""
 
     action: str = param("list", choices=VIEW_ACTIONS, help="what to do with the views")
-    board: str | None = param(
-        None,
-        max_chars=16,
-        help=f"board inner corners COLSxROWS (default {DEFAULT_BOARD})",
-        only_when=(("action", ("add",)),),
-    )
+    board: str | None = _board((("action", ("add",)),))
     name: str | None = param(
         None,
         max_chars=32,
@@ -340,7 +309,7 @@ class PictureRequest:
         kind="path", help="absolute path of a picture the service wrote (a reply's overlay_png)"
     )
     width: int = _width_px()
-    quality: int = param(85, lo=10, hi=95, help="JPEG quality")
+    quality: int = _quality(85)
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,7 @@ def calibrate(ctx: Context, request: CalibrateRequest) -> Reply:
 
         images = tuple(image_files(str(request.folder)))
         return ctx.cell.jobs.calibrate_intrinsics(request.intrinsics(images), ctx.cancel)
-    return ctx.cell.jobs.calibrate_extrinsics(request.extrinsics(), ctx.cancel)
+    return ctx.cell.jobs.calibrate_extrinsics(request, ctx.cancel)
 
 
 def map_scene(ctx: Context, request: MapRequest) -> Reply:
@@ -123,14 +123,7 @@ def locate(ctx: Context, request: LocateRequest) -> Reply:
 
 
 def move(ctx: Context, request: MoveRequest) -> Reply:
-    return ctx.cell.move(
-        joints_deg=request.joints_deg,
-        pose=request.pose,
-        matrix=request.matrix,
-        speed_deg_s=request.speed_deg_s,
-        speed_mm_s=request.speed_mm_s,
-        cancel=ctx.cancel,
-    )
+    return ctx.cell.move(request, ctx.cancel)
 
 
 def sort(ctx: Context, request: SortRequest) -> Reply:

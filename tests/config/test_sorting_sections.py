@@ -61,3 +61,48 @@ def test_example_cell_file_sorting_and_registration_sections_parse() -> None:
     reg = parse_registration_config(data["registration"])
     assert cfg.robot_model == "UR5e" and cfg.bins and cfg.obstacles
     assert (reg.board.cols, reg.board.rows, reg.board.square_mm) == (9, 6, 40.0)
+
+
+def test_registration_keys_are_checked_by_their_declaration() -> None:
+    """`[registration]` is checked against `RegistrationSettings`, each problem naming its key
+    with the bound or the choices it broke; `register-robot`'s flags are made from the same
+    declaration, and its flags are checked by it too, named as flags."""
+    import argparse
+
+    from omnisort_hw.cli.request_flags import add_request_arguments
+    from omnisort_hw.config.registration_settings import RegistrationSettings
+    from omnisort_hw.config.sorting import REGISTRATION_KEYS, registration_config
+    from omnisort_hw.errors import InputError
+
+    good = {"board": "9x6", "square_mm": 40, "offset": [200, -180, 2, 180, 0, 90]}
+    cases = {
+        "square_mm": (0.5, "[registration].square_mm: must be a finite number within 1..1000 mm"),
+        "offset": ([1, 2, 3], "[registration].offset: must be an array of 6 numbers"),
+        "fit": ("tilted", "[registration].fit: must be one of auto, level, free"),
+        "camera_height_mm": (-5, "[registration].camera_height_mm: must be a finite number"),
+        "board": ("9by6", "[registration].board:"),
+    }
+    for key, (value, message) in cases.items():
+        with pytest.raises(ConfigError) as err:
+            parse_registration_config({**good, key: value})
+        assert str(err.value).startswith(message), err.value
+    reg = parse_registration_config({**good, "fit": "level", "camera_height_mm": 900})
+    assert (reg.fit, reg.camera_height_mm, reg.offset[1]) == ("level", 900.0, -180.0)
+    assert parse_registration_config(reg.settings()) == reg  # the record as keys, and back
+
+    parser = argparse.ArgumentParser()
+    add_request_arguments(parser, RegistrationSettings)
+    flags = {a.dest: a.option_strings for a in parser._actions if a.dest in REGISTRATION_KEYS}
+    assert flags == {
+        "board": ["--board"],
+        "square_mm": ["--square"],
+        "offset": ["--offset"],
+        "fit": ["--fit"],
+        "camera_height_mm": ["--camera-height"],
+    }
+    args = parser.parse_args(["--square", "40", "--offset", "1,2,3,4,5"])
+    values = {k: getattr(args, k) for k in REGISTRATION_KEYS if getattr(args, k) is not None}
+    with pytest.raises(InputError, match="--offset: must be an array of 6 numbers"):
+        registration_config(values, "register-robot", lambda a: a.cli_flag, InputError)
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--offset", "1,2,x,4,5,6"])  # argparse: not numbers

@@ -12,7 +12,7 @@ import numpy as np
 from omnisort_hw.core.radiometry import SRGB
 from omnisort_hw.evaluation.table3 import truth_parameters
 from omnisort_hw.pipeline.extrinsics import calibrate_system
-from omnisort_hw.pipeline.requests import ExtrinsicsRequest
+from omnisort_hw.pipeline.requests import CalibrateRequest
 from tests.service.sim_cell import calibrated_sim_cell
 
 
@@ -34,7 +34,8 @@ def test_the_simulated_cell_calibrates_with_its_cameras_own_curve(tmp_path: Path
         want = truth_parameters(truth)
 
         result = cell.jobs.calibrate_extrinsics(
-            ExtrinsicsRequest(
+            CalibrateRequest(
+                "extrinsics",
                 image=str(image),
                 target="two-sided",
                 separation_mm=truth["target"]["separation_mm"],

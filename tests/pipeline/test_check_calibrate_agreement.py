@@ -20,7 +20,7 @@ from omnisort_hw.core.camera_io import camera_record
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import calibration_key, save_reference
-from omnisort_hw.pipeline.requests import ExtrinsicsRequest
+from omnisort_hw.pipeline.requests import CalibrateRequest
 from tests.cli_json import cli_result
 
 pytestmark = pytest.mark.timeout(600)
@@ -92,7 +92,9 @@ def test_cli_calibrate_is_the_services_calibrate(tmp_path: Path) -> None:
         f'[target]\nkind = "two-sided"\nseparation_mm = {separation}\n'
     )
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = as_json(cell.jobs.calibrate_extrinsics(ExtrinsicsRequest(str(image_path))))
+    service = as_json(
+        cell.jobs.calibrate_extrinsics(CalibrateRequest("extrinsics", image=str(image_path)))
+    )
     out = tmp_path / "cli" / "system.json"
     command = cli(
         "extrinsics",
