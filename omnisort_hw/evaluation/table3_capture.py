@@ -36,7 +36,7 @@ from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.measurement_capture import MeasurementCapture, capture_measurement
 from sim_backend.dataset import TABLE3_SCENES, table3_configs
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
-from sim_backend.scene import Scene, load_scene, sized
+from sim_backend.scene import Scene, load_scene, sized, with_camera_effects
 
 EVAL_GRAB_TIMEOUT_S = 900.0  # a first 1920 px render on a loaded machine takes minutes
 
@@ -188,6 +188,7 @@ def evaluate_captures(
     partial: Path | None = None,
     keep: Path | None = None,
     only: Sequence[int] | None = None,
+    effects: bool = False,
 ) -> dict[str, Any]:
     """Every configuration measured with captures of `frames` on/off pairs; the summary of
     `evaluate_dataset` plus the capture times, and under `clean` the same summary on the clean
@@ -197,13 +198,17 @@ def evaluate_captures(
     laser-light image, measured response) and clean image are kept, so a change to the
     extraction or the solvers is measured again by `evaluate_kept` without exposing again.
     `only`: the indices of the configurations to measure, in that order (shards of a long
-    run, kept in one folder and measured together by `evaluate_kept`)."""
+    run, kept in one folder and measured together by `evaluate_kept`). `effects`: every frame
+    through the colour camera's effects as well (crosstalk, chromatic aberration, bloom, Bayer
+    demosaicing: `scene.with_camera_effects`); the clean reference stays the clean render."""
     from tqdm import tqdm
 
     bases = [
         (name, sized(load_scene(name), width).replace(render={"tone_curve": "srgb"}))
         for name in TABLE3_SCENES
     ]
+    if effects:
+        bases = [(name, with_camera_effects(base)) for name, base in bases]
     t_start = time.perf_counter()
     settings = CaptureSettings(frames=frames)
     tone = ToneCurve.srgb()  # the simulated camera's nominal curve; a capture measures its own
@@ -241,6 +246,7 @@ def evaluate_captures(
             "configs": [c.folder for c in configs[:done]],
             "seed": seed,
             "degraded": True,
+            "effects": effects,
             "frames": frames,
             "differencing": True,
             "width": width or 1920,

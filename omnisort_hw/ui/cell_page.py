@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 
 from nicegui import app, run, ui
 
-from omnisort_hw.pipeline.requests import LaserRequest, MapRequest
+from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.service.status_reading import (
     PickHistory,
     drift_alarm,
@@ -30,12 +30,13 @@ from omnisort_hw.service.status_reading import (
 from omnisort_hw.ui.cell_3d import Cell3D
 from omnisort_hw.ui.commissioning import CommissioningPanel
 from omnisort_hw.ui.context import UiContext
-from omnisort_hw.ui.link import Call, CellCommands, ClientError, CommandError, call_of
+from omnisort_hw.ui.link import CellCommands, call_of
 from omnisort_hw.ui.operators import SignInError
 from omnisort_hw.ui.overlay_svg import cubes_overlay, map_overlay
 from omnisort_hw.ui.recovery import RecoveryPanel
 from omnisort_hw.ui.schema_form import form_fields
 from omnisort_hw.ui.schema_widgets import SchemaForm
+from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.sim_panel import SimulatorPanel
 from omnisort_hw.ui.widgets import confirm, tag
 
@@ -73,7 +74,7 @@ class CellPage:
         self._picks_shown: list[dict[str, Any]] = []
         self.pick_history = PickHistory()  # this page's sorts, numbered across them
         self.simulator: SimulatorPanel | None = None
-        self._stale: Callable[[], bool] | None = None  # when the message shown is stale
+        self.session = BrowserSession(ctx, browser)
         self.start_button: Any = None
 
     # -- building -------------------------------------------------------------------------
@@ -94,15 +95,14 @@ class CellPage:
             self.recover_button = tag(
                 ui.button("Recover", on_click=self.start_recovery, color="amber-9"), "recover"
             )
-        self.message = tag(ui.label(""), "message").classes("w-full text-base")
+        self.message = tag(ui.label("").bind_text_from(self.session, "message"), "message")
+        self.message.classes("w-full text-base")
         with ui.row().classes("w-full items-start gap-4 no-wrap"):
             with ui.column().classes("gap-4"):
                 self._build_operator()
                 self._build_status()
             with ui.column().classes("gap-4 grow min-w-0"):
-                self.recovery = RecoveryPanel(
-                    self.ctx, self._token, self._start_job, self.laser, self.browser
-                )
+                self.recovery = RecoveryPanel(self.session)
                 self.recovery.build()
                 self._build_job()
                 with ui.tabs().classes("w-full") as tabs:
@@ -116,21 +116,14 @@ class CellPage:
                         self._build_view()
                         self._build_sort()
                     with ui.tab_panel("Commission").classes("p-0"):
-                        self.commissioning = CommissioningPanel(
-                            self.ctx,
-                            self._token,
-                            self._start_job,
-                            self._operator_send,
-                            self.laser,
-                            self.browser,
-                        )
+                        self.commissioning = CommissioningPanel(self.session)
                         self.commissioning.build()
                     with ui.tab_panel("3D").classes("p-0"):
                         self.cell_3d = Cell3D(self.ctx)
                         self.cell_3d.build()
                     if self.ctx.sim is not None:
                         with ui.tab_panel("Simulator").classes("p-0"):
-                            self.simulator = SimulatorPanel(self.ctx, self.ctx.sim, self._token)
+                            self.simulator = SimulatorPanel(self.session, self.ctx.sim)
                             self.simulator.build()
                 panels.on_value_change(self._tab_shown)
 
@@ -157,8 +150,14 @@ class CellPage:
             )
             with ui.row().classes("items-center") as self.operator_row:
                 ui.label("Laser")
-                tag(ui.button("On", on_click=lambda: self.laser(True)).props("flat"), "laser-on")
-                tag(ui.button("Off", on_click=lambda: self.laser(False)).props("flat"), "laser-off")
+                tag(
+                    ui.button("On", on_click=lambda: self.session.laser(True)).props("flat"),
+                    "laser-on",
+                )
+                tag(
+                    ui.button("Off", on_click=lambda: self.session.laser(False)).props("flat"),
+                    "laser-off",
+                )
                 tag(ui.button("Reset", on_click=self.reset).props("flat"), "reset")
                 tag(
                     ui.button("Acknowledge drift", on_click=self.acknowledge).props("flat"),
@@ -224,8 +223,7 @@ class CellPage:
 
     def refresh(self) -> None:
         snap = self.ctx.link.snapshot
-        if self._stale is not None and self._stale():
-            self.message.text, self._stale = "", None
+        self.session.expire()
         operator = self.ctx.operators.signed_in(self.browser)
         if self.ctx.operators.allowed:
             self.sign_in_row.set_visibility(not operator)
@@ -326,57 +324,18 @@ class CellPage:
 
     # -- acting ---------------------------------------------------------------------------
 
-    def say(self, text: str, kind: str = "info", until: Callable[[], bool] | None = None) -> None:
-        """A message under the header (and a notification); `until`: once it holds, the
-        message is stale and `refresh` takes it away (a job that has ended, a service back)."""
-        self.message.text = text
-        self._stale = until
-        ui.notify(text, type=kind)  # type: ignore[arg-type]
-
-    def _unreachable(self, cmd: str) -> None:
-        """Not sent for want of the service: said until the service answers again."""
-        self.say(
-            f"{cmd}: not sent, the service is unreachable",
-            "negative",
-            lambda: self.ctx.link.snapshot.reachable,
-        )
-
-    async def _send(self, command: Call[R], token: str | None = None) -> R | None:
-        """One quick command; its reply, or None with the refusal shown."""
-        if not self.ctx.link.snapshot.reachable:
-            self._unreachable(command.command)
-            return None
-        try:
-            return await run.io_bound(self.ctx.link.call, command, token)
-        except CommandError as exc:
-            self.say(f"{command.command}: {exc.code}: {exc.message}", "negative")
-        except ClientError as exc:
-            self.say(f"{command.command}: the service cannot be reached: {exc}", "negative")
-        return None
-
-    async def _operator_send(self, command: Call[R]) -> R | None:
-        """One quick command with this session's token; None, with why, when not sent."""
-        token = self._token()
-        if token is None:
-            return None
-        return await self._send(command, token)
-
     async def stop(self) -> None:
-        if await self._send(call_of(CellCommands.stop)) is not None:
-            self.say("stop sent: the job and the arm stop", "warning")
+        if await self.session.send(call_of(CellCommands.stop)) is not None:
+            self.session.say("stop sent: the job and the arm stop", "warning")
 
     async def estop(self) -> None:
-        if await self._send(call_of(CellCommands.estop)) is not None:
-            self.say("E-stop sent: everything stopped, the cell latched in fault", "warning")
-
-    def _token(self) -> str | None:
-        token = self.ctx.operators.token(self.browser)
-        if token is None:
-            self.say("sign in as operator first: nothing was sent", "negative")
-        return token
+        if await self.session.send(call_of(CellCommands.estop)) is not None:
+            self.session.say(
+                "E-stop sent: everything stopped, the cell latched in fault", "warning"
+            )
 
     async def _operator(self, action: Callable[[str], Awaitable[None]]) -> None:
-        token = self._token()
+        token = self.session.token()
         if token is not None:
             await action(token)
 
@@ -385,93 +344,67 @@ class CellPage:
         try:
             await run.io_bound(self.ctx.operators.sign_in, self.browser, typed)
         except SignInError as exc:
-            self.say(f"sign-in refused: {exc}", "negative")
+            self.session.say(f"sign-in refused: {exc}", "negative")
             return
         finally:
             self.token_input.value = ""
-        self.say("signed in as operator", "positive")
+        self.session.say("signed in as operator", "positive")
         self.refresh()
 
     def sign_out(self) -> None:
         self.ctx.operators.sign_out(self.browser)
-        self.say("signed out: read-only")
+        self.session.say("signed out: read-only")
         self.refresh()
-
-    async def laser(self, on: bool) -> None:
-        async def act(token: str) -> None:
-            job = call_of(CellCommands.laser, LaserRequest(on=on))
-            if await self._send(job, token) is not None:
-                self.say(f"laser {'on' if on else 'off'}")
-
-        await self._operator(act)
 
     async def acknowledge(self) -> None:
         async def act(token: str) -> None:
             if not await confirm("Accept the drift and allow motion again?"):
                 return
-            if await self._send(call_of(CellCommands.acknowledge_drift), token) is not None:
-                self.say("drift acknowledged: motion allowed again")
+            if await self.session.send(call_of(CellCommands.acknowledge_drift), token) is not None:
+                self.session.say("drift acknowledged: motion allowed again")
 
         await self._operator(act)
 
     async def reset(self) -> None:
         async def act(token: str) -> None:
-            if await self._send(call_of(CellCommands.reset), token) is not None:
-                self.say("reset: the cell left the stopped/fault state")
+            if await self.session.send(call_of(CellCommands.reset), token) is not None:
+                self.session.say("reset: the cell left the stopped/fault state")
 
         await self._operator(act)
 
     def start_recovery(self) -> None:
-        if self._token() is not None:
+        if self.session.token() is not None:
             self.recovery.open()
 
-    def _start_job(self, job: Call[Any]) -> bool:
-        """Start a job on the service for this operator; False, with the reason shown, when it
-        was not sent. Motion is confirmed before this (`start_sort`), never here."""
-        token = self._token()
-        if token is None:
-            return False
-        if not self.ctx.link.snapshot.reachable:
-            self._unreachable(job.command)
-            return False
-        try:
-            self.ctx.jobs.start(job, token, self.browser)
-        except RuntimeError as exc:
-            self.say(f"{job.command}: not sent: {exc}", "negative")
-            return False
-        ended = self.ctx.jobs.ended
-        self.say(f"{job.command} started", until=lambda: self.ctx.jobs.ended > ended)
-        return True
-
     def map_line(self) -> None:
-        self._start_job(call_of(CellCommands.map, MapRequest(points=True)))
+        self.session.start_job(call_of(CellCommands.map, MapRequest(points=True)))
 
     def locate(self) -> None:
-        self._start_job(call_of(CellCommands.locate))
+        self.session.start_job(call_of(CellCommands.locate))
 
     async def start_sort(self) -> None:
-        token = self._token()
+        token = self.session.token()
         if token is None or self.sort_fields is None:
             return
         job = self.ctx.operators.checked(CellCommands.sort, self.sort_fields.args())
         self.sort_problems.text = "; ".join(job) if isinstance(job, list) else ""
         if isinstance(job, list):
-            self.say(f"sort: not sent: {self.sort_problems.text}", "negative")
+            self.session.say(f"sort: not sent: {self.sort_problems.text}", "negative")
             return
         snap = self.ctx.link.snapshot
         if snap.status is None:
-            self._unreachable(job.command)
+            self.session.unreachable(job.command)
             return
         if (busy := self.ctx.jobs.busy(self.browser)) is not None:
-            self.say(f"sort: not sent: {busy}")
+            self.session.say(f"sort: not sent: {busy}")
             return
         if snap.status["state"] not in ("idle", "stopped"):
-            self.say(f"sort: not sent: the cell is {snap.status['state']}", "negative")
+            self.session.say(f"sort: not sent: the cell is {snap.status['state']}", "negative")
             return
         if not await confirm("Start sorting? The arm will move."):
-            self.say("sort: cancelled, nothing was sent")
+            self.session.say("sort: cancelled, nothing was sent")
             return
-        self._start_job(job)
+        self.session.start_job(job)
 
 
 def cell_page(ctx: UiContext) -> None:
@@ -479,12 +412,12 @@ def cell_page(ctx: UiContext) -> None:
     page = CellPage(ctx, str(app.storage.browser["id"]))
     page.build()
     page.refresh()
-    ui.timer(ctx.config.status_period_s, page.refresh)
-    ui.timer(min(ctx.config.view_period_s, 0.5), page.refresh_view)
-    ui.timer(0.5, page.recovery.refresh)
-    ui.timer(0.5, page.commissioning.refresh)
-    ui.timer(0.5, page.cell_3d.refresh)
-    if page.simulator is not None:
-        ui.timer(0.5, page.simulator.refresh)
+    every = page.session.every
+    every(ctx.config.status_period_s, page.refresh)
+    every(min(ctx.config.view_period_s, 0.5), page.refresh_view)
+    for panel in (page.recovery, page.commissioning, page.cell_3d, page.simulator):
+        if panel is not None:
+            every(0.5, panel.refresh)
+    ui.timer(page.session.tick_s, page.session.tick)  # the page's one timer
     ctx.feed.watch()
     ui.context.client.on_delete(ctx.feed.unwatch)

@@ -17,7 +17,7 @@ Every action is a command of the protocol; the page only shows the replies.
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from nicegui import background_tasks, ui
@@ -29,15 +29,15 @@ from omnisort_hw.ui.calibration_views import (
     parameter_table,
     separation_input,
 )
-from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.guided_step import GuidedStep, verdict_text
 from omnisort_hw.ui.history_panel import HistoryPanel
 from omnisort_hw.ui.job_runner import JobWatch
-from omnisort_hw.ui.link import Call, CellCommands, Send, StartJob, call_of
+from omnisort_hw.ui.link import Call, CellCommands, call_of
 from omnisort_hw.ui.overlay_svg import Overlay, coverage_overlay
 from omnisort_hw.ui.pictures import show_picture
 from omnisort_hw.ui.schema_form import typed_number
+from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.widgets import number_input, tag
 
 STEPS = (
@@ -71,26 +71,18 @@ def intrinsics_lines(result: Mapping[str, Any]) -> list[str]:
 class CommissioningPanel:
     """The commissioning steps; `refresh()` (a timer) follows the job a step started."""
 
-    def __init__(
-        self,
-        ctx: UiContext,
-        token: Callable[[], str | None],
-        start_job: StartJob,
-        send: Send,
-        laser: Callable[[bool], Awaitable[None]],
-        session: str,
-    ) -> None:
-        """`token`: this session's; `start_job`: the page's one way to start a job; `send`: its
-        one way to send a quick command (None with the refusal shown); `laser`: its way to
-        switch the laser; `session`: the browser session, for the log."""
-        self.ctx, self.token, self.send, self.laser = ctx, token, send, laser
-        self.watch = JobWatch(ctx.jobs, start_job)
+    def __init__(self, session: BrowserSession) -> None:
+        """`session`: the browser's (its token, its one way to start a job and to send a quick
+        command, its way to switch the laser, its id for the log)."""
+        self.session, self.ctx = session, session.ctx
+        self.token, self.send, self.laser = session.token, session.operator_send, session.laser
+        self.watch = JobWatch(self.ctx.jobs, session.start_job)
         self.views: dict[str, Any] = {}  # the last `views` reply
         self.visible = False
 
         def step(name: str, note: str, go: str | None, go_tag: str) -> GuidedStep:
             go_on = self._next if go is not None else self._verified
-            return GuidedStep(f"commissioning: {name}", note, go, go_tag, go_on, session)
+            return GuidedStep(f"commissioning: {name}", note, go, go_tag, go_on, session.browser)
 
         self.steps = {
             "intrinsics": step("camera intrinsics", "intr-note", "Next", "intr-next"),
@@ -103,14 +95,14 @@ class CommissioningPanel:
         }
         self._what = ""  # the step whose job is being followed
         self.board_detection = LiveDetection(
-            ctx, token, self._board_args, "intr-detect", self._coverage
+            session, self._board_args, "intr-detect", self._coverage
         )
-        self.target_detection = LiveDetection(ctx, token, DetectRequest, "extr-detect")
+        self.target_detection = LiveDetection(session, DetectRequest, "extr-detect")
         self.floor_detection = LiveDetection(
-            ctx, token, lambda: DetectRequest(what="floor"), "reg-detect"
+            session, lambda: DetectRequest(what="floor"), "reg-detect"
         )
         self.detections = (self.board_detection, self.target_detection, self.floor_detection)
-        self.history = HistoryPanel(send, lambda job: self._start("restore", job))
+        self.history = HistoryPanel(self.send, lambda job: self._start("restore", job))
 
     # -- building -------------------------------------------------------------------------
 

@@ -12,9 +12,9 @@ from nicegui import run, ui
 
 from omnisort_hw.pipeline.replies import DetectReply
 from omnisort_hw.pipeline.requests import DetectRequest
-from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.overlay_svg import Overlay, detection_overlay
+from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.widgets import tag
 
 
@@ -24,16 +24,17 @@ class LiveDetection:
 
     def __init__(
         self,
-        ctx: UiContext,
-        token: Callable[[], str | None],
+        session: BrowserSession,
         request: Callable[[], DetectRequest],
         name: str,
         extra: Callable[[float, float], Overlay | None] | None = None,
     ) -> None:
-        """`request`: the `detect` request at each ask (the pattern as the page sets it now);
-        `name`: the tests' name of its elements (`NAME-image`, `NAME-summary`); `extra`: a
-        further overlay drawn under the detection, given the picture's scale and unit."""
-        self.ctx, self.token, self.request, self.name = ctx, token, request, name
+        """`session`: the browser's (its token; its timer asks again); `request`: the `detect`
+        request at each ask (the pattern as the page sets it now); `name`: the tests' name of
+        its elements (`NAME-image`, `NAME-summary`); `extra`: a further overlay drawn under the
+        detection, given the picture's scale and unit."""
+        self.session, self.ctx = session, session.ctx
+        self.token, self.request, self.name = session.token, request, name
         self.extra = extra
         self.active = False
         self.found: bool | None = None
@@ -45,7 +46,7 @@ class LiveDetection:
         self.image = tag(
             ui.interactive_image().classes("w-full max-w-[960px]"), f"{self.name}-image"
         )
-        ui.timer(self.ctx.config.view_period_s, self.tick)
+        self.session.every(self.ctx.config.view_period_s, self.tick)
 
     async def tick(self) -> None:
         """Ask once, unless not shown, still waiting for the last answer, or signed out."""

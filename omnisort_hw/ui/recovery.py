@@ -7,7 +7,6 @@ replies. Started from the drift banner; open to a signed-in operator."""
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
 from typing import Any
 
 from nicegui import ui
@@ -19,12 +18,12 @@ from omnisort_hw.ui.calibration_views import (
     parameter_table,
     separation_input,
 )
-from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.guided_step import GuidedStep
 from omnisort_hw.ui.job_runner import JobWatch
-from omnisort_hw.ui.link import Call, CellCommands, StartJob, call_of
+from omnisort_hw.ui.link import Call, CellCommands, call_of
 from omnisort_hw.ui.pictures import show_picture
+from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.widgets import tag
 
 STEPS = ("Place the target", "Calibrate camera and laser", "Register the robot", "Verify")
@@ -33,22 +32,15 @@ STEPS = ("Place the target", "Calibrate camera and laser", "Register the robot",
 class RecoveryPanel:
     """The recovery's steps on one page; `refresh()` follows the job each step started."""
 
-    def __init__(
-        self,
-        ctx: UiContext,
-        token: Callable[[], str | None],
-        start_job: StartJob,
-        laser: Callable[[bool], Awaitable[None]],
-        session: str,
-    ) -> None:
-        """`token`: this session's, for the residual picture; `start_job`: the page's one way
-        to start a job (signed in, service reachable, no job of this interface running);
-        `laser`: its way to switch the laser; `session`: the browser session, for the log."""
-        self.ctx, self.token, self.laser = ctx, token, laser
-        self.watch = JobWatch(ctx.jobs, start_job)
+    def __init__(self, session: BrowserSession) -> None:
+        """`session`: the browser's (its token, its way to start a job and to switch the
+        laser, its id for the log)."""
+        self.session, self.ctx = session, session.ctx
+        self.token, self.laser = session.token, session.laser
+        self.watch = JobWatch(self.ctx.jobs, session.start_job)
         self.active = False  # opened from the drift banner, until the operator closes it
         self._step = "recalibration"  # the step whose job was started last
-        self.detection = LiveDetection(ctx, token, DetectRequest, "recovery-target")
+        self.detection = LiveDetection(session, DetectRequest, "recovery-target")
         self.steps = {
             "recalibration": GuidedStep(
                 "recovery: camera and laser plane",
@@ -56,7 +48,7 @@ class RecoveryPanel:
                 "Accept",
                 "accept-calib",
                 self._next,
-                session,
+                session.browser,
             ),
             "robot": GuidedStep(
                 "recovery: robot registration",
@@ -64,7 +56,7 @@ class RecoveryPanel:
                 "Next",
                 "accept-register",
                 self._next,
-                session,
+                session.browser,
             ),
             "verify": GuidedStep(
                 "recovery: drift check",
@@ -72,7 +64,7 @@ class RecoveryPanel:
                 "Done",
                 "recovery-done",
                 self.close,
-                session,
+                session.browser,
             ),
         }
 

@@ -28,9 +28,9 @@ from omnisort_hw import sim_requests as sr
 from omnisort_hw.request_fields import build
 from omnisort_hw.sim_link import MOVE_TIMEOUT_S, SimControlError, SimLink
 from omnisort_hw.sim_replies import SimTruth
-from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.schema_form import form_fields, problems, typed_number
 from omnisort_hw.ui.schema_widgets import SchemaForm
+from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.widgets import confirm, tag
 
 CUBE_COLUMNS = [
@@ -102,9 +102,9 @@ class SimulatorPanel:
     channel's own `describe` (`SchemaForm`) once the tab is first shown; the buttons are the
     panel's."""
 
-    def __init__(self, ctx: UiContext, sim: SimLink, token: Callable[[], str | None]) -> None:
-        """`token`: this session's (None, with why shown, when not signed in)."""
-        self.ctx, self.sim, self.token = ctx, sim, token
+    def __init__(self, session: BrowserSession, sim: SimLink) -> None:
+        """`session`: the browser's (its token: None, with why said, when not signed in)."""
+        self.ctx, self.sim, self.token = session.ctx, sim, session.token
         self.visible = False
         self._ticks = 0
         self._busy = False
