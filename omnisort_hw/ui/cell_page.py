@@ -103,6 +103,8 @@ class CellPage:
                 self._build_status()
             with ui.column().classes("gap-4 grow min-w-0"):
                 self.recovery = RecoveryPanel(self.session)
+                if self.ctx.sim is not None:  # built in its tab, offered to the commissioning
+                    self.simulator = SimulatorPanel(self.session, self.ctx.sim)
                 self.recovery.build()
                 self._build_job()
                 with ui.tabs().classes("w-full") as tabs:
@@ -116,14 +118,16 @@ class CellPage:
                         self._build_view()
                         self._build_sort()
                     with ui.tab_panel("Commission").classes("p-0"):
-                        self.commissioning = CommissioningPanel(self.session)
+                        self.commissioning = CommissioningPanel(
+                            self.session,
+                            self.simulator.next_board if self.simulator is not None else None,
+                        )
                         self.commissioning.build()
                     with ui.tab_panel("3D").classes("p-0"):
                         self.cell_3d = Cell3D(self.ctx)
                         self.cell_3d.build()
-                    if self.ctx.sim is not None:
+                    if self.simulator is not None:
                         with ui.tab_panel("Simulator").classes("p-0"):
-                            self.simulator = SimulatorPanel(self.session, self.ctx.sim)
                             self.simulator.build()
                 panels.on_value_change(self._tab_shown)
 

@@ -17,7 +17,7 @@ Every action is a command of the protocol; the page only shows the replies.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from typing import Any
 
 from nicegui import background_tasks, ui
@@ -71,10 +71,16 @@ def intrinsics_lines(result: Mapping[str, Any]) -> list[str]:
 class CommissioningPanel:
     """The commissioning steps; `refresh()` (a timer) follows the job a step started."""
 
-    def __init__(self, session: BrowserSession) -> None:
+    def __init__(
+        self,
+        session: BrowserSession,
+        next_pose: Callable[[], Awaitable[str]] | None = None,
+    ) -> None:
         """`session`: the browser's (its token, its one way to start a job and to send a quick
-        command, its way to switch the laser, its id for the log)."""
-        self.session, self.ctx = session, session.ctx
+        command, its way to switch the laser, its id for the log); `next_pose`: with a
+        simulated cell, the Simulator tab's way to walk the held board on to its next pose
+        (what it says is shown under the views), so the views are taken from this tab."""
+        self.session, self.ctx, self.next_pose = session, session.ctx, next_pose
         self.token, self.send, self.laser = session.token, session.operator_send, session.laser
         self.watch = JobWatch(self.ctx.jobs, session.start_job)
         self.views: dict[str, Any] = {}  # the last `views` reply
@@ -131,9 +137,15 @@ class CommissioningPanel:
             self.square = number_input("square (mm)", "square")
         self.board_detection.build()
         with ui.row().classes("items-center"):
+            if self.next_pose is not None:
+                tag(
+                    ui.button("Next board pose (simulator)", on_click=self.hold_next_pose),
+                    "intr-next-pose",
+                ).props("outline")
             tag(ui.button("Add view", on_click=self.add_view), "add-view")
             tag(ui.button("Remove last", on_click=self.remove_last).props("flat"), "remove-view")
             tag(ui.button("Clear views", on_click=self.clear_views).props("flat"), "clear-views")
+        self.pose_note = tag(ui.label(""), "intr-pose-note")
         self.views_note = tag(ui.label(""), "views-note").classes("whitespace-pre-line")
         with ui.row().classes("items-center"):
             tag(ui.button("Calibrate", on_click=self.calibrate_intrinsics), "calibrate-intr")
@@ -230,6 +242,11 @@ class CommissioningPanel:
         reply = await self.send(job)
         if reply is not None:
             self._show_views(dict(reply))
+
+    async def hold_next_pose(self) -> None:
+        """The simulated board walked on to its next pose, said under the views."""
+        if self.next_pose is not None:
+            self.pose_note.text = await self.next_pose()
 
     async def add_view(self) -> None:
         await self._views({"action": "add", "board": self._board_size()})

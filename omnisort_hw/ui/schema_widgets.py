@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from nicegui import ui
+from nicegui.elements.mixins.value_element import ValueElement
 
 from omnisort_hw.ui.schema_form import FormField, args_from_form, inapplicable
 from omnisort_hw.ui.widgets import tag
@@ -25,12 +26,12 @@ class SchemaForm:
 
     def __init__(self, fields: list[FormField], prefix: str, width: str = "w-40") -> None:
         self.fields = fields
-        self.inputs: dict[str, Any] = {}  # a field's widget, or a `numbers` field's list
+        self.inputs: dict[str, ValueElement | list[ValueElement]] = {}  # a list: `numbers`
         for f in fields:
             self.inputs[f.name] = self._draw(f, f"{prefix}-{f.name}", width)
 
     @staticmethod
-    def _draw(f: FormField, name: str, width: str) -> Any:
+    def _draw(f: FormField, name: str, width: str) -> ValueElement | list[ValueElement]:
         if f.kind == "numbers":
             default = f.default if isinstance(f.default, list | tuple) else [None] * f.length
             return [
@@ -40,7 +41,7 @@ class SchemaForm:
                 for i, v in enumerate(default)
             ]
         if f.kind == "bool":
-            field: Any = ui.checkbox(f.label, value=bool(f.default))
+            field: ValueElement = ui.checkbox(f.label, value=bool(f.default))
         elif f.kind in ("int", "number"):
             field = ui.input(f.label, value=_text(f.default)).classes(width)
         elif f.kind == "choice":

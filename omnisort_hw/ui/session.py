@@ -29,7 +29,7 @@ class _Refresh:
     """A panel's refresh and its period; `due`: the monotonic time it runs next; `running`: a
     coroutine of it not yet done (a slow answer), so it is not started again meanwhile."""
 
-    refresh: Callable[[], Any]
+    refresh: Callable[[], object]
     period_s: float
     due: float = 0.0
     running: bool = False
@@ -130,7 +130,7 @@ class BrowserSession:
 
     # -- the page's one timer --------------------------------------------------------------
 
-    def every(self, period_s: float, refresh: Callable[[], Any]) -> None:
+    def every(self, period_s: float, refresh: Callable[[], object]) -> None:
         """`refresh` (a panel's; it may be a coroutine) run by the page's timer every
         `period_s`."""
         self._refreshes.append(_Refresh(refresh, max(period_s, MIN_PERIOD_S)))

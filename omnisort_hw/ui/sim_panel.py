@@ -75,7 +75,7 @@ def truth_lines(truth: SimTruth) -> list[str]:
     return lines
 
 
-def cube_rows(truth: SimTruth) -> list[dict[str, Any]]:
+def cube_rows(truth: SimTruth) -> list[dict[str, object]]:
     """The cubes table's rows."""
     return [
         {
@@ -89,7 +89,7 @@ def cube_rows(truth: SimTruth) -> list[dict[str, Any]]:
     ]
 
 
-class _Shown(dict[str, Any]):
+class _Shown(dict[str, object]):
     """A note's values: what was not given was left as it was."""
 
     def __missing__(self, key: str) -> str:
@@ -111,7 +111,7 @@ class SimulatorPanel:
         self._shown = -1
         self._filled = False  # the forms start from the cell as it is, once
         self._schemas: dict[str, Any] = {}  # each command's, from the channel's describe
-        self._slots: dict[str, Any] = {}  # each command's row, where its fields are drawn
+        self._slots: dict[str, ui.row] = {}  # each command's row, where its fields are drawn
         self.forms: dict[str, SchemaForm] = {}
         self._describing = asyncio.Lock()
 
@@ -176,7 +176,7 @@ class SimulatorPanel:
     def _card(
         self,
         title: str,
-        buttons: list[tuple[str, str, str, Callable[[], Any]]],
+        buttons: list[tuple[str, str, str, Callable[[], object]]],
         color: str | None = None,
     ) -> None:
         """A card with its title, a row for each command's fields (`(command, label, name,
@@ -351,11 +351,11 @@ class SimulatorPanel:
         value = typed_number(self.forms["board"].typed()["view"], integer=True)
         return value if isinstance(value, int) else None
 
-    async def next_board(self) -> None:
+    async def next_board(self) -> str:
         """The board moved on to its next pose, as a person walks it through the field; after
-        the last, the first again (said in the note)."""
+        the last, the first again (said in the note); the note."""
         if not await self._forms():
-            return
+            return str(self.note.text)
         top = int(self._schemas["board"]["properties"]["view"]["anyOf"][0]["maximum"])
         now = self._view()
         view = 0 if now is None else (now + 1) % (top + 1)
@@ -363,6 +363,7 @@ class SimulatorPanel:
         await self.hold_board()
         if view == 0 and now == top:
             self.note.text += f" (all {top + 1} poses shown: the first again)"
+        return str(self.note.text)
 
     async def put_board_down(self) -> None:
         if await self._forms():

@@ -119,9 +119,19 @@ def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS
     page.click("tab-commission")
     page.type("square", f"{HELD_SQUARE_MM:g}")
     for k in range(views):
-        show_tab(page, "tab-simulator", "add-view")  # the board walked on to its next pose
-        sim_note_after(page, "sim-board-next", f"board held at pose {k}")
-        show_tab(page, "tab-commission", "sim-board-next")
+        # The board walked on to its next pose: the first from the Simulator tab, the others
+        # from the views step itself (the same channel command, offered there with a
+        # simulated cell).
+        held = f"board held at pose {k}"
+        if k == 0:
+            show_tab(page, "tab-simulator", "add-view")
+            sim_note_after(page, "sim-board-next", held)
+            show_tab(page, "tab-commission", "sim-board-next")
+        else:
+            page.click("intr-next-pose")
+            wait_for(
+                held, lambda held=held: page.text("intr-pose-note").startswith(held), UI_S, 0.1
+            )
         page.click("add-view")
         name = f"view_{k + 1:03d}"
         wait_for(name, lambda name=name: name in page.text("views-note"), UI_S, 0.1)
