@@ -24,7 +24,12 @@ from typing import Any
 from benchmarks import prose
 from benchmarks.figures_common import ANGLES, PARAM_HEADS, PARAMS
 from benchmarks.figures_common import table as _table
-from benchmarks.figures_real_light import real_light, real_light_camera, table3_effects
+from benchmarks.figures_real_light import (
+    real_light,
+    real_light_camera,
+    table3_effects,
+    table3_effects_captures,
+)
 from benchmarks.figures_uncertainty import uncertainty, uncertainty_rows
 
 HERE = Path(__file__).resolve().parent
@@ -715,6 +720,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "real_light": real_light,
     "real_light_camera": real_light_camera,
     "table3_effects": table3_effects,
+    "table3_effects_captures": table3_effects_captures,
 }
 
 
