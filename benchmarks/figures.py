@@ -27,6 +27,7 @@ from benchmarks.figures_common import table as _table
 from benchmarks.figures_real_light import (
     real_light,
     real_light_camera,
+    stripe_effects,
     table3_effects,
     table3_effects_captures,
 )
@@ -721,6 +722,7 @@ GENERATORS: dict[str, Callable[[dict[str, Any]], str]] = {
     "real_light_camera": real_light_camera,
     "table3_effects": table3_effects,
     "table3_effects_captures": table3_effects_captures,
+    "stripe_effects": stripe_effects,
 }
 
 

@@ -199,3 +199,36 @@ def table3_effects_captures(r: dict[str, Any]) -> str:
         f"every parameter ({verdicts}).\n"
     )
     return _table(["MAE", *PARAM_HEADS.split(" | ")], rows) + note
+
+
+def stripe_effects(r: dict[str, Any]) -> str:
+    """The stripe's centre under each colour-camera effect against its true centre line."""
+    s = r["stripe_effects"]
+    rows: list[list[Any]] = []
+    for name, entry in s.items():
+        if not isinstance(entry, dict) or name.startswith("_"):
+            continue
+        for width, e in entry.items():
+            rows.append(
+                [
+                    name,
+                    width.removeprefix("sigma_") + " px",
+                    f"{e['rows_rms_px']:.3f}",
+                    f"{e['rows_worst_bias_px']:.3f}",
+                    f"{e['tilted_rms_px']:.3f}",
+                    f"{e['tilted_bias_px']:+.3f}",
+                ]
+            )
+    head = [
+        "effect",
+        "line sigma",
+        "along rows: RMS px",
+        "along rows: worst bias px",
+        "tilted: RMS px",
+        "tilted: bias px",
+    ]
+    note = (
+        f"\n{s['offsets']} sub-pixel offsets along the rows, one tilted line, "
+        f"{s['size_px']} px frames; the extractor's goal: {s['goal_rms_px']:g} px RMS.\n"
+    )
+    return _table(head, rows) + note
