@@ -16,7 +16,7 @@ Environment: OMNISORT_BENCH_UNSEEN_SEEDS (comma-separated, default "11,12"; seed
 development seed, is refused), OMNISORT_BENCH_UNSEEN_N configurations each (default 12). The
 datasets are kept in build/bench/ and reused (bench_table3's naming, suffix `-effects`);
 OMNISORT_BENCH_EFFECTS_CAPTURES_ONLY=1 keeps the recorded single-frame figures and measures the
-captures alone (about 15 minutes a seed at 1920 px on 2 cores).
+captures alone (about 6 minutes a seed at 1920 px, alone on 2 cores).
 """
 
 from __future__ import annotations
