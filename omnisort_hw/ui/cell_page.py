@@ -228,7 +228,7 @@ class CellPage:
     def refresh(self) -> None:
         snap = self.ctx.link.snapshot
         self.session.expire()
-        operator = self.ctx.operators.signed_in(self.browser)
+        operator = self.session.operator
         if self.ctx.operators.allowed:
             self.sign_in_row.set_visibility(not operator)
             self.sign_out_button.set_visibility(operator)
@@ -306,7 +306,7 @@ class CellPage:
         self.view_note.text = feed.problem or (
             f"picture {pic.sequence} at {pic.wall_time[11:19]}{rate}" if pic else "waiting"
         )
-        self.view_ops.set_visibility(self.ctx.operators.signed_in(self.browser))
+        self.view_ops.set_visibility(self.session.operator)
         if pic is None:
             return
         key = (pic.sequence, self.ctx.jobs.ended)
