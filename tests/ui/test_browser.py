@@ -76,7 +76,10 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     )
     assert width == 320, width  # the simulated camera's frames, at most [ui] view_width_px
 
-    # Out of range: the schema refuses it here, nothing reaches the service.
+    # Out of range: the schema refuses it here, nothing reaches the service. (Start is offered
+    # once the page has the service's idle state after the location: a click on it while it
+    # is still disabled does nothing, as it should.)
+    wait_for("Start enabled", lambda: page.el("start-sort").is_enabled(), UI_S, 0.1)
     before = service_status(svc.port)["service"]
     page.type("sort-max_objects", "0")
     page.click("start-sort")
