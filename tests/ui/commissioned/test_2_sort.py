@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from omnisort_hw.service.virtual_cell_demo import check_truth
-from tests.ui.browser_page import wait_for
+from tests.ui.browser_page import UI_S, wait_for
 from tests.ui.commissioned.shared import Commissioned
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
@@ -16,6 +16,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 def test_the_commissioned_cell_sorts_from_the_page(commissioned: Commissioned) -> None:
     page = commissioned.page
     page.click("tab-cell")
+    # Offered once the page has the cell idle after the verification's location (a click on
+    # a disabled Start does nothing).
+    wait_for("Start enabled", lambda: page.el("start-sort").is_enabled(), UI_S, 0.1)
     page.click("start-sort")
     page.confirm()
     end = wait_for(
