@@ -51,11 +51,12 @@ Condition: TypeAlias = tuple[str, "tuple[object, ...] | _Given"]
 
 
 class ArgumentError(InputError):
-    """An argument of a request is out of its declaration (the message names the field)."""
+    """An argument of a request is out of its declaration (the message names the field;
+    `reason`, what is wrong with its value alone, for a door that names the field its own way)."""
 
-    def __init__(self, field: str, message: str) -> None:
+    def __init__(self, field: str, message: str, reason: str | None = None) -> None:
         super().__init__(message)
-        self.field = field
+        self.field, self.reason = field, reason or message
 
 
 @dataclass(frozen=True)
@@ -191,7 +192,7 @@ def type_name(value: Any) -> str:
 
 
 def _bad(arg: Arg, command: str, what: str, label: str | None) -> ArgumentError:
-    return ArgumentError(arg.name, f"{command}: argument {label or repr(arg.name)} {what}")
+    return ArgumentError(arg.name, f"{command}: argument {label or repr(arg.name)} {what}", what)
 
 
 def _is_number(value: Any) -> bool:

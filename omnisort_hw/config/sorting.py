@@ -230,8 +230,7 @@ def registration_config(
         try:
             checked[name] = check_value(arg, where, value, label=label(arg), cell_paths=False)
         except ArgumentError as exc:
-            detail = str(exc).split(f"argument {label(arg)} ", 1)[-1]
-            raise error(f"{label(arg)}: {detail}") from None
+            raise error(f"{label(arg)}: {exc.reason}") from None
     for name in ("square_mm", "offset"):
         if name not in checked:
             arg = declared[name]

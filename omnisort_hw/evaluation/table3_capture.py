@@ -34,9 +34,9 @@ from omnisort_hw.evaluation.table3 import (
 from omnisort_hw.pipeline.extrinsics import calibrate_system
 from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.measurement_capture import MeasurementCapture, capture_measurement
-from sim_backend.dataset import TABLE3_SCENES, table3_configs
+from sim_backend.dataset import TABLE3_SCENES, table3_bases, table3_configs
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
-from sim_backend.scene import Scene, load_scene, sized, with_camera_effects
+from sim_backend.scene import Scene
 
 EVAL_GRAB_TIMEOUT_S = 900.0  # a first 1920 px render on a loaded machine takes minutes
 
@@ -203,12 +203,7 @@ def evaluate_captures(
     demosaicing: `scene.with_camera_effects`); the clean reference stays the clean render."""
     from tqdm import tqdm
 
-    bases = [
-        (name, sized(load_scene(name), width).replace(render={"tone_curve": "srgb"}))
-        for name in TABLE3_SCENES
-    ]
-    if effects:
-        bases = [(name, with_camera_effects(base)) for name, base in bases]
+    bases = table3_bases(width, "srgb", effects=effects)  # the rendered dataset's scenes
     t_start = time.perf_counter()
     settings = CaptureSettings(frames=frames)
     tone = ToneCurve.srgb()  # the simulated camera's nominal curve; a capture measures its own

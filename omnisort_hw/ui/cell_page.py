@@ -10,10 +10,9 @@ schema before anything is sent, and a refusal is shown as the service's typed me
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
 from dataclasses import asdict
 from datetime import UTC, datetime
-from typing import Any, TypeVar
+from typing import Any
 
 from nicegui import app, run, ui
 
@@ -40,7 +39,6 @@ from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.sim_panel import SimulatorPanel
 from omnisort_hw.ui.widgets import confirm, tag
 
-R = TypeVar("R")
 STATE_COLORS = {
     "idle": "positive",
     "sorting": "primary",
@@ -338,11 +336,6 @@ class CellPage:
                 "E-stop sent: everything stopped, the cell latched in fault", "warning"
             )
 
-    async def _operator(self, action: Callable[[str], Awaitable[None]]) -> None:
-        token = self.session.token()
-        if token is not None:
-            await action(token)
-
     async def sign_in(self) -> None:
         typed = str(self.token_input.value or "")
         try:
@@ -361,20 +354,15 @@ class CellPage:
         self.refresh()
 
     async def acknowledge(self) -> None:
-        async def act(token: str) -> None:
-            if not await confirm("Accept the drift and allow motion again?"):
-                return
-            if await self.session.send(call_of(CellCommands.acknowledge_drift), token) is not None:
-                self.session.say("drift acknowledged: motion allowed again")
-
-        await self._operator(act)
+        token = self.session.token()  # signed in, before the question
+        if token is None or not await confirm("Accept the drift and allow motion again?"):
+            return
+        if await self.session.send(call_of(CellCommands.acknowledge_drift), token) is not None:
+            self.session.say("drift acknowledged: motion allowed again")
 
     async def reset(self) -> None:
-        async def act(token: str) -> None:
-            if await self.session.send(call_of(CellCommands.reset), token) is not None:
-                self.session.say("reset: the cell left the stopped/fault state")
-
-        await self._operator(act)
+        if await self.session.operator_send(call_of(CellCommands.reset)) is not None:
+            self.session.say("reset: the cell left the stopped/fault state")
 
     def start_recovery(self) -> None:
         if self.session.token() is not None:

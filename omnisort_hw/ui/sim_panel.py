@@ -356,7 +356,7 @@ class SimulatorPanel:
         the last, the first again (said in the note); the note."""
         if not await self._forms():
             return str(self.note.text)
-        top = int(self._schemas["board"]["properties"]["view"]["anyOf"][0]["maximum"])
+        top = sr.HELD_VIEWS - 1
         now = self._view()
         view = 0 if now is None else (now + 1) % (top + 1)
         self.forms["board"].set("view", view)
