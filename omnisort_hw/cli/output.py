@@ -25,14 +25,15 @@ def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
 
 def print_verdict(reply: Mapping[str, Any]) -> None:
     """A reply's verdict and its picture, as the last lines of a command's human output."""
-    from omnisort_hw.pipeline.verdict import verdict_lines
+    from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 
     if reply.get("overlay_png"):
         print(f"picture: {reply['overlay_png']}")
     elif reply.get("overlay_problem"):
         print(f"no picture: {reply['overlay_problem']}")
-    if "verdict" in reply:
-        print("\n".join(verdict_lines(reply["verdict"])))
+    verdict = verdict_of(reply)
+    if verdict is not None:
+        print("\n".join(verdict_lines(verdict)))
 
 
 def print_error(code: str, message: str) -> None:

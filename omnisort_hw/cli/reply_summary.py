@@ -8,7 +8,7 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 
 MAX_FIELDS = 12
 
@@ -21,8 +21,9 @@ def summarise_reply(command: str, result: Mapping[str, Any]) -> str:
     """The reply's verdict, its scalar top-level fields (paths, counts, figures), a sort's
     totals, and where the rest is."""
     lines: list[str] = []
-    if isinstance(result.get("verdict"), Mapping):
-        lines += verdict_lines(result["verdict"])
+    verdict = verdict_of(result)
+    if verdict is not None:
+        lines += verdict_lines(verdict)
     else:
         lines.append(f"{command}: done")
     shown = 0

@@ -8,7 +8,7 @@ A part not calibrated yet is None, with why in `problems`.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -79,54 +79,47 @@ class GeometryResult:
 def run(rig: GeometryRig, request: GeometryRequest) -> GeometryResult:
     """The cell's parts in S from what is stored and configured; see the module doc."""
     del request  # nothing to ask: the cell as it is
-    out: GeometryReply = {
-        "camera_R_SC": None,
-        "laser_plane": None,
-        "robot_base_T_SB": None,
-        "arm": None,
-        "bins": [],
-        "cube_size_mm": (rig.sort_config or SortConfig()).cube_size_mm,
-        "floor_z_mm": None,
-        "problems": [],
-    }
+    cfg = rig.sort_config or SortConfig()
     try:
         record = rig.store.read("system")
         calib = SystemCalibration.from_json(record.payload, source=str(record.path))
     except OmnisortError as exc:
-        out["problems"].append(f"no camera or laser plane: {exc}")
-        return GeometryResult(out)
-    out["camera_R_SC"] = np.round(calib.R_SC, 9).tolist()
+        return GeometryResult(
+            GeometryReply(cfg.cube_size_mm, problems=[f"no camera or laser plane: {exc}"])
+        )
     corners = laser_patch(calib.laser_normal, calib.laser_distance_mm, LASER_PATCH_MM)
-    plane: LaserPlaneReply = {
-        "normal": np.round(calib.laser_normal, 9).tolist(),
-        "distance_mm": round(float(calib.laser_distance_mm), 3),
-        "corners_S_mm": np.round(corners, 2).tolist(),
-    }
-    out["laser_plane"] = plane
+    calibrated = GeometryReply(
+        cfg.cube_size_mm,
+        camera_R_SC=np.round(calib.R_SC, 9).tolist(),
+        laser_plane=LaserPlaneReply(
+            normal=np.round(calib.laser_normal, 9).tolist(),
+            distance_mm=round(float(calib.laser_distance_mm), 3),
+            corners_S_mm=np.round(corners, 2).tolist(),
+        ),
+    )
     base = calib.robot_base
     if not isinstance(base, dict) or "matrix" not in base:
-        out["problems"].append("robot not registered: no base, arm or bins")
-        return GeometryResult(out)
+        problem = "robot not registered: no base, arm or bins"
+        return GeometryResult(replace(calibrated, problems=[problem]))
     T_SB = np.asarray(base["matrix"], float)
-    out["robot_base_T_SB"] = np.round(T_SB, 6).tolist()
-    out["floor_z_mm"] = round(float(T_SB[2, 3]), 2)
-    cfg = rig.sort_config or SortConfig()
+    bins = []
     for spec in cfg.bins:
         rim, foot = bin_corners_B(spec)
-        item: BinReply = {
-            "color": spec.color,
-            "corners_S_mm": _to_S(T_SB, rim),
-            "floor_S_mm": _to_S(T_SB, foot),
-        }
-        out["bins"].append(item)
+        bins.append(BinReply(spec.color, _to_S(T_SB, rim), _to_S(T_SB, foot)))
     joints = rig.arm_joints()
-    if joints is None:
-        out["problems"].append("no joint reading from the arm")
-    else:
-        arm: ArmReply = {
-            "model": cfg.robot_model,
-            "joints_deg": [round(float(q), 4) for q in joints],
-            "points_S_mm": np.round(arm_points_S(cfg.robot_model, joints, T_SB), 2).tolist(),
-        }
-        out["arm"] = arm
-    return GeometryResult(out)
+    arm = None
+    if joints is not None:
+        arm = ArmReply(
+            model=cfg.robot_model,
+            joints_deg=[round(float(q), 4) for q in joints],
+            points_S_mm=np.round(arm_points_S(cfg.robot_model, joints, T_SB), 2).tolist(),
+        )
+    registered = replace(
+        calibrated,
+        robot_base_T_SB=np.round(T_SB, 6).tolist(),
+        floor_z_mm=round(float(T_SB[2, 3]), 2),
+        bins=bins,
+        arm=arm,
+        problems=[] if arm is not None else ["no joint reading from the arm"],
+    )
+    return GeometryResult(registered)

@@ -38,7 +38,7 @@ from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
 from omnisort_hw.pipeline.cell_acquisition import frame
 from omnisort_hw.pipeline.replies import DriftReply
 from omnisort_hw.pipeline.requests import CheckRequest
-from omnisort_hw.pipeline.verdict import Check, Verdict
+from omnisort_hw.pipeline.verdict import Check, Verdict, to_wire_verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
 REFERENCE_NAME = "drift_reference.png"
@@ -134,7 +134,7 @@ class DriftResult:
             "image": self.source,
             "calibration_key": self.key,
             "board": self.board.summary() if self.board is not None else None,
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }
         if self.board_problem:
             out["board_problem"] = self.board_problem

@@ -32,7 +32,7 @@ from omnisort_hw.pipeline.replies import ExtrinsicsReply
 from omnisort_hw.pipeline.requests import CalibrateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.scale_check import ScaleCheck, check_scale
-from omnisort_hw.pipeline.verdict import Check, Verdict, graded
+from omnisort_hw.pipeline.verdict import Check, Verdict, graded, to_wire_verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -274,7 +274,7 @@ class ExtrinsicsResult:
             "image": self.image,
             "tone_curve": self.tone.name,
             "scale_check": checked,
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }
 
 

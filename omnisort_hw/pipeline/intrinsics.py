@@ -41,7 +41,7 @@ from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.replies import IntrinsicsReply
 from omnisort_hw.pipeline.requests import IntrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Check, Verdict, graded
+from omnisort_hw.pipeline.verdict import Check, Verdict, graded, to_wire_verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
@@ -154,7 +154,7 @@ class IntrinsicsResult:
                 "image_circle": figures.circle_field_deg,
                 "corners_seen": figures.corners_field_deg,
             },
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }
         if cal.uncertainty_picture is not None:
             out["uncertainty_png"] = str(uncertainty_png_path(self.path))

@@ -30,7 +30,7 @@ from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.replies import MapReply, MapSummary
 from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Check, Verdict, at_least
+from omnisort_hw.pipeline.verdict import Check, Verdict, at_least, to_wire_verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -182,7 +182,7 @@ class MapResult:
             "image": self.image,
             **self.laser_map.summary(self.with_points),
             **self.picture,
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }
 
     def verdict(self) -> Verdict:

@@ -34,7 +34,7 @@ from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.replies import LocateReply
 from omnisort_hw.pipeline.requests import LocateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Verdict, at_least, graded, verdict_lines
+from omnisort_hw.pipeline.verdict import Verdict, at_least, graded, to_wire_verdict, verdict_lines
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -70,7 +70,7 @@ class LocateResult:
                 f"{i} {c.color}: B ({x:.1f}, {y:.1f}, {z:.1f}) mm, yaw {c.yaw_B_deg:.1f} deg, "
                 f"sigma {c.sigma_mm:.2f} mm"
             )
-        return [*out, *verdict_lines(self.verdict().to_dict())]
+        return [*out, *verdict_lines(self.verdict())]
 
     def asked(self) -> list[Cube]:
         """The cubes of the request's colours (all when it named none)."""
@@ -110,7 +110,7 @@ class LocateResult:
             "count": len(found),
             "rejected": rejected,
             **self.picture,
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }
 
 

@@ -29,7 +29,7 @@ from omnisort_hw.pipeline.intrinsics import board_record
 from omnisort_hw.pipeline.replies import RegisterReply
 from omnisort_hw.pipeline.requests import RegisterRequest
 from omnisort_hw.pipeline.rig import Rig
-from omnisort_hw.pipeline.verdict import Verdict, graded, verdict_lines
+from omnisort_hw.pipeline.verdict import Verdict, graded, to_wire_verdict, verdict_lines
 from omnisort_hw.runlog import NullLog, RunLog
 
 MAX_BASE_DISTANCE_MM = 10000.0
@@ -79,7 +79,7 @@ class RegisterResult:
             "robot_base": self.record,
             "path": str(self.path) if self.path is not None else None,
             **self.picture,
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }
 
     def lines(self, with_verdict: bool = True) -> list[str]:
@@ -93,7 +93,7 @@ class RegisterResult:
             f"1-sigma: x {std['x_mm']:.2f}, y {std['y_mm']:.2f}, z {std['z_mm']:.2f} mm, "
             f"yaw {std['yaw_deg']:.3f} deg",
             f"{len(reg.corners_px)} board corners, RMS {reg.rms_px:.3f} px",
-            *(verdict_lines(self.verdict().to_dict()) if with_verdict else []),
+            *(verdict_lines(self.verdict()) if with_verdict else []),
         ]
 
 

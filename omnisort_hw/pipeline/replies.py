@@ -11,29 +11,53 @@ reads `NotRequired` when its class is made, and `tests/service/test_door_agreeme
 each real reply against its declared keys.)
 """
 
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any, Literal, NotRequired, TypedDict
 
 from omnisort_hw.core.records import DecisionSummary, LaserLineReply, PictureReply, Record
+from omnisort_hw.wire_records import absent
 
 Level = Literal["pass", "warn", "fail"]
 
 
-class CheckReply(TypedDict):
-    """One criterion of a verdict: its figure against its threshold, and what to do."""
+_RANK: dict[str, int] = {"pass": 0, "warn": 1, "fail": 2}
+
+
+def worst(levels: Sequence[Level]) -> Level:
+    """The worst of some levels (pass when none)."""
+    rank = max((_RANK[lv] for lv in levels), default=0)
+    levels_by_rank: tuple[Level, ...] = ("pass", "warn", "fail")
+    return levels_by_rank[rank]
+
+
+@dataclass(frozen=True)
+class CheckReply:
+    """One criterion of a verdict: its figure against its threshold, and what to do (none on
+    a pass: the key is left out)."""
 
     name: str
     level: Level
     figure: str
     threshold: str
-    advice: NotRequired[str]
+    advice: str = absent("")
 
 
-class VerdictReply(TypedDict):
-    """A result's verdict: the worst level of its checks."""
+@dataclass(frozen=True)
+class VerdictReply:
+    """A result's verdict: its checks, and its level, the worst of theirs (computed, so a
+    verdict read from a reply cannot disagree with its checks)."""
 
-    level: Level
     what: str
-    checks: list[CheckReply]
+    checks: tuple[CheckReply, ...]
+    level: Level = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "level", worst([c.level for c in self.checks]))
+
+
+VerdictWire = Record
+"""A verdict in a reply not yet a record: `to_wire(VerdictReply)`."""
 
 
 class MapSummary(TypedDict):
@@ -55,20 +79,20 @@ class MapSummary(TypedDict):
 
 class MapReply(MapSummary, PictureReply):
     image: Record
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class LocateReply(PictureReply):
     cubes: list[Record]
     count: int
     rejected: list[Record]
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class RegisterReply(PictureReply):
     robot_base: Record
     path: str | None
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class IntrinsicsReply(TypedDict):
@@ -100,7 +124,7 @@ class IntrinsicsReply(TypedDict):
     center_uv: list[float]
     model: Record
     field_of_view_deg: dict[str, float | None]
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class ExtrinsicsReply(PictureReply):
@@ -113,7 +137,7 @@ class ExtrinsicsReply(PictureReply):
     image: Record | None
     tone_curve: str
     scale_check: Record
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class DriftReply(DecisionSummary):
@@ -123,7 +147,7 @@ class DriftReply(DecisionSummary):
     board: Record | None
     board_problem: NotRequired[str]
     reference_adopted: NotRequired[bool]
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class SortExtras(TypedDict, total=False):
@@ -143,7 +167,7 @@ class SortReply(SortExtras):
     totals: Record
     registration: Record | None
     rejected_blobs: int
-    verdict: VerdictReply
+    verdict: VerdictWire
 
 
 class AdoptReply(TypedDict):
@@ -207,7 +231,8 @@ class DetectReply(TypedDict):
     picture: NotRequired[ImageReply]
 
 
-class KeptViewReply(TypedDict):
+@dataclass(frozen=True)
+class KeptViewReply:
     """One view kept for the intrinsics: its name, when it was taken, the board's outline."""
 
     name: str
@@ -215,7 +240,8 @@ class KeptViewReply(TypedDict):
     outline_px: list[list[float]]
 
 
-class CoverageReply(TypedDict):
+@dataclass(frozen=True)
+class CoverageReply:
     """The views' corners over the image circle's outer band: which of its sectors (equal
     angles from -180 deg, about `centre_px`) hold a corner, and which lie inside the frame."""
 
@@ -227,20 +253,23 @@ class CoverageReply(TypedDict):
     fraction: float
 
 
-class ViewsReply(TypedDict):
-    """The views kept for the intrinsics (`calibrate what=intrinsics folder=<folder>`)."""
+@dataclass(frozen=True)
+class ViewsReply:
+    """The views kept for the intrinsics (`calibrate what=intrinsics folder=<folder>`); the
+    board, the frame's size and the coverage once a view is kept; what a request added or
+    removed."""
 
     folder: str
     count: int
     need: int
     views: list[KeptViewReply]
     verdict: VerdictReply
-    board: NotRequired[str]
-    image_width: NotRequired[int]
-    image_height: NotRequired[int]
-    coverage: NotRequired[CoverageReply]
-    added: NotRequired[str]
-    removed: NotRequired[list[str]]
+    board: str | None = absent()
+    image_width: int | None = absent()
+    image_height: int | None = absent()
+    coverage: CoverageReply | None = absent()
+    added: str | None = absent()
+    removed: list[str] | None = absent()
 
 
 class VersionReply(TypedDict):
@@ -254,35 +283,48 @@ class VersionReply(TypedDict):
     problem: NotRequired[str]
 
 
-class LaserPlaneReply(TypedDict):
+@dataclass(frozen=True)
+class LaserPlaneReply:
+    """The laser plane in S: its unit normal, its distance below the camera, and a patch of it
+    around the emitter (4 corners, in order) for a picture."""
+
     normal: list[float]
     distance_mm: float
-    corners_S_mm: list[list[float]]  # a patch of the plane around the emitter, for a picture
+    corners_S_mm: list[list[float]]
 
 
-class BinReply(TypedDict):
+@dataclass(frozen=True)
+class BinReply:
+    """A bin of `[sorting]` in S: its colour, its rim's four corners in order, the same corners
+    on the floor."""
+
     color: str
-    corners_S_mm: list[list[float]]  # the rim's four corners, in order
-    floor_S_mm: list[list[float]]  # the same corners on the floor
+    corners_S_mm: list[list[float]]
+    floor_S_mm: list[list[float]]
 
 
-class ArmReply(TypedDict):
+@dataclass(frozen=True)
+class ArmReply:
+    """The arm as it stands: its model, its joints, and the base then each DH frame's origin to
+    the flange in S."""
+
     model: str
     joints_deg: list[float]
-    points_S_mm: list[list[float]]  # the base, then each DH frame's origin to the flange
+    points_S_mm: list[list[float]]
 
 
-class GeometryReply(TypedDict):
+@dataclass(frozen=True)
+class GeometryReply:
     """The cell in 3D, in S (mm): what is calibrated, each part None until it is."""
 
-    camera_R_SC: list[list[float]] | None
-    laser_plane: LaserPlaneReply | None
-    robot_base_T_SB: list[list[float]] | None
-    arm: ArmReply | None
-    bins: list[BinReply]
     cube_size_mm: float  # of `[sorting]`: the cubes a locate finds
-    floor_z_mm: float | None  # the robot base's plane (the floor it stands on)
-    problems: list[str]  # why a part is missing
+    camera_R_SC: list[list[float]] | None = None
+    laser_plane: LaserPlaneReply | None = None
+    robot_base_T_SB: list[list[float]] | None = None
+    arm: ArmReply | None = None
+    bins: list[BinReply] = field(default_factory=list)
+    floor_z_mm: float | None = None  # the robot base's plane (the floor it stands on)
+    problems: list[str] = field(default_factory=list)  # why a part is missing
 
 
 class HistoryReply(TypedDict):

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from omnisort_hw.pipeline.replies import SortExtras, SortReply
-from omnisort_hw.pipeline.verdict import Verdict, none_of
+from omnisort_hw.pipeline.verdict import Verdict, none_of, to_wire_verdict
 
 
 def _finite(value: float, digits: int) -> float | None:
@@ -140,5 +140,5 @@ class SortReport:
             "registration": self.registration,
             "rejected_blobs": self.rejected_blobs,
             **self.extra,
-            "verdict": self.verdict().to_dict(),
+            "verdict": to_wire_verdict(self.verdict()),
         }

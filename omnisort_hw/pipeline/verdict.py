@@ -9,35 +9,23 @@ gives them with their reasons), never fitted to one data set.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import Any
 
-from omnisort_hw.pipeline.replies import CheckReply, Level, VerdictReply
+from omnisort_hw.pipeline.replies import CheckReply, Level, VerdictReply, VerdictWire
+from omnisort_hw.wire_records import from_wire, to_wire
 
-_RANK: dict[str, int] = {"pass": 0, "warn": 1, "fail": 2}
+Check = CheckReply
+"""One criterion: its name, its level, the figure measured, the threshold, the advice."""
+
+Verdict = VerdictReply
+"""The checks of one result; its level is the worst of theirs."""
 
 
-@dataclass(frozen=True)
-class Check:
-    """One criterion: its name, its level, the figure measured, the threshold, the advice."""
-
-    name: str
-    level: Level
-    figure: str
-    threshold: str
-    advice: str = ""
-
-    def to_dict(self) -> CheckReply:
-        out: CheckReply = {
-            "name": self.name,
-            "level": self.level,
-            "figure": self.figure,
-            "threshold": self.threshold,
-        }
-        if self.advice:
-            out["advice"] = self.advice
-        return out
+def to_wire_verdict(verdict: Verdict) -> VerdictWire:
+    """A verdict for a reply that is not a record yet (a TypedDict's `verdict`)."""
+    wire: VerdictWire = to_wire(verdict)
+    return wire
 
 
 def graded(
@@ -75,38 +63,17 @@ def at_least(name: str, count: int, minimum: int, level: Level, advice: str) -> 
     return Check(name, "pass" if ok else level, str(count), f">= {minimum}", "" if ok else advice)
 
 
-@dataclass(frozen=True)
-class Verdict:
-    """The checks of one result; its level is the worst of theirs."""
-
-    what: str
-    checks: tuple[Check, ...]
-
-    @property
-    def level(self) -> Level:
-        return worst([c.level for c in self.checks])
-
-    def to_dict(self) -> VerdictReply:
-        return {
-            "level": self.level,
-            "what": self.what,
-            "checks": [c.to_dict() for c in self.checks],
-        }
+def verdict_of(reply: Mapping[str, Any] | None) -> Verdict | None:
+    """The verdict a reply carries (its `verdict` as sent), read as its record; None for a
+    reply without one. WireError names a verdict that is not one."""
+    wire = None if reply is None else reply.get("verdict")
+    return None if wire is None else from_wire(VerdictReply, wire)
 
 
-def verdict_lines(verdict: Mapping[str, Any]) -> list[str]:
-    """A reply's `verdict` as lines for a terminal: the level first, then each check."""
-    lines = [f"{str(verdict['level']).upper()}: {verdict['what']}"]
-    for check in verdict.get("checks", ()):
-        line = f"  {check['level']:<4}  {check['name']}: {check['figure']} ({check['threshold']})"
-        if check.get("advice"):
-            line += f"; {check['advice']}"
-        lines.append(line)
+def verdict_lines(verdict: Verdict) -> list[str]:
+    """A verdict as lines for a terminal: the level first, then each check."""
+    lines = [f"{verdict.level.upper()}: {verdict.what}"]
+    for c in verdict.checks:
+        line = f"  {c.level:<4}  {c.name}: {c.figure} ({c.threshold})"
+        lines.append(line + (f"; {c.advice}" if c.advice else ""))
     return lines
-
-
-def worst(levels: Sequence[Level]) -> Level:
-    """The worst of some levels (pass when none)."""
-    rank = max((_RANK[lv] for lv in levels), default=0)
-    levels_by_rank: tuple[Level, ...] = ("pass", "warn", "fail")
-    return levels_by_rank[rank]

@@ -220,39 +220,33 @@ class ViewsResult:
         return Verdict("views for the intrinsic calibration", tuple(checks))
 
     def reply(self) -> ViewsReply:
-        out: ViewsReply = {
-            "folder": str(self.folder),
-            "count": len(self.views),
-            "need": MIN_IMAGES,
-            "views": [_view_reply(v) for v in self.views],
-            "verdict": self.verdict().to_dict(),
-        }
-        if self.views:
-            w, h = self.views[0].image_size
-            out["board"], out["image_width"], out["image_height"] = self.views[0].board, w, h
-        cov = self.coverage
-        if cov is not None:
-            out["coverage"] = CoverageReply(
+        first, cov = (self.views[0] if self.views else None), self.coverage
+        return ViewsReply(
+            folder=str(self.folder),
+            count=len(self.views),
+            need=MIN_IMAGES,
+            views=[_view_reply(v) for v in self.views],
+            verdict=self.verdict(),
+            board=first.board if first else None,
+            image_width=first.image_size[0] if first else None,
+            image_height=first.image_size[1] if first else None,
+            coverage=None
+            if cov is None
+            else CoverageReply(
                 centre_px=[round(cov.centre[0], 1), round(cov.centre[1], 1)],
                 radius_px=round(cov.radius, 1),
                 outer_band=OUTER_BAND,
                 covered=cov.covered.tolist(),
                 inside=cov.inside.tolist(),
                 fraction=round(cov.fraction, 3),
-            )
-        if self.added is not None:
-            out["added"] = self.added.name
-        if self.removed:
-            out["removed"] = list(self.removed)
-        return out
+            ),
+            added=self.added.name if self.added is not None else None,
+            removed=list(self.removed) if self.removed else None,
+        )
 
 
 def _view_reply(view: View) -> KeptViewReply:
-    return {
-        "name": view.name,
-        "taken": view.taken,
-        "outline_px": np.round(view.outline_px(), 1).tolist(),
-    }
+    return KeptViewReply(view.name, view.taken, np.round(view.outline_px(), 1).tolist())
 
 
 def run(rig: ViewsRig, request: ViewsRequest) -> ViewsResult:

@@ -54,6 +54,7 @@ from omnisort_hw.pipeline.requests import (
 )
 from omnisort_hw.request_fields import wire_args
 from omnisort_hw.service.status_reply import StatusReply
+from omnisort_hw.wire_records import from_wire
 
 Result = dict[str, Any]
 OnEvent = Callable[[dict[str, Any]], None] | None
@@ -97,13 +98,13 @@ class CellCommands:
         return cast(DetectReply, self.execute("detect", wire_args(request)))
 
     def views(self, request: ViewsRequest | None = None) -> ViewsReply:
-        return cast(ViewsReply, self.execute("views", wire_args(request)))
+        return from_wire(ViewsReply, self.execute("views", wire_args(request)))
 
     def history(self, request: HistoryRequest | None = None) -> HistoryReply:
         return cast(HistoryReply, self.execute("history", wire_args(request)))
 
     def geometry(self, request: GeometryRequest | None = None) -> GeometryReply:
-        return cast(GeometryReply, self.execute("geometry", wire_args(request)))
+        return from_wire(GeometryReply, self.execute("geometry", wire_args(request)))
 
     def capture(self, request: CaptureRequest | None = None) -> CaptureReply:
         return cast(CaptureReply, self.execute("capture", wire_args(request)))

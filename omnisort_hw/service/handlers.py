@@ -35,6 +35,7 @@ from omnisort_hw.pipeline.requests import (
 )
 from omnisort_hw.service.protocol import describe_commands
 from omnisort_hw.service.status_reply import ServiceStatus, StatusReply
+from omnisort_hw.wire_records import to_wire
 
 
 @dataclass
@@ -74,7 +75,7 @@ def detect(ctx: Context, request: DetectRequest) -> Reply:
 def views(ctx: Context, request: ViewsRequest) -> Reply:
     from omnisort_hw.pipeline import views as kept_views
 
-    return kept_views.run(ctx.cell.jobs, request).reply()
+    return to_wire(kept_views.run(ctx.cell.jobs, request).reply())
 
 
 def history(ctx: Context, request: HistoryRequest) -> Reply:
@@ -86,7 +87,7 @@ def history(ctx: Context, request: HistoryRequest) -> Reply:
 def geometry(ctx: Context, request: GeometryRequest) -> Reply:
     from omnisort_hw.pipeline import cell_geometry
 
-    return cell_geometry.run(ctx.cell.jobs, request).reply()
+    return to_wire(cell_geometry.run(ctx.cell.jobs, request).reply())
 
 
 def picture(ctx: Context, request: PictureRequest) -> Reply:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from nicegui import run, ui
 
+from omnisort_hw.pipeline.replies import GeometryReply
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.overlay_svg import sigma_rgb
@@ -105,10 +106,10 @@ class Cell3D:
     # -- drawing --------------------------------------------------------------------------
 
     def draw(
-        self, geometry: Mapping[str, Any], map_reply: Mapping[str, Any], located: Mapping[str, Any]
+        self, geometry: GeometryReply, map_reply: Mapping[str, Any], located: Mapping[str, Any]
     ) -> None:
         """Everything again, from the replies (S in mm) to the scene (metres above the floor)."""
-        floor = geometry.get("floor_z_mm")
+        floor = geometry.floor_z_mm
         lift = np.array([0.0, 0.0, -(floor if floor is not None else -1000.0)]) * MM
         s = self.scene
         s.clear()
@@ -122,41 +123,39 @@ class Cell3D:
             for a, b in zip(pts, pts[1:] + pts[:1] if closed else pts[1:], strict=False):
                 s.line(a, b).material(colour)
 
-        R = geometry.get("camera_R_SC")
+        R = geometry.camera_R_SC
         if R is not None:
             origin = at([0.0, 0.0, 0.0])
             s.axes_helper(0.25).rotate_R(R).move(*origin)
             s.sphere(0.03).material("#222222").move(*origin)
             s.text("camera", "font-size: 0.8em").move(*origin)
             drawn["camera"] = 1
-        plane = geometry.get("laser_plane")
+        plane = geometry.laser_plane
         if plane is not None:
-            polyline(plane["corners_S_mm"], LASER_COLOUR, closed=True)
-            c = np.asarray(plane["corners_S_mm"], float)
+            polyline(plane.corners_S_mm, LASER_COLOUR, closed=True)
+            c = np.asarray(plane.corners_S_mm, float)
             for a, b in ((c[0], c[2]), (c[1], c[3])):
                 s.line(at(a), at(b)).material(LASER_COLOUR, opacity=0.5)
             drawn["laser plane"] = 1
-        T = geometry.get("robot_base_T_SB")
-        if T is not None:
-            T = np.asarray(T, float)
+        if geometry.robot_base_T_SB is not None:
+            T = np.asarray(geometry.robot_base_T_SB, float)
             s.axes_helper(0.2).rotate_R(T[:3, :3].tolist()).move(*at(T[:3, 3]))
             s.text("robot base", "font-size: 0.8em").move(*at(T[:3, 3]))
-        arm = geometry.get("arm")
-        if arm is not None:
-            points = arm["points_S_mm"]
+        if geometry.arm is not None:
+            points = geometry.arm.points_S_mm
             polyline(points, ARM_COLOUR, closed=False)
             for p in points:
                 s.sphere(0.025).material(ARM_COLOUR).move(*at(p))
             drawn["arm joints"] = len(points)
-        for b in geometry.get("bins") or []:
-            colour = CUBE_COLOURS.get(b["color"], "#888888")
-            polyline(b["corners_S_mm"], colour, closed=True)
-            polyline(b["floor_S_mm"], colour, closed=True)
-            for top, foot in zip(b["corners_S_mm"], b["floor_S_mm"], strict=True):
+        for b in geometry.bins:
+            colour = CUBE_COLOURS.get(b.color, "#888888")
+            polyline(b.corners_S_mm, colour, closed=True)
+            polyline(b.floor_S_mm, colour, closed=True)
+            for top, foot in zip(b.corners_S_mm, b.floor_S_mm, strict=True):
                 s.line(at(top), at(foot)).material(colour)
             drawn["bins"] = drawn.get("bins", 0) + 1
         self._draw_points(map_reply, at, drawn)
-        size = float(geometry.get("cube_size_mm") or 100.0) * MM
+        size = geometry.cube_size_mm * MM
         for cube in located.get("cubes") or []:
             yaw = np.radians(float(cube.get("yaw_S_deg", 0.0)))
             s.box(size, size, size).material(CUBE_COLOURS.get(cube["color"], "#888888")).rotate(
@@ -170,7 +169,7 @@ class Cell3D:
                 x=2.0, y=-1.0, z=1.5, look_at_x=0.0, look_at_y=0.8, look_at_z=0.5, duration=0.0
             )
         self.drawn = drawn
-        problems = "; ".join(geometry.get("problems") or [])
+        problems = "; ".join(geometry.problems)
         self.legend.text = ", ".join(f"{k}: {v}" for k, v in drawn.items()) + (
             f" ({problems})" if problems else ""
         )

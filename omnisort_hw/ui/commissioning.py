@@ -22,6 +22,7 @@ from typing import Any
 
 from nicegui import background_tasks, ui
 
+from omnisort_hw.pipeline.replies import ViewsReply
 from omnisort_hw.pipeline.requests import DEFAULT_BOARD, DetectRequest, MapRequest
 from omnisort_hw.ui.calibration_views import (
     extrinsics_args,
@@ -83,7 +84,7 @@ class CommissioningPanel:
         self.session, self.ctx, self.next_pose = session, session.ctx, next_pose
         self.token, self.send, self.laser = session.token, session.operator_send, session.laser
         self.watch = JobWatch(self.ctx.jobs, session.start_job)
-        self.views: dict[str, Any] = {}  # the last `views` reply
+        self.views: ViewsReply | None = None  # the last `views` reply
         self.visible = False
 
         def step(name: str, note: str, go: str | None, go_tag: str) -> GuidedStep:
@@ -226,10 +227,10 @@ class CommissioningPanel:
     def _coverage(self, scale: float, unit: float) -> Overlay | None:
         return coverage_overlay(self.views, scale, unit) if self.views else None
 
-    def _show_views(self, reply: dict[str, Any]) -> None:
+    def _show_views(self, reply: ViewsReply) -> None:
         self.views = reply
-        names = ", ".join(v["name"] for v in reply["views"]) or "none"
-        self.views_note.text = f"views kept: {names}\n{verdict_text(reply)}"
+        names = ", ".join(v.name for v in reply.views) or "none"
+        self.views_note.text = f"views kept: {names}\n{verdict_text(reply.verdict)}"
 
     # -- acting: the views ------------------------------------------------------------------
 
@@ -241,7 +242,7 @@ class CommissioningPanel:
             return
         reply = await self.send(job)
         if reply is not None:
-            self._show_views(dict(reply))
+            self._show_views(reply)
 
     async def hold_next_pose(self) -> None:
         """The simulated board walked on to its next pose, said under the views."""
@@ -252,8 +253,8 @@ class CommissioningPanel:
         await self._views({"action": "add", "board": self._board_size()})
 
     async def remove_last(self) -> None:
-        if self.views.get("views"):
-            await self._views({"action": "remove", "name": self.views["views"][-1]["name"]})
+        if self.views is not None and self.views.views:
+            await self._views({"action": "remove", "name": self.views.views[-1].name})
 
     async def clear_views(self) -> None:
         await self._views({"action": "clear"})
@@ -282,11 +283,11 @@ class CommissioningPanel:
     def calibrate_intrinsics(self) -> None:
         args = {
             "what": "intrinsics",
-            "folder": str(self.views.get("folder", "")),
+            "folder": self.views.folder if self.views else "",
             "board": self._board_size(),
             "square_mm": typed_number(self.square.value),
         }
-        doing = f"calibrating the lens from {self.views.get('count', 0)} views..."
+        doing = f"calibrating the lens from {self.views.count if self.views else 0} views..."
         self._start("intrinsics", self.ctx.operators.checked(CellCommands.calibrate, args), doing)
 
     def calibrate_extrinsics(self) -> None:

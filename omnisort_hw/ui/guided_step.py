@@ -21,11 +21,12 @@ from typing import Any
 from nicegui import ui
 
 from omnisort_hw.pipeline.replies import Level
-from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.pipeline.verdict import Verdict, verdict_lines, verdict_of
 from omnisort_hw.service.status_reading import job_text
 from omnisort_hw.ui.job_runner import JobEnd, JobWatch
 from omnisort_hw.ui.link import Call
 from omnisort_hw.ui.widgets import tag
+from omnisort_hw.wire_records import WireError
 
 log = logging.getLogger(__name__)
 
@@ -34,13 +35,10 @@ RETAKE = "the step cannot be accepted: fix the cause above and retake it"
 WARNED = "accept with warning to go on, or fix the cause above and retake"
 
 
-def verdict_text(result: Mapping[str, Any] | None) -> str:
-    """A reply's verdict in lines: PASS/WARN/FAIL first, then each check with its figure, its
-    threshold and, when not a pass, what to do; "" for a reply without one."""
-    verdict = (result or {}).get("verdict")
-    if not isinstance(verdict, Mapping):
-        return ""
-    return "\n".join(line.strip() for line in verdict_lines(verdict))
+def verdict_text(verdict: Verdict | None) -> str:
+    """A verdict in lines: PASS/WARN/FAIL first, then each check with its figure, its
+    threshold and, when not a pass, what to do; "" for none."""
+    return "" if verdict is None else "\n".join(line.strip() for line in verdict_lines(verdict))
 
 
 def level_of(end: JobEnd) -> Level:
@@ -48,10 +46,11 @@ def level_of(end: JobEnd) -> Level:
     reply that carries no verdict."""
     if not end.ok or end.result is None:
         return "fail"
-    verdict = end.result.get("verdict")
-    if not isinstance(verdict, Mapping):
-        return "pass"
-    return next((lv for lv in LEVELS if lv == verdict.get("level")), "fail")
+    try:
+        verdict = verdict_of(end.result)
+    except WireError:
+        return "fail"  # a verdict it cannot read is never a way on
+    return "pass" if verdict is None else verdict.level
 
 
 class GuidedStep:
@@ -141,7 +140,11 @@ class GuidedStep:
         if not end.ok or end.result is None:
             text = [f"FAIL: {end.message}"]
         else:
-            text = [verdict_text(end.result) or f"{end.cmd} done", *(lines or [])]
+            try:
+                shown = verdict_text(verdict_of(end.result)) or f"{end.cmd} done"
+            except WireError as exc:
+                shown = f"FAIL: the reply's verdict cannot be read: {exc}"
+            text = [shown, *(lines or [])]
         if level == "fail":
             text.append(RETAKE)
         elif level == "warn":

@@ -10,7 +10,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from omnisort_hw.pipeline.verdict import verdict_lines
+from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 from omnisort_hw.ui.link import Call, ClientError, CommandError, ServiceLink
 
 JOB_TIMEOUT_S = 3600.0
@@ -34,8 +34,9 @@ def ended_text(cmd: str, result: Mapping[str, Any]) -> str:
     if isinstance(totals, Mapping):
         counts = ("sorted", "skipped", "failed")
         parts[0] += ": " + ", ".join(f"{totals.get(k, 0)} {k}" for k in counts)
-    if isinstance(result.get("verdict"), Mapping):
-        parts += [line.strip() for line in verdict_lines(result["verdict"])]
+    verdict = verdict_of(result)
+    if verdict is not None:
+        parts += [line.strip() for line in verdict_lines(verdict)]
     return "; ".join(parts)
 
 

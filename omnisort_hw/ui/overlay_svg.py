@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from html import escape
 from typing import Any
 
+from omnisort_hw.pipeline.replies import ViewsReply
+
 MAX_POINTS = 800  # drawn of a map's points, evenly spaced: enough to see, light to send
 
 
@@ -110,19 +112,19 @@ def detection_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0)
     return Overlay("".join(parts), str(reply.get("summary", "")))
 
 
-def coverage_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:
+def coverage_overlay(reply: ViewsReply, scale: float, unit: float = 1.0) -> Overlay | None:
     """A `views` reply over the picture: the image circle's outer band, each of its sectors
     green where a view's corners reach it and red where none does yet (sectors outside the
     frame not drawn), and every kept view's board outline; None without views."""
-    cov = reply.get("coverage")
-    if not cov:
+    cov = reply.coverage
+    if cov is None:
         return None
-    cu, cv = (c * scale for c in cov["centre_px"])
-    r_out = cov["radius_px"] * scale
-    r_in = (1.0 - cov["outer_band"]) * r_out
-    n = len(cov["covered"])
+    cu, cv = (c * scale for c in cov.centre_px)
+    r_out = cov.radius_px * scale
+    r_in = (1.0 - cov.outer_band) * r_out
+    n = len(cov.covered)
     parts = []
-    for k, (covered, inside) in enumerate(zip(cov["covered"], cov["inside"], strict=True)):
+    for k, (covered, inside) in enumerate(zip(cov.covered, cov.inside, strict=True)):
         if not inside:
             continue
         a0, a1 = -math.pi + 2 * math.pi * k / n, -math.pi + 2 * math.pi * (k + 1) / n
@@ -135,14 +137,14 @@ def coverage_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) 
             f'0 0 0 {p[3][0]:.1f} {p[3][1]:.1f} Z" fill="{colour}" fill-opacity="0.35" '
             f'data-covered="{str(bool(covered)).lower()}" />'
         )
-    for view in reply.get("views") or []:
-        ring = " ".join(f"{u * scale:.1f},{v * scale:.1f}" for u, v in view["outline_px"])
+    for view in reply.views:
+        ring = " ".join(f"{u * scale:.1f},{v * scale:.1f}" for u, v in view.outline_px)
         parts.append(
             f'<polygon points="{ring}" fill="none" stroke="#38bdf8" '
             f'stroke-width="{1.5 * unit:.2f}" />'
         )
     legend = (
-        f"{reply.get('count', 0)} views; the image circle's rim covered "
-        f"{cov['fraction']:.0%} (green: reached by a view's corners, red: not yet)"
+        f"{reply.count} views; the image circle's rim covered "
+        f"{cov.fraction:.0%} (green: reached by a view's corners, red: not yet)"
     )
     return Overlay("".join(parts), legend)

@@ -3,7 +3,15 @@ non-pass says what to do; the same lines reach every door."""
 
 from __future__ import annotations
 
-from omnisort_hw.pipeline.verdict import Check, Verdict, at_least, graded, verdict_lines
+from omnisort_hw.pipeline.verdict import (
+    Check,
+    Verdict,
+    at_least,
+    graded,
+    verdict_lines,
+    verdict_of,
+)
+from omnisort_hw.wire_records import to_wire
 
 
 def test_a_graded_figure_passes_warns_and_fails_at_its_thresholds() -> None:
@@ -23,7 +31,9 @@ def test_the_worst_check_is_the_verdict_and_every_line_says_why() -> None:
     )
     v = Verdict("laser map", checks)
     assert v.level == "warn"
-    lines = verdict_lines(v.to_dict())
+    lines = verdict_lines(v)
+    assert verdict_lines(verdict_of({"verdict": to_wire(v)})) == lines  # as a reply sends it
+    assert "advice" not in to_wire(checks[0])  # a pass says nothing to do: its key is left out
     assert lines[0] == "WARN: laser map"
     assert "segments: 0 (>= 1); is the laser on?" in lines[2]
     assert "rms: 0.2 px (pass <= 0.5 px, fail > 1 px)" in lines[1]
