@@ -21,7 +21,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -92,13 +92,13 @@ def _jpeg(image: Any, width: int, quality: int) -> ImageReply:
         size = (max(1, round(w * scale)), max(1, round(h * scale)))
         image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
     data = _encoded(image, "jpg", (cv2.IMWRITE_JPEG_QUALITY, int(quality)))
-    return {
-        "width": int(image.shape[1]),
-        "height": int(image.shape[0]),
-        "scale": scale,
-        "format": "jpg",
-        "base64": base64.b64encode(data).decode("ascii"),
-    }
+    return ImageReply(
+        width=int(image.shape[1]),
+        height=int(image.shape[0]),
+        scale=scale,
+        format="jpg",
+        base64=base64.b64encode(data).decode("ascii"),
+    )
 
 
 def _iso(wall: float) -> str:
@@ -481,11 +481,10 @@ class Cell:
         JPEG-encoded (base64). Not logged (a screen asks often); refused (`busy`) rather than
         waited for while a command holds or wants the camera (`live_frame`)."""
         frame = self.live_frame()
-        return {
-            "sequence": int(frame.sequence),
-            "wall_time": _iso(frame.wall_time),
-            **_jpeg(frame.image, width, quality),
-        }
+        picture = _jpeg(frame.image, width, quality)
+        return ViewReply(
+            **vars(picture), sequence=int(frame.sequence), wall_time=_iso(frame.wall_time)
+        )
 
     def live_frame(self) -> Any:
         """A fresh frame for a screen, the laser as it is: refused (`busy`) at once while a
@@ -502,7 +501,7 @@ class Cell:
         from omnisort_hw.pipeline import detection
 
         found = detection.run(self.jobs, request)
-        return {**found.reply(), "picture": _jpeg(found.image, request.width, request.quality)}
+        return replace(found.reply(), picture=_jpeg(found.image, request.width, request.quality))
 
     def picture(self, path: str, width: int = 960, quality: int = 85) -> PictureFileReply:
         """A picture this service wrote (a PNG in the calibration store's folder, as a reply's
@@ -517,7 +516,7 @@ class Cell:
         image = cv2.imread(str(p), cv2.IMREAD_COLOR)
         if image is None:
             raise InputError(f"{path}: no such picture, or not readable as PNG")
-        return {"path": str(p), **_jpeg(image, width, quality)}
+        return PictureFileReply(**vars(_jpeg(image, width, quality)), path=str(p))
 
     def prune_captures(self) -> None:
         files = sorted(self.capture_dir.glob("capture-*"))

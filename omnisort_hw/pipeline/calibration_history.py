@@ -39,16 +39,17 @@ def summary(kind: str, payload: dict[str, Any]) -> str:
 
 
 def _version(path: Path, kind: str, current: bool) -> VersionReply:
-    out: VersionReply = {"path": str(path), "current": current}
     try:
         rec = read_calibration_file(path, kind)
     except CalibrationFileError as exc:
-        out["problem"] = str(exc)
-        return out
-    out["saved"] = rec.saved.isoformat()
-    out["checksum"] = rec.checksum
-    out["summary"] = summary(kind, rec.payload)
-    return out
+        return VersionReply(str(path), current, problem=str(exc))
+    return VersionReply(
+        str(path),
+        current,
+        saved=rec.saved.isoformat(),
+        checksum=rec.checksum,
+        summary=summary(kind, rec.payload),
+    )
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,7 @@ class HistoryResult:
     versions: tuple[VersionReply, ...]
 
     def reply(self) -> HistoryReply:
-        return {"kind": self.kind, "versions": list(self.versions)}
+        return HistoryReply(self.kind, list(self.versions))
 
 
 def run(rig: HistoryRig, request: HistoryRequest) -> HistoryResult:

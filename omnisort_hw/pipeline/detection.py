@@ -85,15 +85,13 @@ class Layer:
 
     def reply(self) -> LayerReply:
         b, g, r = self.colour
-        out: LayerReply = {
-            "name": self.name,
-            "kind": self.kind,
-            "colour": f"#{r:02x}{g:02x}{b:02x}",
-            "pixels": np.round(self.pixels, PIXEL_DECIMALS).tolist(),
-        }
-        if self.labels:
-            out["labels"] = list(self.labels)
-        return out
+        return LayerReply(
+            name=self.name,
+            kind=self.kind,
+            colour=f"#{r:02x}{g:02x}{b:02x}",
+            pixels=np.round(self.pixels, PIXEL_DECIMALS).tolist(),
+            labels=list(self.labels) if self.labels else None,
+        )
 
 
 @dataclass
@@ -121,18 +119,16 @@ class Detection:
 
     def reply(self) -> DetectReply:
         h, w = self.image.shape[:2]
-        out: DetectReply = {
-            "what": self.pattern.what,
-            "pattern": self.pattern.name,
-            "found": self.found,
-            "summary": self.summary(),
-            "image_width": int(w),
-            "image_height": int(h),
-            "layers": [layer.reply() for layer in self.layers],
-        }
-        if self.problem is not None:
-            out["problem"] = self.problem
-        return out
+        return DetectReply(
+            what=self.pattern.what,
+            pattern=self.pattern.name,
+            found=self.found,
+            summary=self.summary(),
+            image_width=int(w),
+            image_height=int(h),
+            layers=[layer.reply() for layer in self.layers],
+            problem=self.problem,
+        )
 
 
 def _points(uv: list[np.ndarray]) -> np.ndarray:

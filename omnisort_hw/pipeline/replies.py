@@ -175,17 +175,20 @@ class AdoptReply(TypedDict):
     drift_reference: bool
 
 
-class LayerReply(TypedDict):
-    """One detected feature's pixels in the frame, its kind and the colour it is drawn in."""
+@dataclass(frozen=True)
+class LayerReply:
+    """One detected feature's pixels in the frame, its kind and the colour it is drawn in
+    (`labels`: the markers' names, none for other kinds)."""
 
     name: str
     kind: str
     colour: str
     pixels: list[list[float]]
-    labels: NotRequired[list[str]]
+    labels: list[str] | None = absent()
 
 
-class ImageReply(TypedDict):
+@dataclass(frozen=True)
+class ImageReply:
     """A picture sent to a client: JPEG in base64, its size, and its px per camera px."""
 
     width: int
@@ -194,7 +197,14 @@ class ImageReply(TypedDict):
     format: str
     base64: str
 
+    @property
+    def data_url(self) -> str:
+        """The picture for an `<img>`'s source."""
+        mime = "jpeg" if self.format == "jpg" else self.format
+        return f"data:image/{mime};base64,{self.base64}"
 
+
+@dataclass(frozen=True)
 class ViewReply(ImageReply):
     """`view`: a live picture, with its frame's number and wall time."""
 
@@ -202,6 +212,7 @@ class ViewReply(ImageReply):
     wall_time: str
 
 
+@dataclass(frozen=True)
 class PictureFileReply(ImageReply):
     """`picture`: a PNG this service wrote, as a picture for a screen."""
 
@@ -217,8 +228,10 @@ class StopReply(TypedDict):
     problems: list[str]
 
 
-class DetectReply(TypedDict):
-    """A calibration pattern in one frame: its layers, or why it was not found."""
+@dataclass(frozen=True)
+class DetectReply:
+    """A calibration pattern in one frame: its layers, or why it was not found; the frame as a
+    picture when the service sends one."""
 
     what: str
     pattern: str
@@ -227,8 +240,8 @@ class DetectReply(TypedDict):
     image_width: int
     image_height: int
     layers: list[LayerReply]
-    problem: NotRequired[str]
-    picture: NotRequired[ImageReply]
+    problem: str | None = absent()
+    picture: ImageReply | None = absent()
 
 
 @dataclass(frozen=True)
@@ -272,15 +285,17 @@ class ViewsReply:
     removed: list[str] | None = absent()
 
 
-class VersionReply(TypedDict):
-    """One kept version of a calibration file: its figures, or why it does not verify."""
+@dataclass(frozen=True)
+class VersionReply:
+    """One kept version of a calibration file: when it was saved, its checksum and a summary,
+    or (`problem`) why it does not verify."""
 
     path: str
     current: bool
-    saved: NotRequired[str]
-    checksum: NotRequired[str]
-    summary: NotRequired[str]
-    problem: NotRequired[str]
+    saved: str | None = absent()
+    checksum: str | None = absent()
+    summary: str | None = absent()
+    problem: str | None = absent()
 
 
 @dataclass(frozen=True)
@@ -327,7 +342,8 @@ class GeometryReply:
     problems: list[str] = field(default_factory=list)  # why a part is missing
 
 
-class HistoryReply(TypedDict):
+@dataclass(frozen=True)
+class HistoryReply:
     """A calibration file's current version and the ones kept before it, newest first."""
 
     kind: str

@@ -89,19 +89,19 @@ class CellCommands:
         return self.execute("describe")
 
     def view(self, request: ViewRequest | None = None) -> ViewReply:
-        return cast(ViewReply, self.execute("view", wire_args(request)))
+        return from_wire(ViewReply, self.execute("view", wire_args(request)))
 
     def picture(self, request: PictureRequest) -> PictureFileReply:
-        return cast(PictureFileReply, self.execute("picture", wire_args(request)))
+        return from_wire(PictureFileReply, self.execute("picture", wire_args(request)))
 
     def detect(self, request: DetectRequest | None = None) -> DetectReply:
-        return cast(DetectReply, self.execute("detect", wire_args(request)))
+        return from_wire(DetectReply, self.execute("detect", wire_args(request)))
 
     def views(self, request: ViewsRequest | None = None) -> ViewsReply:
         return from_wire(ViewsReply, self.execute("views", wire_args(request)))
 
     def history(self, request: HistoryRequest | None = None) -> HistoryReply:
-        return cast(HistoryReply, self.execute("history", wire_args(request)))
+        return from_wire(HistoryReply, self.execute("history", wire_args(request)))
 
     def geometry(self, request: GeometryRequest | None = None) -> GeometryReply:
         return from_wire(GeometryReply, self.execute("geometry", wire_args(request)))

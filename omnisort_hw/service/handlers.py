@@ -65,11 +65,11 @@ def describe(ctx: Context, _request: None) -> Reply:
 
 
 def view(ctx: Context, request: ViewRequest) -> Reply:
-    return ctx.cell.view(request.width, request.quality)
+    return to_wire(ctx.cell.view(request.width, request.quality))
 
 
 def detect(ctx: Context, request: DetectRequest) -> Reply:
-    return ctx.cell.detect(request)
+    return to_wire(ctx.cell.detect(request))
 
 
 def views(ctx: Context, request: ViewsRequest) -> Reply:
@@ -81,7 +81,7 @@ def views(ctx: Context, request: ViewsRequest) -> Reply:
 def history(ctx: Context, request: HistoryRequest) -> Reply:
     from omnisort_hw.pipeline import calibration_history
 
-    return calibration_history.run(ctx.cell.jobs, request).reply()
+    return to_wire(calibration_history.run(ctx.cell.jobs, request).reply())
 
 
 def geometry(ctx: Context, request: GeometryRequest) -> Reply:
@@ -91,7 +91,7 @@ def geometry(ctx: Context, request: GeometryRequest) -> Reply:
 
 
 def picture(ctx: Context, request: PictureRequest) -> Reply:
-    return ctx.cell.picture(request.path, request.width, request.quality)
+    return to_wire(ctx.cell.picture(request.path, request.width, request.quality))
 
 
 def capture(ctx: Context, request: CaptureRequest) -> Reply:

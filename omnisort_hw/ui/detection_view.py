@@ -75,12 +75,15 @@ class LiveDetection:
         self.show(reply)
 
     def show(self, reply: DetectReply) -> None:
-        picture = reply["picture"]
-        scale, unit = float(picture["scale"]), picture["width"] / 960.0
+        picture = reply.picture
+        if picture is None:  # the service sends one with every detection
+            self.found, self.summary.text = reply.found, reply.summary
+            return
+        scale, unit = picture.scale, picture.width / 960.0
         overlays = [self.extra(scale, unit) if self.extra else None]
         overlays.append(detection_overlay(reply, scale, unit))
         shown = [o for o in overlays if o is not None]
-        self.last, self.found = reply, bool(reply["found"])
-        self.image.set_source(f"data:image/jpeg;base64,{picture['base64']}")
+        self.last, self.found = reply, reply.found
+        self.image.set_source(picture.data_url)
         self.image.content = "".join(o.svg for o in shown)
         self.summary.text = "; ".join(o.legend for o in reversed(shown))

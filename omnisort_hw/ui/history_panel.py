@@ -20,10 +20,11 @@ KINDS = ("system", "camera")
 
 def version_label(version: VersionReply) -> str:
     """A version in a line: when it was saved, what it holds, or why it does not verify."""
-    if "problem" in version:
-        return f"DOES NOT VERIFY: {version['problem']}"
-    now = " (current)" if version["current"] else ""
-    return f"{version['saved'][:19]} {version['summary']}, {version['checksum'][:15]}{now}"
+    if version.problem is not None:
+        return f"DOES NOT VERIFY: {version.problem}"
+    now = " (current)" if version.current else ""
+    saved, checksum = version.saved or "", version.checksum or ""
+    return f"{saved[:19]} {version.summary}, {checksum[:15]}{now}"
 
 
 class HistoryPanel:
@@ -66,13 +67,11 @@ class HistoryPanel:
             reply = await self.send(call_of(CellCommands.history, HistoryRequest(kind=kind)))
             if reply is None:
                 return
-            versions = reply["versions"]
+            versions = reply.versions
             self.versions[kind] = versions
             self.lists[kind].text = "\n".join(version_label(v) for v in versions) or "none yet"
             kept = {
-                v["path"]: version_label(v)
-                for v in versions
-                if not v["current"] and "problem" not in v
+                v.path: version_label(v) for v in versions if not v.current and v.problem is None
             }
             self.pick[kind].set_options(kept, value=next(iter(kept), None))
 
@@ -81,7 +80,7 @@ class HistoryPanel:
         if not path:
             self.note.text = f"{kind}: no kept version to go back to"
             return
-        label = version_label(next(v for v in self.versions[kind] if v["path"] == path))
+        label = version_label(next(v for v in self.versions[kind] if v.path == path))
         if not await confirm(
             f"Go back to the {kind} calibration {label}? The current one is kept in the history."
         ):

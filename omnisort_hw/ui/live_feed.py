@@ -8,27 +8,10 @@ from __future__ import annotations
 import collections
 import threading
 import time
-from dataclasses import dataclass
 
 from omnisort_hw.pipeline.replies import ViewReply
 from omnisort_hw.pipeline.requests import ViewRequest
 from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, ServiceLink, call_of
-
-
-@dataclass(frozen=True)
-class Picture:
-    """One live picture as the service gave it (`view`'s reply)."""
-
-    base64: str
-    width: int
-    height: int
-    scale: float  # picture px per camera px
-    sequence: int
-    wall_time: str
-
-    @property
-    def data_url(self) -> str:
-        return f"data:image/jpeg;base64,{self.base64}"
 
 
 class LiveFeed:
@@ -36,7 +19,7 @@ class LiveFeed:
 
     def __init__(self, link: ServiceLink, period_s: float, width_px: int) -> None:
         self.link, self.period_s, self.width_px = link, period_s, width_px
-        self.picture: Picture | None = None
+        self.picture: ViewReply | None = None  # the last live picture
         self.problem: str | None = None
         self.received = 0  # pictures received since the start
         self._times: collections.deque[float] = collections.deque(maxlen=20)
@@ -96,14 +79,7 @@ class LiveFeed:
         reader.close()
 
     def _store(self, reply: ViewReply) -> None:
-        self.picture = Picture(
-            str(reply["base64"]),
-            int(reply["width"]),
-            int(reply["height"]),
-            float(reply["scale"]),
-            int(reply["sequence"]),
-            str(reply["wall_time"]),
-        )
+        self.picture = reply
         self.problem = None
         with self._lock:
             self.received += 1

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from html import escape
 from typing import Any
 
-from omnisort_hw.pipeline.replies import ViewsReply
+from omnisort_hw.pipeline.replies import DetectReply, ViewsReply
 
 MAX_POINTS = 800  # drawn of a map's points, evenly spaced: enough to see, light to send
 
@@ -83,16 +83,15 @@ def cubes_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> 
     return Overlay("".join(parts), legend)
 
 
-def detection_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay:
+def detection_overlay(reply: DetectReply, scale: float, unit: float = 1.0) -> Overlay:
     """A `detect` reply's layers in their colours: markers ringed and labelled, board corners
     and rejected corners as larger dots, border, floor line and stripe as small dots."""
     parts = []
-    for layer in reply.get("layers") or []:
-        colour = escape(str(layer.get("colour", "white")))
-        pixels: Sequence[Sequence[float]] = layer.get("pixels") or []
-        labels: Sequence[str] = layer.get("labels") or []
-        if layer.get("kind") == "marker":
-            for i, (u, v) in enumerate(pixels):
+    for layer in reply.layers:
+        colour = escape(layer.colour)
+        labels = layer.labels or []
+        if layer.kind == "marker":
+            for i, (u, v) in enumerate(layer.pixels):
                 x, y = u * scale, v * scale
                 parts.append(
                     f'<circle cx="{x:.1f}" cy="{y:.1f}" r="{8 * unit:.2f}" fill="none" '
@@ -104,12 +103,12 @@ def detection_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0)
                         f'font-size="{12 * unit:.1f}">{escape(labels[i])}</text>'
                     )
             continue
-        r = (3 if layer.get("kind") in ("corner", "rejected") else 1.5) * unit
+        r = (3 if layer.kind in ("corner", "rejected") else 1.5) * unit
         parts += [
             f'<circle cx="{u * scale:.1f}" cy="{v * scale:.1f}" r="{r:.2f}" fill="{colour}" />'
-            for u, v in pixels
+            for u, v in layer.pixels
         ]
-    return Overlay("".join(parts), str(reply.get("summary", "")))
+    return Overlay("".join(parts), reply.summary)
 
 
 def coverage_overlay(reply: ViewsReply, scale: float, unit: float = 1.0) -> Overlay | None:

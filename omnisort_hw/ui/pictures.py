@@ -22,7 +22,7 @@ async def fetch_picture(ctx: UiContext, token: str, path: str, width: int = 960)
     sent = await run.io_bound(ctx.link.call, job, token)
     if sent is None:
         return None
-    return f"data:image/jpeg;base64,{sent['base64']}"
+    return sent.data_url
 
 
 async def show_picture(

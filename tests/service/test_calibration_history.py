@@ -11,8 +11,10 @@ from pathlib import Path
 import pytest
 
 from omnisort_hw.config.service import ServiceConfig
+from omnisort_hw.pipeline.replies import HistoryReply
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.server import Service, start_in_thread
+from omnisort_hw.wire_records import from_wire, to_wire
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -51,6 +53,8 @@ def test_versions_are_listed_verified_and_restored(tmp_path: Path) -> None:
             denied = anyone.call("history")
     finally:
         running.stop()
+    for reply in (listed, after, checked, cameras):  # the record holds it all, problems too
+        assert to_wire(from_wire(HistoryReply, reply)) == reply
 
     versions = listed["versions"]
     assert [v["current"] for v in versions] == [True, False]

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from omnisort_hw.config.service import ServiceConfig
+from omnisort_hw.pipeline.replies import DetectReply
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.server import Service, start_in_thread
+from omnisort_hw.wire_records import from_wire, to_wire
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -71,6 +73,8 @@ def test_detection_lies_where_the_simulator_drew_it(tmp_path: Path) -> None:
             board_for_floor = op.call("detect", {"what": "floor", "board": "9x6"})
     finally:
         running.stop()
+    for reply in (target, floor, dark, live):  # the record holds it all, the picture too
+        assert to_wire(from_wire(DetectReply, reply)) == reply
 
     assert target["found"] and "problem" not in target, target["summary"]
     assert (target["image_width"], target["image_height"]) == (WIDTH, WIDTH)

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from omnisort_hw.config.service import ServiceConfig
+from omnisort_hw.pipeline.replies import PictureFileReply, ViewReply
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.server import Service, start_in_thread
+from omnisort_hw.wire_records import from_wire, to_wire
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -45,6 +47,7 @@ def test_view_is_the_frame_scaled_and_cubes_carry_their_pixels(tmp_path: Path) -
             assert small["scale"] == pytest.approx(100 / WIDTH)
             full = anyone.execute("view", {"width": 4096})
             assert (full["width"], full["scale"]) == (WIDTH, 1.0)  # never enlarged
+            assert to_wire(from_wire(ViewReply, full)) == full  # the record holds it all
             assert full["sequence"] > small["sequence"]  # a fresh frame each time
             # The small picture is the frame scaled: the same scene within JPEG's noise.
             frame, picture = _decode(full), _decode(small)
@@ -59,6 +62,7 @@ def test_view_is_the_frame_scaled_and_cubes_carry_their_pixels(tmp_path: Path) -
             # The picture the location wrote, sent to a client; nothing else of the PC is.
             overlay = located["overlay_png"]
             sent = operator.execute("picture", {"path": overlay, "width": 200})
+            assert to_wire(from_wire(PictureFileReply, sent)) == sent
             written = cv2.imread(overlay, cv2.IMREAD_COLOR)
             assert sent["width"] == 200 and sent["scale"] == pytest.approx(200 / written.shape[1])
             assert _decode(sent).shape[:2] == (sent["height"], 200)

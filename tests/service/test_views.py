@@ -14,8 +14,10 @@ import pytest
 
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.core.intrinsics import MIN_IMAGES
+from omnisort_hw.pipeline.replies import ViewsReply
 from omnisort_hw.service.client import Client
 from omnisort_hw.service.server import Service, start_in_thread
+from omnisort_hw.wire_records import from_wire, to_wire
 
 pytest.importorskip("pybullet", reason="the simulated cell needs pybullet")
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
@@ -52,6 +54,8 @@ def test_views_are_kept_covered_removed_and_cleared(tmp_path: Path) -> None:
             denied = anyone.call("views")
     finally:
         running.stop()
+    for reply in (empty, first, second, removed, third, cleared):  # the record holds it all
+        assert to_wire(from_wire(ViewsReply, reply)) == reply
 
     folder = Path(first["folder"])
     assert folder == tmp_path / "state" / "views"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 
+from omnisort_hw.pipeline.replies import DetectReply, LayerReply
 from omnisort_hw.ui.overlay_svg import (
     MAX_POINTS,
     cubes_overlay,
@@ -65,15 +66,20 @@ def test_cubes_are_drawn_in_their_colour_with_their_index() -> None:
 
 
 def test_a_detection_is_drawn_layer_by_layer_in_its_colours() -> None:
-    reply = {
-        "summary": "the two-sided target found: 2 border px, 2 markers",
-        "layers": [
-            {"name": "left wall border", "kind": "border", "colour": "#ffff00",
-             "pixels": [[10.0, 20.0], [12.0, 22.0]]},
-            {"name": "left wall markers", "kind": "marker", "colour": "#0050ff",
-             "pixels": [[100.0, 50.0], [200.0, 60.0]], "labels": ["L:border_near", "L:<far>"]},
-        ],
-    }  # fmt: skip
+    def found(*layers: LayerReply) -> DetectReply:
+        summary = "the two-sided target found: 2 border px, 2 markers"
+        return DetectReply("target", "two-sided", True, summary, 640, 480, list(layers))
+
+    reply = found(
+        LayerReply("left wall border", "border", "#ffff00", [[10.0, 20.0], [12.0, 22.0]]),
+        LayerReply(
+            "left wall markers",
+            "marker",
+            "#0050ff",
+            [[100.0, 50.0], [200.0, 60.0]],
+            labels=["L:border_near", "L:<far>"],
+        ),
+    )
     overlay = detection_overlay(reply, 0.5)
     rings = re.findall(r'<circle cx="([\d.]+)" cy="([\d.]+)" r="8.00" fill="none" '
                        r'stroke="#0050ff"', overlay.svg)  # fmt: skip
@@ -81,5 +87,5 @@ def test_a_detection_is_drawn_layer_by_layer_in_its_colours() -> None:
     dots = re.findall(r'<circle cx="([\d.]+)" cy="([\d.]+)" r="1.50" fill="#ffff00"', overlay.svg)
     assert dots == [("5.0", "10.0"), ("6.0", "11.0")]
     assert "L:border_near" in overlay.svg and "L:&lt;far&gt;" in overlay.svg  # escaped
-    assert overlay.legend == reply["summary"]
-    assert detection_overlay({"summary": "not found", "layers": []}, 1.0).svg == ""
+    assert overlay.legend == reply.summary
+    assert detection_overlay(found(), 1.0).svg == ""
