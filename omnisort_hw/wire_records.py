@@ -5,10 +5,13 @@ and neither names a key.
 
 The codec reads each record's own annotations (`typing.get_type_hints`): nested records,
 `list[T]`, `tuple[T, ...]` and fixed tuples, `dict[str, T]`, `T | None`, `Literal[...]`,
-numbers (an int is a valid float, as in JSON), and `Any` or `dict[str, Any]` as they come.
+numbers (an int is a valid float, as in JSON; a null where a float is declared is NaN, which
+strict JSON cannot carry and the protocol sends as null), and `Any` or `dict[str, Any]` as
+they come.
 - A field made with `absent()` is left out of the JSON while it holds its default (None, or
   the default given), as a key that is not always there; a field with `None` in its type and
   no `absent()` is sent as null.
+- A field made with `wire_key(key)` is sent under `key` (a Python keyword: `from`).
 - A field with `init=False` (a figure the record computes from its other fields) is sent, and
   computed again when read.
 - A reply that does not fit its record raises `WireError` naming the record and the field's
@@ -22,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import types
 from collections.abc import Mapping
 from typing import Any, Literal, TypeVar, Union, cast, get_args, get_origin, get_type_hints
@@ -31,6 +35,7 @@ from omnisort_hw.errors import OmnisortError
 T = TypeVar("T")
 
 _ABSENT = "wire_absent"
+_KEY = "wire_key"
 
 
 class WireError(OmnisortError, ValueError):
@@ -39,6 +44,11 @@ class WireError(OmnisortError, ValueError):
     def __init__(self, path: str, problem: str) -> None:
         self.path, self.problem = path, problem
         super().__init__(f"{path}: {problem}")
+
+
+def wire_key(key: str) -> Any:
+    """A field sent under another key than its name (a key that is a Python keyword)."""
+    return dataclasses.field(metadata={_KEY: key})
 
 
 def absent(default: Any = None) -> Any:
@@ -56,7 +66,7 @@ def to_wire(value: Any) -> Any:
             v = getattr(value, f.name)
             if f.metadata.get(_ABSENT) and v == f.default:
                 continue
-            out[f.name] = to_wire(v)
+            out[f.metadata.get(_KEY, f.name)] = to_wire(v)
         return out
     if isinstance(value, list | tuple):
         return [to_wire(v) for v in value]
@@ -124,10 +134,11 @@ def _read_record(cls: type, data: Any, path: str) -> Any:
     for f in dataclasses.fields(cls):
         if not f.init:
             continue
-        if f.name in data:
-            values[f.name] = _read(hints[f.name], data[f.name], f"{path}.{f.name}")
+        key = f.metadata.get(_KEY, f.name)
+        if key in data:
+            values[f.name] = _read(hints[f.name], data[key], f"{path}.{key}")
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            raise WireError(f"{path}.{f.name}", "missing")
+            raise WireError(f"{path}.{key}", "missing")
     return cls(**values)
 
 
@@ -135,6 +146,8 @@ def _read_scalar(tp: Any, data: Any, path: str) -> Any:
     if tp is float:
         if isinstance(data, int | float) and not isinstance(data, bool):
             return float(data)
+        if data is None:  # strict JSON has no NaN: the protocol sends it as null
+            return math.nan
     elif tp is int:
         if isinstance(data, int) and not isinstance(data, bool):
             return data

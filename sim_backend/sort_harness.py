@@ -188,9 +188,8 @@ class SimVerifier:
             used.add(t.index)
             out.error_mm = float(np.linalg.norm(t.center_S - c))
             true_B = T_BS_true[:3, :3] @ t.center_S + T_BS_true[:3, 3]
-            report.extra.setdefault("errors_B_mm", []).append(
-                float(np.linalg.norm(true_B - np.asarray(out.center_B_mm)))
-            )
+            errors = report.extra.errors_B_mm = report.extra.errors_B_mm or []
+            errors.append(float(np.linalg.norm(true_B - np.asarray(out.center_B_mm))))
             out.in_right_bin = self.bin_of(final[t.body]) == t.color
         for t in truth:
             if t.index in used:
@@ -199,7 +198,7 @@ class SimVerifier:
             report.add_missed(t.color, t.center_S.tolist(), in_bin)
         report.verified = True
         report.collisions = len(self.collisions)
-        report.extra["collision_events"] = list(self.collisions)
+        report.extra.collision_events = list(self.collisions)
 
 
 def scene_T_SB(scene: Any) -> np.ndarray:

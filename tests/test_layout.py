@@ -240,9 +240,15 @@ def test_the_cli_imports_the_simulator_only_in_its_commands() -> None:
 
 
 def test_the_core_is_pure() -> None:
-    """The core imports only the core, the project's errors and its atomic file writes (for
-    camera.json): no devices, no configuration, no pipeline, no service."""
-    allowed = ("omnisort_hw.core", "omnisort_hw.errors", "omnisort_hw.fileio")
+    """The core imports only the core, the project's errors, its atomic file writes (for
+    camera.json) and the replies' codec (for the records it replies with): no devices, no
+    configuration, no pipeline, no service."""
+    allowed = (
+        "omnisort_hw.core",
+        "omnisort_hw.errors",
+        "omnisort_hw.fileio",
+        "omnisort_hw.wire_records",
+    )
     bad = {
         n: sorted(d for d in _project_edges(n) if not d.startswith(allowed))
         for n in MODULES

@@ -5,6 +5,7 @@ not fit its record is refused with the record's and the field's path."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -81,7 +82,8 @@ def test_the_cell_geometry_reads_back_equal() -> None:
         ({"ratio": True}, "Outer.ratio"),  # a boolean is no number here, though Python says so
         ({"inner": {"level": "pass", "count": 1.5}}, "Outer.inner.count"),
         ({"pair": [1.0]}, "Outer.pair"),
-        ({"by_name": {"x": None}}, "Outer.by_name.x"),
+        ({"by_name": {"x": "1"}}, "Outer.by_name.x"),
+        ({"maybe": "none"}, "Outer.maybe"),
         ({"items": {"level": "pass"}}, "Outer.items"),
     ],
 )
@@ -101,3 +103,10 @@ def test_a_missing_key_is_named() -> None:
         from_wire(Outer, wire)
     with pytest.raises(WireError, match=r"GeometryReply: expected an object"):
         from_wire(GeometryReply, [1, 2])
+
+
+def test_a_null_float_is_nan_and_a_null_optional_is_none() -> None:
+    """Strict JSON has no NaN (the protocol sends it as null): a null where a float is
+    declared reads back as NaN; where None is allowed it stays None."""
+    read = from_wire(Outer, {**to_wire(_outer()), "ratio": None, "maybe": None})
+    assert math.isnan(read.ratio) and read.maybe is None

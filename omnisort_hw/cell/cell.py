@@ -442,11 +442,11 @@ class Cell:
         """Switch the laser when `on` is given; always read the state back."""
         laser = self._need("laser")
         if on is not None:
-            return {"on": self.set_laser(on)}
+            return LaserReply(self.set_laser(on))
         with locked(self._laser_lock, "laser"):
             state = bool(laser.state())
         self._cache_laser(state)
-        return {"on": state}
+        return LaserReply(state)
 
     def capture(
         self, encoding: str = "path", fmt: str = "png", laser: bool | None = None
@@ -458,23 +458,21 @@ class Cell:
         ext = ".png" if fmt == "png" else ".jpg"
         data = _encoded(frame.image, fmt)
         h, w = frame.image.shape[:2]
-        result: CaptureReply = {
-            "sequence": int(frame.sequence),
-            "wall_time": _iso(frame.wall_time),
-            "width": int(w),
-            "height": int(h),
-            "format": fmt,
-            "bytes": len(data),
-        }
+        result = CaptureReply(
+            sequence=int(frame.sequence),
+            wall_time=_iso(frame.wall_time),
+            width=int(w),
+            height=int(h),
+            format=fmt,
+            bytes=len(data),
+        )
         if encoding == "base64":
-            result["base64"] = base64.b64encode(data).decode("ascii")
-            return result
+            return replace(result, base64=base64.b64encode(data).decode("ascii"))
         stamp = datetime.fromtimestamp(frame.wall_time, UTC).strftime("%Y%m%dT%H%M%S.%fZ")
         path = self.capture_dir / f"capture-{stamp}-{int(frame.sequence):06d}{ext}"
         fileio.atomic_write_bytes(path, data, keep_history=False)
         self.prune_captures()
-        result["path"] = str(path)
-        return result
+        return replace(result, path=str(path))
 
     def view(self, width: int = 960, quality: int = 80) -> ViewReply:
         """A live picture for a screen: one fresh frame scaled to at most `width` px and

@@ -14,6 +14,7 @@ import logging
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
@@ -152,8 +153,7 @@ class CellJobs:
         from omnisort_hw.pipeline import intrinsics
 
         reply = intrinsics.run(self, request, cancel).reply()
-        reply["camera_serial"] = self.store.expected_serial
-        return reply
+        return replace(reply, camera_serial=self.store.expected_serial)
 
     def calibrate_extrinsics(
         self, request: CalibrateRequest, cancel: threading.Event | None = None
@@ -253,7 +253,7 @@ class CellJobs:
         """A laser-off frame for the drift watchdog, the laser left as it was: a periodic
         check must not switch off a laser an operator switched on (unless the cell now refuses
         to switch it on: then it stays off, and why is logged)."""
-        was_on = self.cell.devices.laser is not None and bool(self.cell.laser()["on"])
+        was_on = self.cell.devices.laser is not None and self.cell.laser().on
         try:
             return self.grab_frame(laser=False)
         finally:

@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -38,6 +38,7 @@ from omnisort_hw.pipeline.drift_check import (
 from omnisort_hw.pipeline.replies import AcknowledgeReply, DriftReply
 from omnisort_hw.pipeline.requests import CheckRequest
 from omnisort_hw.runlog import RunLog
+from omnisort_hw.wire_records import to_wire
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +155,7 @@ class DriftWatchdog:
             )
             self._save()
         self.ports.runlog().event("drift/check", "drift acknowledged by an operator", level="WARN")
-        return {"acknowledged": drift is not None, "drift": drift}
+        return AcknowledgeReply(acknowledged=drift is not None, drift=drift)
 
     # -- checks ------------------------------------------------------------------------------
 
@@ -177,11 +178,11 @@ class DriftWatchdog:
             # image check.
             assert result.frame is not None
             save_reference(self.store.state_dir, result.frame, result.key)
-            summary["reference_adopted"] = True
+            summary = replace(summary, reference_adopted=True)
         with self._lock:
-            self._state["last"] = summary
+            self._state["last"] = to_wire(summary)
             if result.drift:
-                self._state["drift_detected"] = summary
+                self._state["drift_detected"] = to_wire(summary)
                 self._state["acknowledged"] = None
             self._save()
         if result.drift:

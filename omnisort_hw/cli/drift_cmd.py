@@ -72,11 +72,11 @@ def cmd_check(args: argparse.Namespace) -> int:
     if args.json:
         print_result(s)
     else:
-        b = s["board"] or {}
+        b = s.board or {}
         print(
-            f"{'DRIFT' if s['drift'] else 'ok'}: camera turned {s['angle_deg']:.4f} deg "
-            f"(rotation vector {s['rotvec_deg']} deg in S, threshold {s['threshold_deg']:.4f} "
-            f"deg, from the {s['source']})"
+            f"{'DRIFT' if s.drift else 'ok'}: camera turned {s.angle_deg:.4f} deg "
+            f"(rotation vector {s.rotvec_deg} deg in S, threshold {s.threshold_deg:.4f} "
+            f"deg, from the {s.source})"
         )
         if b:
             print(

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -12,6 +11,7 @@ from typing import Any
 from omnisort_hw.cli.arg_types import output_file
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
+from omnisort_hw.core.records import PictureReply
 from omnisort_hw.pipeline.requests import CalibrateRequest, MapRequest
 
 EXTRINSICS = {"what": "extrinsics"}
@@ -88,19 +88,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.json:
         print_result(result)
     else:
-        print(f"system calibration ({result['method']}) written to {args.out}")
-        for key, value in result["parameters"].items():
-            std = result["std"].get(key)
+        print(f"system calibration ({result.method}) written to {args.out}")
+        for key, value in result.parameters.items():
+            std = result.std.get(key)
             extra = f"  +- {std:.4f}" if std is not None else ""
             print(f"  {key:<20} {value:10.4f}{extra}")
         print_verdict(result)
     return 0
 
 
-def _warn(picture: Mapping[str, Any]) -> None:
+def _warn(picture: PictureReply) -> None:
     """A picture that could not be written: said on stderr, the command still succeeds."""
-    if picture.get("overlay_problem"):
-        print(f"omnisort: warning: {picture['overlay_problem']}", file=sys.stderr)
+    if picture.overlay_problem:
+        print(f"omnisort: warning: {picture.overlay_problem}", file=sys.stderr)
 
 
 def cmd_map(args: argparse.Namespace) -> int:

@@ -9,24 +9,27 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
+from omnisort_hw.wire_records import to_wire
+
 EXIT_DRIFT = 4
 """`omnisort check` and `omnisort ctl check`: the check ran and found the camera turned (0: it
 did not; errors keep their own codes), so a script can stop the line on it."""
 
 
-def print_result(result: Mapping[str, Any], indent: int | None = None) -> None:
-    """A command's result as one JSON document on stdout (NaN as null, as on the protocol:
-    strict JSON parsers refuse NaN)."""
+def print_result(result: object, indent: int | None = None) -> None:
+    """A command's result (a reply's record, or its JSON object) as one JSON document on
+    stdout (NaN as null, as on the protocol: strict JSON parsers refuse NaN)."""
     from omnisort_hw.service.protocol import encode
 
-    doc = json.loads(encode({"ok": True, "result": dict(result)}))
+    doc = json.loads(encode({"ok": True, "result": to_wire(result)}))
     print(json.dumps(doc, indent=indent))
 
 
-def print_verdict(reply: Mapping[str, Any]) -> None:
+def print_verdict(result: object) -> None:
     """A reply's verdict and its picture, as the last lines of a command's human output."""
     from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 
+    reply: Mapping[str, Any] = to_wire(result)
     if reply.get("overlay_png"):
         print(f"picture: {reply['overlay_png']}")
     elif reply.get("overlay_problem"):

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +28,7 @@ from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 from omnisort_hw.config.registration_settings import RegistrationSettings
 from omnisort_hw.errors import ConfigError, InputError
+from omnisort_hw.pipeline.replies import SortReply
 from omnisort_hw.pipeline.requests import LocateRequest, RegisterRequest, SortRequest
 from omnisort_hw.request_fields import args_of
 
@@ -234,30 +234,29 @@ def _print_progress(event: dict[str, Any]) -> None:
     print(f"  cube {event['cube']} ({event['color']}): {event['status']}", file=sys.stderr)
 
 
-def _print_report(result: Mapping[str, Any], as_json: bool) -> None:
+def _print_report(result: SortReply, as_json: bool) -> None:
     if as_json:
         print_result(result)
         return
-    for c in result["cubes"]:
-        err = f"  error {c['error_mm']:.2f} mm" if "error_mm" in c else ""
+    for c in result.cubes:
+        err = f"  error {c.error_mm:.2f} mm" if c.error_mm is not None else ""
         ok = ""
-        if "in_right_bin" in c:
-            ok = "  in its bin" if c["in_right_bin"] else "  NOT in its bin"
-        where = c["center_B_mm"]
+        if c.in_right_bin is not None:
+            ok = "  in its bin" if c.in_right_bin else "  NOT in its bin"
+        where = c.center_B_mm
         print(
-            f"cube {c['index']}: {c['color']:<8} {c['status']:<8} B ({where[0]:.1f}, "
-            f"{where[1]:.1f}, {where[2]:.1f}) mm{err}{ok}"
-            + (f"  - {c['reason']}" if c["reason"] else "")
+            f"cube {c.index}: {c.color:<8} {c.status:<8} B ({where[0]:.1f}, "
+            f"{where[1]:.1f}, {where[2]:.1f}) mm{err}{ok}" + (f"  - {c.reason}" if c.reason else "")
         )
-    t = result["totals"]
+    t = result.totals
     print(
-        f"totals: {t['cubes']} cubes, {t['sorted']} sorted, {t['skipped']} skipped, "
-        f"{t['failed']} failed; planned motion {t['planned_motion_s']:.1f} s; "
-        f"wall {t['wall_s']:.1f} s"
+        f"totals: {t.cubes} cubes, {t.sorted} sorted, {t.skipped} skipped, "
+        f"{t.failed} failed; planned motion {t.planned_motion_s:.1f} s; "
+        f"wall {t.wall_s:.1f} s"
         + (
-            f"; verified: {t['sorted_ok']} in the right bin, {t['collisions']} collisions, "
-            f"mean position error {t['mean_position_error_mm']} mm"
-            if "sorted_ok" in t
+            f"; verified: {t.sorted_ok} in the right bin, {t.collisions} collisions, "
+            f"mean position error {t.mean_position_error_mm} mm"
+            if t.sorted_ok is not None
             else ""
         )
     )

@@ -14,7 +14,7 @@ The verdict's lines (`pipeline.verdict.verdict_lines`) go into the legend, colou
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -30,6 +30,7 @@ from omnisort_hw.core.overlays import (
     project_S,
     put_text,
 )
+from omnisort_hw.core.records import CubeReply
 
 AXIS_MM = 300.0
 AXES: tuple[tuple[str, Colour], ...] = (("X", (0, 0, 255)), ("Y", (0, 200, 0)), ("Z", (255, 80, 0)))
@@ -94,16 +95,18 @@ ELLIPSE_ENLARGE = 10.0
 would be a pixel or less)."""
 
 
-def cube_pixels(calib: SystemCalibration, T_SB: np.ndarray, cube: Cube) -> dict[str, Any]:
-    """Where a located cube is in the image, for a client's overlay: its centre and its 95 %
-    position ellipse enlarged `ELLIPSE_ENLARGE` times (25 points), in camera pixels."""
+def cube_pixels(calib: SystemCalibration, T_SB: np.ndarray, cube: Cube) -> CubeReply:
+    """The cube as a reply gives it, with where it is in the image for a client's overlay:
+    its centre and its 95 % position ellipse enlarged `ELLIPSE_ENLARGE` times (25 points), in
+    camera pixels."""
     centre = project_S(calib, np.asarray(cube.center_S, float)[None, :])[0]
     ring = ellipse_px(calib, T_SB, cube, ELLIPSE_ENLARGE, points=25)
-    return {
-        "center_px": np.round(centre, 1).tolist(),
-        "ellipse_px": np.round(ring, 1).tolist(),
-        "ellipse_scale": ELLIPSE_ENLARGE,
-    }
+    return replace(
+        cube.summary(),
+        center_px=np.round(centre, 1).tolist(),
+        ellipse_px=np.round(ring, 1).tolist(),
+        ellipse_scale=ELLIPSE_ENLARGE,
+    )
 
 
 def ellipse_px(

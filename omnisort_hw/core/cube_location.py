@@ -40,6 +40,7 @@ from scipy.optimize import least_squares
 from scipy.spatial import ConvexHull, QhullError
 
 from omnisort_hw.core.camera_model import OcamModel
+from omnisort_hw.core.records import CubeReply, RejectedBlob
 from omnisort_hw.core.residual_correlation import correlation_inflation
 from omnisort_hw.errors import ConfigError, InputError
 
@@ -277,23 +278,24 @@ class Cube:
         d = np.sqrt(np.clip(np.diag(self.position_cov_xy), 0.0, None))
         return float(d[0]), float(d[1])
 
-    def summary(self) -> dict[str, Any]:
-        return {
-            "color": self.color,
-            "center_S_mm": np.round(self.center_S, 2).tolist(),
-            "center_B_mm": np.round(self.center_B, 2).tolist(),
-            "yaw_S_deg": round(self.yaw_S_deg, 3),
-            "yaw_B_deg": round(self.yaw_B_deg, 3),
-            "sigma_mm": round(self.sigma_mm, 3),
-            "sigma_xy_B_mm": [round(v, 3) for v in self.position_sigma_xy_mm],
-            "sigma_fit_xy_B_mm": [round(v, 3) for v in self.sigma_xy_mm],
-            "sigma_yaw_deg": round(self.sigma_yaw_deg, 3),
-            "rms_px": round(self.rms_px, 3),
-            "area_px": self.area_px,
-            "outline_points": self.outline_points,
-            "laser_points": self.laser_points,
-            "notes": list(self.notes),
-        }
+    def summary(self) -> CubeReply:
+        """The cube as a reply gives it (no pixels: `cell_pictures.cube_pixels` adds them)."""
+        return CubeReply(
+            color=self.color,
+            center_S_mm=np.round(self.center_S, 2).tolist(),
+            center_B_mm=np.round(self.center_B, 2).tolist(),
+            yaw_S_deg=round(self.yaw_S_deg, 3),
+            yaw_B_deg=round(self.yaw_B_deg, 3),
+            sigma_mm=round(self.sigma_mm, 3),
+            sigma_xy_B_mm=[round(v, 3) for v in self.position_sigma_xy_mm],
+            sigma_fit_xy_B_mm=[round(v, 3) for v in self.sigma_xy_mm],
+            sigma_yaw_deg=round(self.sigma_yaw_deg, 3),
+            rms_px=round(self.rms_px, 3),
+            area_px=self.area_px,
+            outline_points=self.outline_points,
+            laser_points=self.laser_points,
+            notes=list(self.notes),
+        )
 
 
 @dataclass(frozen=True)
@@ -440,7 +442,7 @@ def locate_cubes(
         e1, e2 = geom.axes()
         laser_xy = np.stack([lp @ e1, lp @ e2], axis=1)
     cubes: list[Cube] = []
-    rejected: list[dict[str, Any]] = []
+    rejected: list[RejectedBlob] = []
     for name, m in clean.items():
         n, labels, stats, centroids = cv2.connectedComponentsWithStats(m, connectivity=4)
         for i in range(1, n):
@@ -452,9 +454,9 @@ def locate_cubes(
                 continue
             xy, reason = verdict
             where = geom.from_plane(xy[None], size)[0]
-            info = {"color": name, "area_px": area, "at_S_mm": np.round(where, 1).tolist()}
+            at_S = np.round(where, 1).tolist()
             if reason:
-                rejected.append({**info, "reason": reason})
+                rejected.append(RejectedBlob(name, area, at_S, reason))
                 continue
             cube = _locate_one(
                 labels[y - 1 : y + h + 1, x - 1 : x + w + 1] == i,
@@ -470,7 +472,7 @@ def locate_cubes(
                 laser_xy,
             )
             if cube is None:
-                rejected.append({**info, "reason": "outline fit failed"})
+                rejected.append(RejectedBlob(name, area, at_S, "outline fit failed"))
                 continue
             cube.bbox = (x, y, w, h)
             cubes.append(cube)

@@ -445,16 +445,16 @@ class DriftDecision:
     source: str
 
     def summary(self) -> DecisionSummary:
-        return {
-            "drift": self.drift,
-            "angle_deg": round(self.angle_deg, 4),
-            "rotvec_deg": [round(v, 4) for v in self.rotvec_deg],
-            "std_deg": [round(v, 5) for v in self.std_deg],
-            "threshold_deg": round(self.threshold_deg, 4),
-            "t2": round(min(self.t2, 1e12), 2),
-            "p_value": float(f"{self.p_value:.3g}"),
-            "source": self.source,
-        }
+        return DecisionSummary(
+            drift=self.drift,
+            angle_deg=round(self.angle_deg, 4),
+            rotvec_deg=[round(v, 4) for v in self.rotvec_deg],
+            std_deg=[round(v, 5) for v in self.std_deg],
+            threshold_deg=round(self.threshold_deg, 4),
+            t2=round(min(self.t2, 1e12), 2),
+            p_value=float(f"{self.p_value:.3g}"),
+            source=self.source,
+        )
 
 
 def decide(

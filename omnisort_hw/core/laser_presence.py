@@ -63,15 +63,15 @@ class LinePresence:
         )
 
     def to_dict(self) -> LaserLineReply:
-        return {
-            "present": self.present,
-            "longest_line_px": round(self.longest_line_px, 1),
-            "min_line_px": round(self.min_line_px, 1),
-            "chains": self.chains,
-            "spots": self.spots,
-            "blobs": self.blobs,
-            "points": self.points,
-        }
+        return LaserLineReply(
+            present=self.present,
+            longest_line_px=round(self.longest_line_px, 1),
+            min_line_px=round(self.min_line_px, 1),
+            chains=self.chains,
+            spots=self.spots,
+            blobs=self.blobs,
+            points=self.points,
+        )
 
 
 def chain_shapes(

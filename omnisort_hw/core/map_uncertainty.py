@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Any
 
 import numpy as np
 
@@ -31,6 +30,7 @@ from omnisort_hw.core.extrinsics.covariance import ExtrinsicCovariance
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.core.frames import camera_rotation, laser_normal
 from omnisort_hw.core.intrinsics_uncertainty import perturbed_models
+from omnisort_hw.core.records import PointSigmaReply
 
 MIN_CHAIN_POINTS = 8  # a chain needs this many points for its own noise estimate
 SPACINGS = (1, 2, 4, 8)  # points between a centre and the chord's ends
@@ -51,16 +51,16 @@ class PointSigmas:
     normal_S: np.ndarray = field(repr=False)  # (N, 3) unit surface normals used
     sources: list[str] = field(default_factory=list)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> PointSigmaReply:
         ok = np.isfinite(self.normal_mm)
         if not ok.any():
-            return {"sources": self.sources}
-        return {
-            "sources": self.sources,
-            "normal_mm_median": round(float(np.median(self.normal_mm[ok])), 3),
-            "normal_mm_max": round(float(np.max(self.normal_mm[ok])), 3),
-            "pixel_sigma_px_median": round(float(np.median(self.pixel_sigma_px[ok])), 4),
-        }
+            return PointSigmaReply(list(self.sources))
+        return PointSigmaReply(
+            list(self.sources),
+            normal_mm_median=round(float(np.median(self.normal_mm[ok])), 3),
+            normal_mm_max=round(float(np.max(self.normal_mm[ok])), 3),
+            pixel_sigma_px_median=round(float(np.median(self.pixel_sigma_px[ok])), 4),
+        )
 
 
 def stripe_pixel_sigma(pixels: np.ndarray, chains: np.ndarray | None) -> np.ndarray:

@@ -14,11 +14,11 @@ surface continues. A jump in depth spans far more than its pixels imply and stil
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
+from omnisort_hw.core.records import SegmentReply
 
 
 @dataclass
@@ -30,16 +30,16 @@ class Segment:
     length_mm: float
     bearing_deg: float  # direction from the axis to the nearest point, about Z from +X
 
-    def summary(self) -> dict[str, Any]:
-        return {
-            "points": len(self.points_S),
-            "distance_mm": round(self.distance_mm, 2),
-            "mean_distance_mm": round(self.mean_distance_mm, 2),
-            "length_mm": round(self.length_mm, 2),
-            "bearing_deg": round(self.bearing_deg, 2),
-            "start_S_mm": [round(float(v), 2) for v in self.points_S[0]],
-            "end_S_mm": [round(float(v), 2) for v in self.points_S[-1]],
-        }
+    def summary(self) -> SegmentReply:
+        return SegmentReply(
+            points=len(self.points_S),
+            distance_mm=round(self.distance_mm, 2),
+            mean_distance_mm=round(self.mean_distance_mm, 2),
+            length_mm=round(self.length_mm, 2),
+            bearing_deg=round(self.bearing_deg, 2),
+            start_S_mm=[round(float(v), 2) for v in self.points_S[0]],
+            end_S_mm=[round(float(v), 2) for v in self.points_S[-1]],
+        )
 
 
 def pixels_to_plane(pixels: np.ndarray, calib: SystemCalibration) -> np.ndarray:

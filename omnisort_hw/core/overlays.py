@@ -159,17 +159,16 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
 
 
 def write_picture(path: str | Path, draw: Callable[[], np.ndarray]) -> PictureReply:
-    """Draw and write a command's picture, a by-product of its result: `{"overlay_png":
-    path}`, or `{"overlay_png": None, "overlay_problem": why}` when drawing or writing failed,
-    so a measurement already saved is still reported as done (a full disk or a read-only
-    folder costs the picture only)."""
+    """Draw and write a command's picture, a by-product of its result: where it was written,
+    or (no path) why not when drawing or writing failed, so a measurement already saved is
+    still reported as done (a full disk or a read-only folder costs the picture only)."""
     try:
-        return {"overlay_png": str(write_png(path, draw()))}
+        return PictureReply(overlay_png=str(write_png(path, draw())))
     except StorageError as exc:
         why = str(exc)
     except Exception as exc:  # a drawing defect must not turn a saved calibration into an error
         why = f"{path}: the picture could not be drawn ({type(exc).__name__}: {exc})"
-    return {"overlay_png": None, "overlay_problem": why}
+    return PictureReply(overlay_problem=why)
 
 
 def overlay_path(out: str | Path) -> Path:

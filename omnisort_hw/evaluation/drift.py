@@ -29,6 +29,7 @@ from omnisort_hw.evaluation.sorting import apply_layout, draw_layout
 from omnisort_hw.pipeline.drift_check import check_drift
 from omnisort_hw.pipeline.registration import register_from_image, robot_base_record
 from omnisort_hw.sweeps.trial import Trial, TrialOutput, canonical_json
+from omnisort_hw.wire_records import to_wire
 from sim_backend.devices import SimCamera, SimCell
 from sim_backend.scene import load_scene, sized
 from sim_backend.sort_harness import sim_registration_config
@@ -165,7 +166,7 @@ def drift_trial(config: Mapping[str, Any], seed: int) -> TrialOutput:
             err = float(np.degrees(np.linalg.norm(est - true_rotvec)))
             b = res.board
             occluded = b is not None and b.n_visible < b.visible.size
-            summary: dict[str, Any] = dict(res.summary())
+            summary: dict[str, Any] = to_wire(res.summary())
             checked_at.append(summary.pop("checked_at", None))
             return {
                 "drift": res.drift,

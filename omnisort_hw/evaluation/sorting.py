@@ -225,23 +225,23 @@ def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, A
         T_est = np.asarray(report.registration["matrix"], float)
         reg_mm, reg_deg = pose_error(T_est, verifier.T_SB())
         tot = report.totals()
-        picks = max(1, tot["sorted"])
+        picks, extra = max(1, tot.sorted), report.extra
         row.update(
-            sorted_ok=tot["sorted_ok"],
-            collisions=tot["collisions"],
+            sorted_ok=tot.sorted_ok,
+            collisions=tot.collisions,
             position_errors_mm=[o.error_mm for o in report.outcomes if o.error_mm is not None],
-            position_errors_B_mm=report.extra.get("errors_B_mm", []),
+            position_errors_B_mm=extra.errors_B_mm or [],
             registration_error_mm=reg_mm,
             registration_error_deg=reg_deg,
-            motion_s_per_pick=tot["planned_motion_s_per_pick"],
-            cycle=report.extra.get("cycle", {}),
+            motion_s_per_pick=tot.planned_motion_s_per_pick,
+            cycle=extra.cycle or {},
             wall_s_per_pick=wall / picks,
             skipped=[
                 o.reason for o in report.outcomes if o.status in ("skipped", "missed", "failed")
             ],
-            collision_events=report.extra.get("collision_events", []),
-            timings_s=report.extra.get("timings_s", {}),
-            checks=report.extra.get("checks", []),
+            collision_events=extra.collision_events or [],
+            timings_s=extra.timings_s or {},
+            checks=extra.checks or [],
         )
     except Exception as exc:
         row.update(sorted_ok=0, collisions=None, error=f"{type(exc).__name__}: {exc}")

@@ -246,6 +246,6 @@ def gated_sort(width: int = 960, seed: int = 3) -> dict[str, Any]:
             }
             for o in report.outcomes
         ],
-        "sorted_ok": totals["sorted_ok"],
-        "collisions": totals["collisions"],
+        "sorted_ok": totals.sorted_ok,
+        "collisions": totals.collisions,
     }

@@ -26,7 +26,7 @@ from omnisort_hw.fileio import read_calibration_json
 from omnisort_hw.pipeline.calibration_source import read_system_payload
 from omnisort_hw.pipeline.calibration_store import CHECKSUM_KEY, META_KEY, CalibrationStore
 from omnisort_hw.pipeline.image_files import check_image_size
-from omnisort_hw.pipeline.replies import AdoptReply
+from omnisort_hw.pipeline.replies import AdoptedFile, AdoptReply
 from omnisort_hw.pipeline.requests import AdoptRequest
 
 
@@ -48,13 +48,11 @@ class AdoptResult:
     drift_reference: bool
 
     def reply(self) -> AdoptReply:
-        return {
-            "adopted": {
-                f.kind: {"from": f.source, "path": f.path, "checksum": f.checksum}
-                for f in self.files
-            },
-            "drift_reference": self.drift_reference,
+        adopted = {
+            f.kind: AdoptedFile(path=f.path, checksum=f.checksum, source=f.source)
+            for f in self.files
         }
+        return AdoptReply(adopted, self.drift_reference)
 
 
 class AdoptRig(Protocol):

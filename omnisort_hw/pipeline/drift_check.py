@@ -38,7 +38,7 @@ from omnisort_hw.errors import FeatureNotFoundError, OmnisortError
 from omnisort_hw.pipeline.cell_acquisition import frame
 from omnisort_hw.pipeline.replies import DriftReply
 from omnisort_hw.pipeline.requests import CheckRequest
-from omnisort_hw.pipeline.verdict import Check, Verdict, to_wire_verdict
+from omnisort_hw.pipeline.verdict import Check, Verdict
 from omnisort_hw.runlog import NullLog, RunLog
 
 REFERENCE_NAME = "drift_reference.png"
@@ -128,17 +128,15 @@ class DriftResult:
         return self.decision.drift
 
     def summary(self) -> DriftReply:
-        out: DriftReply = {
-            **self.decision.summary(),
-            "checked_at": self.checked_at,
-            "image": self.source,
-            "calibration_key": self.key,
-            "board": self.board.summary() if self.board is not None else None,
-            "verdict": to_wire_verdict(self.verdict()),
-        }
-        if self.board_problem:
-            out["board_problem"] = self.board_problem
-        return out
+        return DriftReply(
+            **vars(self.decision.summary()),
+            checked_at=self.checked_at,
+            image=self.source,
+            calibration_key=self.key,
+            board=self.board.summary() if self.board is not None else None,
+            verdict=self.verdict(),
+            board_problem=self.board_problem or None,
+        )
 
     def verdict(self) -> Verdict:
         """The turn against the decision's own threshold (its false-alarm rate and the

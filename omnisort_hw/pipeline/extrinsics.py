@@ -32,7 +32,7 @@ from omnisort_hw.pipeline.replies import ExtrinsicsReply
 from omnisort_hw.pipeline.requests import CalibrateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.scale_check import ScaleCheck, check_scale
-from omnisort_hw.pipeline.verdict import Check, Verdict, graded, to_wire_verdict
+from omnisort_hw.pipeline.verdict import Check, Verdict, graded
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -263,19 +263,19 @@ class ExtrinsicsResult:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         scale = self.scale
         checked = scale.record() if isinstance(scale, ScaleCheck) else {"not_checked": scale}
-        return {
-            "path": str(self.path),
-            **self.picture,
-            "method": self.calib.method,
-            "target": self.target,
-            "parameters": self.calib.parameters(),
-            "std": self.calib.std,
-            "residuals": self.calib.residuals,
-            "image": self.image,
-            "tone_curve": self.tone.name,
-            "scale_check": checked,
-            "verdict": to_wire_verdict(self.verdict()),
-        }
+        return ExtrinsicsReply(
+            path=str(self.path),
+            method=self.calib.method,
+            target=self.target,
+            parameters=self.calib.parameters(),
+            std=self.calib.std,
+            residuals=self.calib.residuals,
+            image=self.image,
+            tone_curve=self.tone.name,
+            scale_check=checked,
+            verdict=self.verdict(),
+            **vars(self.picture),
+        )
 
 
 ANGLE_STD_DEG = (0.015, 0.03)

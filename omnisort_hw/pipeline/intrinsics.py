@@ -36,13 +36,15 @@ from omnisort_hw.core.intrinsics_uncertainty import (
     unique_images,
 )
 from omnisort_hw.core.overlays import write_png
+from omnisort_hw.core.records import CrossValidation, RejectedImage
 from omnisort_hw.errors import InputError, MotionRefusedError
 from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.replies import IntrinsicsReply
 from omnisort_hw.pipeline.requests import IntrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Check, Verdict, graded, to_wire_verdict
+from omnisort_hw.pipeline.verdict import Check, Verdict, graded
 from omnisort_hw.runlog import NullLog, RunLog
+from omnisort_hw.wire_records import from_wire
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
 
@@ -130,39 +132,37 @@ class IntrinsicsResult:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
         cal = self.calibration
         result, rec, figures = cal.result, cal.record, cal.figures
-        out: IntrinsicsReply = {
-            "path": str(self.path),
-            "report": str(self.report),
-            "rms_px": result.rms_px,
-            "per_image_rms_px": rec["per_image_rms_px"],
-            "images_used": len(result.images_used),
-            "images_rejected": rec["images_rejected"],
-            "corners_rejected": len(result.corners_rejected),
-            "corner_refinement": rec["corner_refinement"],
-            "std": rec["std"],
-            "poly_degree": result.degree,
-            "board": rec["board"],
-            "coverage": rec["coverage"],
-            "cross_validation": rec["cross_validation"],
-            "projection_uncertainty": rec["projection_uncertainty"],
-            "repeated_views": rec["repeated_views"],
-            "created": rec["created"],
-            "outer_band_covered": figures.outer_coverage,
-            "center_uv": list(result.model.center_uv),
-            "model": result.model.to_dict(),
-            "field_of_view_deg": {
+        return IntrinsicsReply(
+            path=str(self.path),
+            report=str(self.report),
+            rms_px=result.rms_px,
+            per_image_rms_px=rec["per_image_rms_px"],
+            images_used=len(result.images_used),
+            images_rejected=[from_wire(RejectedImage, r) for r in rec["images_rejected"]],
+            corners_rejected=len(result.corners_rejected),
+            corner_refinement=rec["corner_refinement"],
+            std=rec["std"],
+            poly_degree=result.degree,
+            board=rec["board"],
+            coverage=rec["coverage"],
+            cross_validation=from_wire(CrossValidation, rec["cross_validation"]),
+            projection_uncertainty=rec["projection_uncertainty"],
+            repeated_views=rec["repeated_views"],
+            created=rec["created"],
+            outer_band_covered=figures.outer_coverage,
+            center_uv=list(result.model.center_uv),
+            model=result.model.to_dict(),
+            field_of_view_deg={
                 "image_circle": figures.circle_field_deg,
                 "corners_seen": figures.corners_field_deg,
             },
-            "verdict": to_wire_verdict(self.verdict()),
-        }
-        if cal.uncertainty_picture is not None:
-            out["uncertainty_png"] = str(uncertainty_png_path(self.path))
-        if "repeated_views_warning" in rec:
-            out["repeated_views_warning"] = rec["repeated_views_warning"]
-        if "images_folder" in rec:
-            out["images_folder"] = rec["images_folder"]
-        return out
+            verdict=self.verdict(),
+            uncertainty_png=str(uncertainty_png_path(self.path))
+            if cal.uncertainty_picture is not None
+            else None,
+            repeated_views_warning=rec.get("repeated_views_warning"),
+            images_folder=rec.get("images_folder"),
+        )
 
     def rim_sigma(self) -> tuple[float, float] | None:
         """(projection sigma, the extrinsic goal in pixels) at RIM_ANGLE_DEG off the axis, or

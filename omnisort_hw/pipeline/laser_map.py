@@ -30,7 +30,7 @@ from omnisort_hw.pipeline.image_files import check_image_size
 from omnisort_hw.pipeline.replies import MapReply, MapSummary
 from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Check, Verdict, at_least, to_wire_verdict
+from omnisort_hw.pipeline.verdict import Check, Verdict, at_least
 from omnisort_hw.runlog import NullLog, RunLog
 
 
@@ -56,26 +56,25 @@ class LaserMap:
         in the same order, its pixel (0.01 px) and its standard deviations (0.01 mm) along
         the surface normal, along the line and off the laser plane."""
         finite = np.all(np.isfinite(self.points_S), axis=1)
-        out: MapSummary = {
-            "points": len(self.pixels),
-            "points_on_plane": int(finite.sum()),
-            "echoes_dropped": self.echoes,
-            "stripe_ends_dropped": self.ends,
-            "segments": [seg.summary() for seg in self.segments],
-        }
-        if self.sigmas is not None:
-            out["sigma"] = self.sigmas.summary()
-        if self.laser_line is not None:
-            out["laser_line"] = self.laser_line.to_dict()
-        if with_points:
-            out["points_S"] = np.round(self.points_S[finite], 1).tolist()
-            out["pixels"] = np.round(self.pixels[finite], 2).tolist()
-            if self.sigmas is not None:
-                sg = self.sigmas
-                out["sigma_normal_mm"] = np.round(sg.normal_mm[finite], 2).tolist()
-                out["sigma_along_mm"] = np.round(sg.along_mm[finite], 2).tolist()
-                out["sigma_off_plane_mm"] = np.round(sg.off_plane_mm[finite], 2).tolist()
-        return out
+        sg = self.sigmas if with_points else None
+
+        def rounded(values: np.ndarray, digits: int) -> list[Any]:
+            return np.round(values[finite], digits).tolist()
+
+        return MapSummary(
+            points=len(self.pixels),
+            points_on_plane=int(finite.sum()),
+            echoes_dropped=self.echoes,
+            stripe_ends_dropped=self.ends,
+            segments=[seg.summary() for seg in self.segments],
+            sigma=self.sigmas.summary() if self.sigmas is not None else None,
+            laser_line=self.laser_line.to_dict() if self.laser_line is not None else None,
+            points_S=rounded(self.points_S, 1) if with_points else None,
+            pixels=rounded(self.pixels, 2) if with_points else None,
+            sigma_normal_mm=rounded(sg.normal_mm, 2) if sg is not None else None,
+            sigma_along_mm=rounded(sg.along_mm, 2) if sg is not None else None,
+            sigma_off_plane_mm=rounded(sg.off_plane_mm, 2) if sg is not None else None,
+        )
 
 
 def map_laser(
@@ -178,12 +177,10 @@ class MapResult:
 
     def reply(self) -> MapReply:
         """The answer at every door (the service's reply, the CLI's `--json`)."""
-        return {
-            "image": self.image,
-            **self.laser_map.summary(self.with_points),
-            **self.picture,
-            "verdict": to_wire_verdict(self.verdict()),
-        }
+        summary = self.laser_map.summary(self.with_points)
+        return MapReply(
+            **vars(summary), **vars(self.picture), image=self.image, verdict=self.verdict()
+        )
 
     def verdict(self) -> Verdict:
         """No laser line in the image is a FAIL: nothing is measured on phantom points (the

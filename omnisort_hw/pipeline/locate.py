@@ -25,7 +25,7 @@ from omnisort_hw.core.laser_stripe import laser_stripe_points
 from omnisort_hw.core.mapping import pixels_to_plane
 from omnisort_hw.core.overlays import write_picture
 from omnisort_hw.core.pick_planning import SortConfig
-from omnisort_hw.core.records import PictureReply
+from omnisort_hw.core.records import CubeReply, PictureReply
 from omnisort_hw.core.registration import Registration
 from omnisort_hw.errors import NotAvailableError
 from omnisort_hw.pipeline.calibration_source import robot_base_T
@@ -34,8 +34,9 @@ from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.replies import LocateReply
 from omnisort_hw.pipeline.requests import LocateRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
-from omnisort_hw.pipeline.verdict import Verdict, at_least, graded, to_wire_verdict, verdict_lines
+from omnisort_hw.pipeline.verdict import Verdict, at_least, graded, verdict_lines
 from omnisort_hw.runlog import NullLog, RunLog
+from omnisort_hw.wire_records import to_wire
 
 
 @dataclass
@@ -59,7 +60,7 @@ class LocateResult:
     max_sigma_mm: float = SortConfig.max_sigma_mm
     picture: PictureReply = field(default_factory=lambda: PictureReply())
     colors: tuple[str, ...] | None = None  # the request's: the reply gives only these
-    pixels: list[dict[str, Any]] = field(default_factory=list)  # each cube's, for overlays
+    shown: list[CubeReply] = field(default_factory=list)  # each cube with its pixels
 
     def lines(self) -> list[str]:
         """The location in a few lines for people (the picture's legend, the CLI)."""
@@ -96,22 +97,22 @@ class LocateResult:
         return Verdict("locate", (found, sigma) if cubes else (found,))
 
     def reply(self) -> LocateReply:
-        """The answer at every door: the cubes (of the request's colours), their count, and
-        the blobs rejected inside the search region with the reason."""
-        where = {id(c): p for c, p in zip(self.cubes, self.pixels, strict=False)}
-        found = [{**c.summary(), **where.get(id(c), {})} for c in self.asked()]
+        """The answer at every door: the cubes (of the request's colours) with their pixels,
+        their count, and the blobs rejected inside the search region with the reason."""
+        where = {id(c): p for c, p in zip(self.cubes, self.shown, strict=False)}
+        found = [where.get(id(c)) or c.summary() for c in self.asked()]
         rejected = [
             r
             for r in self.diagnostics.get("rejected", [])
-            if r["reason"] != "outside the search region"
+            if r.reason != "outside the search region"
         ]
-        return {
-            "cubes": found,
-            "count": len(found),
-            "rejected": rejected,
-            **self.picture,
-            "verdict": to_wire_verdict(self.verdict()),
-        }
+        return LocateReply(
+            cubes=found,
+            count=len(found),
+            rejected=rejected,
+            verdict=self.verdict(),
+            **vars(self.picture),
+        )
 
 
 def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None) -> LocateResult:
@@ -152,7 +153,7 @@ def run(rig: Rig, request: LocateRequest, cancel: threading.Event | None = None)
         what="location",
     )
     result = LocateResult(cubes, diag, cfg.max_sigma_mm, colors=request.colors)
-    result.pixels = [cube_pixels(calib, T_SB, c) for c in cubes]
+    result.shown = [cube_pixels(calib, T_SB, c) for c in cubes]
     result.picture = write_picture(
         rig.picture_path("locate", request.image),
         lambda: draw_cubes(colour, calib, T_SB, cubes, result.lines()),
@@ -243,4 +244,4 @@ def log_cubes(log: RunLog, prefix: str, cubes: Sequence[Cube], diag: Mapping[str
     if cubes:
         log.points3d(f"{prefix}/cubes_S", np.array([c.center_S for c in cubes]), radius=20.0)
         log.points3d(f"{prefix}/cubes_B", np.array([c.center_B for c in cubes]), radius=20.0)
-    log.text(f"{prefix}/cubes", json.dumps([c.summary() for c in cubes], indent=1))
+    log.text(f"{prefix}/cubes", json.dumps([to_wire(c.summary()) for c in cubes], indent=1))

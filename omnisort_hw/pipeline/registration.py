@@ -29,7 +29,7 @@ from omnisort_hw.pipeline.intrinsics import board_record
 from omnisort_hw.pipeline.replies import RegisterReply
 from omnisort_hw.pipeline.requests import RegisterRequest
 from omnisort_hw.pipeline.rig import Rig
-from omnisort_hw.pipeline.verdict import Verdict, graded, to_wire_verdict, verdict_lines
+from omnisort_hw.pipeline.verdict import Verdict, graded, verdict_lines
 from omnisort_hw.runlog import NullLog, RunLog
 
 MAX_BASE_DISTANCE_MM = 10000.0
@@ -75,12 +75,12 @@ class RegisterResult:
     def reply(self) -> RegisterReply:
         """The answer at every door: the `robot_base` record, where it was saved, the picture
         and the verdict."""
-        return {
-            "robot_base": self.record,
-            "path": str(self.path) if self.path is not None else None,
-            **self.picture,
-            "verdict": to_wire_verdict(self.verdict()),
-        }
+        return RegisterReply(
+            robot_base=self.record,
+            path=str(self.path) if self.path is not None else None,
+            verdict=self.verdict(),
+            **vars(self.picture),
+        )
 
     def lines(self, with_verdict: bool = True) -> list[str]:
         """The registration in a few lines for people (the picture's legend, the CLI)."""

@@ -1,22 +1,33 @@
 """The replies of the use cases, typed: what every door shows unchanged (the service's
 `result`, the CLI's `--json`, the typed client's return value), declared once here.
 
-Each is a `TypedDict` (the core's own from `core.records`: a picture's `PictureReply`, a
-drift decision's `DecisionSummary`), so a reply stays plain JSON on the wire while its keys
-and their types are checked where it is built and where it is read; nothing here loads numpy,
-so a client reads these types at no start-up cost. A record the reply carries as it was
-stored or measured (an image record, a calibration file's `robot_base`, a capture's record)
-stays a `Record`: its own module declares it. (No postponed annotations here: a TypedDict
-reads `NotRequired` when its class is made, and `tests/service/test_door_agreement.py` holds
-each real reply against its declared keys.)
+Each is a dataclass record (the core's own from `core.records`: a picture's `PictureReply`, a
+drift decision's `DecisionSummary`, a located cube's `CubeReply`). The service writes it to
+JSON with `wire_records.to_wire` and a client reads it back with `wire_records.from_wire`,
+so the fields are checked where a reply is built and where it is read, and neither side names
+a key; nothing here loads numpy, so a client reads these types at no start-up cost. A record
+the reply carries as it was stored or measured (an image record, a calibration file's
+`robot_base`, a capture's record, the model's coefficients) stays a `Record`: its own module
+declares it. `tests/service/test_door_agreement.py` holds each real reply to its record.
 """
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal, NotRequired, TypedDict
+from typing import Literal
 
-from omnisort_hw.core.records import DecisionSummary, LaserLineReply, PictureReply, Record
-from omnisort_hw.wire_records import absent
+from omnisort_hw.core.records import (
+    CrossValidation,
+    CubeReply,
+    DecisionSummary,
+    LaserLineReply,
+    PictureReply,
+    PointSigmaReply,
+    Record,
+    RejectedBlob,
+    RejectedImage,
+    SegmentReply,
+)
+from omnisort_hw.wire_records import absent, wire_key
 
 Level = Literal["pass", "warn", "fail"]
 
@@ -60,118 +71,204 @@ VerdictWire = Record
 """A verdict in a reply not yet a record: `to_wire(VerdictReply)`."""
 
 
-class MapSummary(TypedDict):
-    """A laser map's counts and segments; with `points`, every point and its sigmas."""
+@dataclass(frozen=True, kw_only=True)
+class MapSummary:
+    """A laser map's counts and segments, its points' sigmas in brief and whether the image
+    showed a laser line; with `points` asked, every point on the plane (S, 0.1 mm) and, in the
+    same order, its pixel and its sigmas along the surface normal, along the line and off the
+    plane (mm)."""
 
     points: int
     points_on_plane: int
     echoes_dropped: int
     stripe_ends_dropped: int
-    segments: list[Record]
-    sigma: NotRequired[Record]
-    laser_line: NotRequired[LaserLineReply]
-    points_S: NotRequired[list[list[float]]]
-    pixels: NotRequired[list[list[float]]]
-    sigma_normal_mm: NotRequired[list[float]]
-    sigma_along_mm: NotRequired[list[float]]
-    sigma_off_plane_mm: NotRequired[list[float]]
+    segments: list[SegmentReply]
+    sigma: PointSigmaReply | None = absent()
+    laser_line: LaserLineReply | None = absent()
+    points_S: list[list[float]] | None = absent()
+    pixels: list[list[float]] | None = absent()
+    sigma_normal_mm: list[float] | None = absent()
+    sigma_along_mm: list[float] | None = absent()
+    sigma_off_plane_mm: list[float] | None = absent()
 
 
+@dataclass(frozen=True, kw_only=True)
 class MapReply(MapSummary, PictureReply):
+    """`map`: the map of one image (its record: path and sha256, or the capture), its verdict
+    and its picture."""
+
     image: Record
-    verdict: VerdictWire
+    verdict: VerdictReply
 
 
+@dataclass(frozen=True, kw_only=True)
 class LocateReply(PictureReply):
-    cubes: list[Record]
+    """The cubes found (of the request's colours), their count, the blobs of a cube's colour
+    inside the search region that were not taken and why, the verdict, and the picture."""
+
+    cubes: list[CubeReply]
     count: int
-    rejected: list[Record]
-    verdict: VerdictWire
+    rejected: list[RejectedBlob]
+    verdict: VerdictReply
 
 
+@dataclass(frozen=True, kw_only=True)
 class RegisterReply(PictureReply):
+    """`register_robot`: the `robot_base` record (as system.json stores it), where it was saved
+    (None: not saved), the verdict and the picture."""
+
     robot_base: Record
     path: str | None
-    verdict: VerdictWire
+    verdict: VerdictReply
 
 
-class IntrinsicsReply(TypedDict):
+@dataclass(frozen=True, kw_only=True)
+class IntrinsicsReply:
     """The intrinsic calibration: camera.json and its report; what camera.json records beside
     the model (the fit per image, the board, the outer band's coverage, the cross-validation,
     the projection uncertainty, the views given twice); the fit's figures; the verdict."""
 
     path: str
     report: str
-    uncertainty_png: NotRequired[str]
     rms_px: float
     per_image_rms_px: dict[str, float]
     images_used: int
-    images_rejected: list[Record]
+    images_rejected: list[RejectedImage]
     corners_rejected: int
-    corner_refinement: str
+    corner_refinement: dict[str, str]  # per image: the refinement its corners got
     std: Record
     poly_degree: int
     board: Record
     coverage: Record
-    cross_validation: Record
+    cross_validation: CrossValidation
     projection_uncertainty: Record
     repeated_views: list[Record]
-    repeated_views_warning: NotRequired[str]
-    images_folder: NotRequired[str]
-    camera_serial: NotRequired[str | None]  # the service's: the camera it was stored for
     created: str
     outer_band_covered: float | None
     center_uv: list[float]
     model: Record
     field_of_view_deg: dict[str, float | None]
-    verdict: VerdictWire
+    verdict: VerdictReply
+    uncertainty_png: str | None = absent()
+    repeated_views_warning: str | None = absent()
+    images_folder: str | None = absent()
+    camera_serial: str | None = absent()  # the service's: the camera it was stored for
 
 
+@dataclass(frozen=True, kw_only=True)
 class ExtrinsicsReply(PictureReply):
+    """`calibrate what=extrinsics`: system.json's path, the method and the target, the fitted
+    parameters (deg, mm) and their 1-sigmas, the fit's residuals, the image's record, the tone
+    curve it was located with, the separation checked against the image's own scale (or why
+    not: `not_checked`), the verdict and the picture."""
+
     path: str
     method: str
     target: str
     parameters: dict[str, float]
     std: dict[str, float]
-    residuals: dict[str, Any]
+    residuals: Record
     image: Record | None
     tone_curve: str
     scale_check: Record
-    verdict: VerdictWire
+    verdict: VerdictReply
 
 
+@dataclass(frozen=True, kw_only=True)
 class DriftReply(DecisionSummary):
+    """`check`: the drift decision, when and on what image, for which calibration, the floor
+    board against its prediction (or why not measured), whether this image became the
+    reference of the finer check, and the verdict."""
+
     checked_at: str
     image: str
     calibration_key: str
     board: Record | None
-    board_problem: NotRequired[str]
-    reference_adopted: NotRequired[bool]
-    verdict: VerdictWire
+    verdict: VerdictReply
+    board_problem: str | None = absent()
+    reference_adopted: bool = absent(False)
 
 
-class SortExtras(TypedDict, total=False):
-    """What a sorting run adds to its report: timings, the cycle, the scene checks, the
-    capture, and a verifier's truth (on the simulated cell)."""
+@dataclass(kw_only=True)
+class SortExtras:
+    """What a sorting run adds to its report as it goes: timings, the cycle, the scene checks,
+    the capture, and a verifier's truth (on the simulated cell)."""
 
-    timings_s: dict[str, float]
-    cycle: Record
-    checks: list[Record]
-    capture: Record
-    errors_B_mm: list[float]
-    collision_events: list[Record]
+    timings_s: dict[str, float] | None = absent()
+    cycle: Record | None = absent()
+    checks: list[Record] | None = absent()
+    capture: Record | None = absent()
+    errors_B_mm: list[float] | None = absent()
+    collision_events: list[Record] | None = absent()
 
 
+@dataclass
+class CubeOutcome:
+    """What happened to one located cube: where it was (mm, NaN where unknown), its status
+    ("sorted": placed; "skipped": refused before motion; "failed"; "missed": a verifier's cube
+    never located) and why, its bin, its pick's planned motion (its lower bound), and a
+    verifier's truth."""
+
+    index: int
+    color: str
+    center_S_mm: list[float]
+    center_B_mm: list[float]
+    yaw_B_deg: float
+    sigma_mm: float
+    status: str
+    reason: str = ""
+    bin: str | None = None
+    planned_motion_s: float = 0.0
+    error_mm: float | None = absent()  # filled by a verifier
+    in_right_bin: bool | None = absent()  # filled by a verifier
+    relocated: bool = absent(False)  # moved after the first capture; located again by a check
+
+
+@dataclass(frozen=True, kw_only=True)
+class SortTotals:
+    """A sorting run's counts, its planned motion (in all, and per pick: None without one),
+    its wall time; with a verifier, the cubes in their bin, the mean position error and the
+    collisions."""
+
+    cubes: int
+    sorted: int
+    skipped: int
+    failed: int
+    planned_motion_s: float
+    planned_motion_s_per_pick: float | None
+    wall_s: float
+    sorted_ok: int | None = absent()
+    mean_position_error_mm: float | None = absent()
+    collisions: int | None = absent()
+
+
+@dataclass(kw_only=True)
 class SortReply(SortExtras):
-    cubes: list[Record]
-    totals: Record
+    """`sort`: each located cube's outcome, the totals, the registration used, the blobs of a
+    cube's colour not taken, the verdict, and what the run added."""
+
+    cubes: list[CubeOutcome]
+    totals: SortTotals
     registration: Record | None
     rejected_blobs: int
-    verdict: VerdictWire
+    verdict: VerdictReply
 
 
-class AdoptReply(TypedDict):
-    adopted: dict[str, Record]
+@dataclass(frozen=True)
+class AdoptedFile:
+    """A calibration file taken in: where from, where it is stored, its new checksum."""
+
+    path: str
+    checksum: str
+    source: str = wire_key("from")  # a field with no default, sent as `from`
+
+
+@dataclass(frozen=True)
+class AdoptReply:
+    """`adopt`: each file taken in, by kind (`camera`, `system`), and whether a drift
+    reference was taken with them."""
+
+    adopted: dict[str, AdoptedFile]
     drift_reference: bool
 
 
@@ -219,7 +316,8 @@ class PictureFileReply(ImageReply):
     path: str
 
 
-class StopReply(TypedDict):
+@dataclass(frozen=True)
+class StopReply:
     """`stop` and `estop`: the job they ended (None: none ran), the state after, and the
     problems met stopping the devices."""
 
@@ -354,13 +452,15 @@ CalibrateReply = IntrinsicsReply | ExtrinsicsReply
 """`calibrate`'s reply: the intrinsics' or the extrinsics', as the request's `what` asks."""
 
 
-class LaserReply(TypedDict):
+@dataclass(frozen=True)
+class LaserReply:
     """`laser`: the switch's state as read back after any switching."""
 
     on: bool
 
 
-class CaptureReply(TypedDict):
+@dataclass(frozen=True)
+class CaptureReply:
     """`capture`: one frame, as a file under the capture folder or inline as base64."""
 
     sequence: int
@@ -369,11 +469,12 @@ class CaptureReply(TypedDict):
     height: int
     format: str
     bytes: int
-    path: NotRequired[str]
-    base64: NotRequired[str]
+    path: str | None = absent()
+    base64: str | None = absent()
 
 
-class AcknowledgeReply(TypedDict):
+@dataclass(frozen=True)
+class AcknowledgeReply:
     """`acknowledge_drift`: whether a drift was there to accept, and that drift."""
 
     acknowledged: bool

@@ -347,16 +347,16 @@ class Sorter:
             registration=loc.registration.record() if loc.registration else None,
             rejected_blobs=len(loc.diagnostics.get("rejected", [])),
         )
-        report.extra["timings_s"] = {
+        report.extra.timings_s = {
             **{k: round(v, 3) for k, v in loc.diagnostics.get("timings_s", {}).items()},
             "plan": round(t_plan, 3),
             "execute": round(time.perf_counter() - t_exec, 3),
         }
-        report.extra["cycle"] = cycle.summary()
+        report.extra.cycle = cycle.summary()
         if self._watch is not None:
-            report.extra["checks"] = self._watch.results
+            report.extra.checks = self._watch.results
         if "capture" in loc.diagnostics:
-            report.extra["capture"] = loc.diagnostics["capture"]
+            report.extra.capture = loc.diagnostics["capture"]
         if on_done is not None:
             on_done(report, loc)
         report.wall_s = time.perf_counter() - t0

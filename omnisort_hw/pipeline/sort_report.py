@@ -3,60 +3,13 @@ service replies, the CLI prints and the evaluation counts them."""
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from omnisort_hw.pipeline.replies import SortExtras, SortReply
-from omnisort_hw.pipeline.verdict import Verdict, none_of, to_wire_verdict
-
-
-def _finite(value: float, digits: int) -> float | None:
-    """A rounded number for JSON, None when it is not finite (strict JSON has no NaN)."""
-    return round(float(value), digits) if math.isfinite(value) else None
-
-
-@dataclass
-class CubeOutcome:
-    """What happened to one located cube."""
-
-    index: int
-    color: str
-    center_S_mm: list[float]
-    center_B_mm: list[float]
-    yaw_B_deg: float
-    sigma_mm: float
-    status: str  # "sorted" (placed), "skipped" (refused before motion), "failed"
-    reason: str = ""
-    bin: str | None = None
-    planned_motion_s: float = 0.0  # the pick's planned motion (its lower bound)
-    error_mm: float | None = None  # filled by a verifier
-    in_right_bin: bool | None = None  # filled by a verifier
-    relocated: bool = False  # moved after the first capture; located again by a check
-
-    def to_dict(self) -> dict[str, Any]:
-        out = {
-            "index": self.index,
-            "color": self.color,
-            "center_S_mm": [_finite(v, 2) for v in self.center_S_mm],
-            "center_B_mm": [_finite(v, 2) for v in self.center_B_mm],
-            "yaw_B_deg": _finite(self.yaw_B_deg, 2),
-            "sigma_mm": _finite(self.sigma_mm, 3),
-            "status": self.status,
-            "reason": self.reason,
-            "bin": self.bin,
-            "planned_motion_s": round(self.planned_motion_s, 3),
-        }
-        if self.error_mm is not None:
-            out["error_mm"] = round(self.error_mm, 3)
-        if self.in_right_bin is not None:
-            out["in_right_bin"] = self.in_right_bin
-        if self.relocated:
-            out["relocated"] = True
-        return out
-
+from omnisort_hw.pipeline.replies import CubeOutcome, SortExtras, SortReply, SortTotals
+from omnisort_hw.pipeline.verdict import Verdict, none_of
 
 MAX_REACHED = "max_objects reached"
 """The reason of a cube left because the request asked for fewer."""
@@ -91,27 +44,24 @@ class SortReport:
             )
         )
 
-    def totals(self) -> dict[str, Any]:
+    def totals(self) -> SortTotals:
         picked = [o for o in self.outcomes if o.status == "sorted"]
-        out: dict[str, Any] = {
-            "cubes": len(self.outcomes),
-            "sorted": len(picked),
-            "skipped": sum(o.status == "skipped" for o in self.outcomes),
-            "failed": sum(o.status == "failed" for o in self.outcomes),
-            "planned_motion_s": round(sum(o.planned_motion_s for o in self.outcomes), 3),
-            "planned_motion_s_per_pick": round(
-                sum(o.planned_motion_s for o in picked) / len(picked), 3
-            )
-            if picked
+        per_pick = sum(o.planned_motion_s for o in picked) / len(picked) if picked else None
+        errs = [o.error_mm for o in self.outcomes if o.error_mm is not None]
+        return SortTotals(
+            cubes=len(self.outcomes),
+            sorted=len(picked),
+            skipped=sum(o.status == "skipped" for o in self.outcomes),
+            failed=sum(o.status == "failed" for o in self.outcomes),
+            planned_motion_s=round(sum(o.planned_motion_s for o in self.outcomes), 3),
+            planned_motion_s_per_pick=round(per_pick, 3) if per_pick is not None else None,
+            wall_s=round(self.wall_s, 3),
+            sorted_ok=sum(bool(o.in_right_bin) for o in self.outcomes) if self.verified else None,
+            mean_position_error_mm=round(float(np.mean(errs)), 3)
+            if self.verified and errs
             else None,
-            "wall_s": round(self.wall_s, 3),
-        }
-        if self.verified:
-            out["sorted_ok"] = sum(bool(o.in_right_bin) for o in self.outcomes)
-            errs = [o.error_mm for o in self.outcomes if o.error_mm is not None]
-            out["mean_position_error_mm"] = round(float(np.mean(errs)), 3) if errs else None
-            out["collisions"] = self.collisions
-        return out
+            collisions=self.collisions if self.verified else None,
+        )
 
     def verdict(self) -> Verdict:
         """Every located cube sorted passes; a skipped one (too uncertain, no bin, cancelled)
@@ -133,12 +83,25 @@ class SortReport:
         return Verdict("sort", tuple(checks))
 
     def reply(self) -> SortReply:
-        """The answer at every door (the service's reply, the CLI's `--json`)."""
-        return {
-            "cubes": [o.to_dict() for o in self.outcomes],
-            "totals": self.totals(),
-            "registration": self.registration,
-            "rejected_blobs": self.rejected_blobs,
-            **self.extra,
-            "verdict": to_wire_verdict(self.verdict()),
-        }
+        """The answer at every door (the service's reply, the CLI's `--json`): each cube's
+        outcome rounded (mm to 0.01, sigmas and times to 0.001)."""
+        return SortReply(
+            cubes=[_rounded(o) for o in self.outcomes],
+            totals=self.totals(),
+            registration=self.registration,
+            rejected_blobs=self.rejected_blobs,
+            verdict=self.verdict(),
+            **vars(self.extra),
+        )
+
+
+def _rounded(o: CubeOutcome) -> CubeOutcome:
+    return replace(
+        o,
+        center_S_mm=[round(v, 2) for v in o.center_S_mm],
+        center_B_mm=[round(v, 2) for v in o.center_B_mm],
+        yaw_B_deg=round(o.yaw_B_deg, 2),
+        sigma_mm=round(o.sigma_mm, 3),
+        planned_motion_s=round(o.planned_motion_s, 3),
+        error_mm=round(o.error_mm, 3) if o.error_mm is not None else None,
+    )

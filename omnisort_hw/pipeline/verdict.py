@@ -10,7 +10,6 @@ gives them with their reasons), never fitted to one data set.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 from omnisort_hw.pipeline.replies import CheckReply, Level, VerdictReply, VerdictWire
 from omnisort_hw.wire_records import from_wire, to_wire
@@ -63,11 +62,15 @@ def at_least(name: str, count: int, minimum: int, level: Level, advice: str) -> 
     return Check(name, "pass" if ok else level, str(count), f">= {minimum}", "" if ok else advice)
 
 
-def verdict_of(reply: Mapping[str, Any] | None) -> Verdict | None:
-    """The verdict a reply carries (its `verdict` as sent), read as its record; None for a
-    reply without one. WireError names a verdict that is not one."""
-    wire = None if reply is None else reply.get("verdict")
-    return None if wire is None else from_wire(VerdictReply, wire)
+def verdict_of(reply: object) -> Verdict | None:
+    """The verdict a reply carries: a record's, or read as its record from a reply's JSON
+    object (`verdict`); None for a reply without one. WireError names a verdict that is not
+    one."""
+    if isinstance(reply, Mapping):
+        wire = reply.get("verdict")
+        return None if wire is None else from_wire(VerdictReply, wire)
+    found = getattr(reply, "verdict", None)
+    return found if isinstance(found, VerdictReply) else None
 
 
 def verdict_lines(verdict: Verdict) -> list[str]:

@@ -17,16 +17,10 @@ from collections.abc import Callable
 from typing import Any
 
 from omnisort_hw.config.service import DEFAULT_PORT
-from omnisort_hw.service.commands import CellCommands, CommandError
+from omnisort_hw.service.commands import CellCommands, ClientError, CommandError, ReplyError
 
 MAX_REPLY_BYTES = 256 * 1024 * 1024
-__all__ = ["Client", "ClientError", "CommandError"]
-
-
-class ClientError(Exception):
-    """The service could not be reached or did not answer in time."""
-
-    code = "client_error"
+__all__ = ["Client", "ClientError", "CommandError", "ReplyError"]
 
 
 class Client(CellCommands):

@@ -21,8 +21,10 @@ from omnisort_hw.pipeline.replies import (
     CaptureReply,
     DetectReply,
     DriftReply,
+    ExtrinsicsReply,
     GeometryReply,
     HistoryReply,
+    IntrinsicsReply,
     LaserReply,
     LocateReply,
     MapReply,
@@ -54,11 +56,12 @@ from omnisort_hw.pipeline.requests import (
 )
 from omnisort_hw.request_fields import wire_args
 from omnisort_hw.service.status_reply import StatusReply
-from omnisort_hw.wire_records import from_wire
+from omnisort_hw.wire_records import WireError, from_wire
 
 Result = dict[str, Any]
 OnEvent = Callable[[dict[str, Any]], None] | None
 R = TypeVar("R")
+T = TypeVar("T")
 Q = TypeVar("Q")
 
 
@@ -72,6 +75,26 @@ class CommandError(Exception):
         self.message = str(error.get("message", ""))
         self.details = {k: v for k, v in error.items() if k not in ("code", "message")}
         super().__init__(f"{command}: {self.code}: {self.message}")
+
+
+class ClientError(Exception):
+    """The service could not be reached or did not answer in time."""
+
+    code = "client_error"
+
+
+class ReplyError(ClientError):
+    """The service's reply does not fit the command's reply record (a service of another
+    version): names the command, the record and the field."""
+
+    code = "reply_mismatch"
+
+
+def _read(record: type[T], command: str, result: Result) -> T:
+    try:
+        return from_wire(record, result)
+    except WireError as exc:
+        raise ReplyError(f"{command}: the service's reply does not fit {exc}") from None
 
 
 class CellCommands:
@@ -89,63 +112,67 @@ class CellCommands:
         return self.execute("describe")
 
     def view(self, request: ViewRequest | None = None) -> ViewReply:
-        return from_wire(ViewReply, self.execute("view", wire_args(request)))
+        return _read(ViewReply, "view", self.execute("view", wire_args(request)))
 
     def picture(self, request: PictureRequest) -> PictureFileReply:
-        return from_wire(PictureFileReply, self.execute("picture", wire_args(request)))
+        return _read(PictureFileReply, "picture", self.execute("picture", wire_args(request)))
 
     def detect(self, request: DetectRequest | None = None) -> DetectReply:
-        return from_wire(DetectReply, self.execute("detect", wire_args(request)))
+        return _read(DetectReply, "detect", self.execute("detect", wire_args(request)))
 
     def views(self, request: ViewsRequest | None = None) -> ViewsReply:
-        return from_wire(ViewsReply, self.execute("views", wire_args(request)))
+        return _read(ViewsReply, "views", self.execute("views", wire_args(request)))
 
     def history(self, request: HistoryRequest | None = None) -> HistoryReply:
-        return from_wire(HistoryReply, self.execute("history", wire_args(request)))
+        return _read(HistoryReply, "history", self.execute("history", wire_args(request)))
 
     def geometry(self, request: GeometryRequest | None = None) -> GeometryReply:
-        return from_wire(GeometryReply, self.execute("geometry", wire_args(request)))
+        return _read(GeometryReply, "geometry", self.execute("geometry", wire_args(request)))
 
     def capture(self, request: CaptureRequest | None = None) -> CaptureReply:
-        return cast(CaptureReply, self.execute("capture", wire_args(request)))
+        return _read(CaptureReply, "capture", self.execute("capture", wire_args(request)))
 
     def laser(self, request: LaserRequest | None = None) -> LaserReply:
-        return cast(LaserReply, self.execute("laser", wire_args(request)))
+        return _read(LaserReply, "laser", self.execute("laser", wire_args(request)))
 
     def calibrate(self, request: CalibrateRequest, on_event: OnEvent = None) -> CalibrateReply:
-        return cast(CalibrateReply, self.execute("calibrate", wire_args(request), on_event))
+        reply = self.execute("calibrate", wire_args(request), on_event)
+        if request.what == "intrinsics":
+            return _read(IntrinsicsReply, "calibrate", reply)
+        return _read(ExtrinsicsReply, "calibrate", reply)
 
     def map(self, request: MapRequest | None = None, on_event: OnEvent = None) -> MapReply:
-        return cast(MapReply, self.execute("map", wire_args(request), on_event))
+        return _read(MapReply, "map", self.execute("map", wire_args(request), on_event))
 
     def register_robot(
         self, request: RegisterRequest | None = None, on_event: OnEvent = None
     ) -> RegisterReply:
-        return cast(RegisterReply, self.execute("register_robot", wire_args(request), on_event))
+        reply = self.execute("register_robot", wire_args(request), on_event)
+        return _read(RegisterReply, "register_robot", reply)
 
     def locate(self, request: LocateRequest | None = None, on_event: OnEvent = None) -> LocateReply:
-        return cast(LocateReply, self.execute("locate", wire_args(request), on_event))
+        return _read(LocateReply, "locate", self.execute("locate", wire_args(request), on_event))
 
     def move(self, request: MoveRequest, on_event: OnEvent = None) -> Result:
         return self.execute("move", wire_args(request), on_event)
 
     def sort(self, request: SortRequest | None = None, on_event: OnEvent = None) -> SortReply:
-        return cast(SortReply, self.execute("sort", wire_args(request), on_event))
+        return _read(SortReply, "sort", self.execute("sort", wire_args(request), on_event))
 
     def check(self, request: CheckRequest | None = None, on_event: OnEvent = None) -> DriftReply:
-        return cast(DriftReply, self.execute("check", wire_args(request), on_event))
+        return _read(DriftReply, "check", self.execute("check", wire_args(request), on_event))
 
     def adopt(self, request: AdoptRequest, on_event: OnEvent = None) -> AdoptReply:
-        return cast(AdoptReply, self.execute("adopt", wire_args(request), on_event))
+        return _read(AdoptReply, "adopt", self.execute("adopt", wire_args(request), on_event))
 
     def acknowledge_drift(self) -> AcknowledgeReply:
-        return cast(AcknowledgeReply, self.execute("acknowledge_drift"))
+        return _read(AcknowledgeReply, "acknowledge_drift", self.execute("acknowledge_drift"))
 
     def stop(self) -> StopReply:
-        return cast(StopReply, self.execute("stop"))
+        return _read(StopReply, "stop", self.execute("stop"))
 
     def estop(self) -> StopReply:
-        return cast(StopReply, self.execute("estop"))
+        return _read(StopReply, "estop", self.execute("estop"))
 
     def reset(self, request: ResetRequest | None = None) -> Result:
         return self.execute("reset", wire_args(request))

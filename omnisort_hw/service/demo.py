@@ -15,9 +15,18 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from omnisort_hw.pipeline.replies import (
+    CalibrateReply,
+    ExtrinsicsReply,
+    IntrinsicsReply,
+    MapReply,
+    RegisterReply,
+    SortReply,
+)
 
 if TYPE_CHECKING:
     from omnisort_hw.service.client import Client
@@ -73,27 +82,33 @@ def calibrate_from_truth(config: Path) -> None:
         cell.close()
 
 
-def _brief(cmd: str, res: Mapping[str, Any]) -> str:
-    if cmd == "calibrate intrinsics":
-        return f"rms {res['rms_px']:.3f} px from {res['images_used']} images -> {res['path']}"
-    if cmd == "calibrate extrinsics":
-        p = res["parameters"]
-        return (
-            f"{res['method']}: camera roll/pitch/yaw {p['cam_roll_deg']:.2f}/"
-            f"{p['cam_pitch_deg']:.2f}/{p['cam_yaw_deg']:.2f} deg, laser at "
-            f"{p['laser_distance_mm']:.1f} mm -> {res['path']}"
-        )
-    if cmd == "register_robot":
-        xyz = res["robot_base"]["xyz_mm"]
-        return f"robot base at [{xyz[0]:.1f}, {xyz[1]:.1f}, {xyz[2]:.1f}] mm (S)"
-    if cmd == "map":
-        return f"{res['points_on_plane']} laser points, {len(res['segments'])} segments"
-    if cmd == "sort":
-        t = res["totals"]
-        return (
-            f"{t['sorted']}/{t['cubes']} cubes sorted, {t['skipped']} skipped, {t['failed']} failed"
-        )
-    return json.dumps(res)[:160]
+def _intrinsics_brief(res: CalibrateReply) -> str:
+    assert isinstance(res, IntrinsicsReply)
+    return f"rms {res.rms_px:.3f} px from {res.images_used} images -> {res.path}"
+
+
+def _extrinsics_brief(res: CalibrateReply) -> str:
+    assert isinstance(res, ExtrinsicsReply)
+    p = res.parameters
+    return (
+        f"{res.method}: camera roll/pitch/yaw {p['cam_roll_deg']:.2f}/"
+        f"{p['cam_pitch_deg']:.2f}/{p['cam_yaw_deg']:.2f} deg, laser at "
+        f"{p['laser_distance_mm']:.1f} mm -> {res.path}"
+    )
+
+
+def _register_brief(res: RegisterReply) -> str:
+    xyz = res.robot_base["xyz_mm"]
+    return f"robot base at [{xyz[0]:.1f}, {xyz[1]:.1f}, {xyz[2]:.1f}] mm (S)"
+
+
+def _map_brief(res: MapReply) -> str:
+    return f"{res.points_on_plane} laser points, {len(res.segments)} segments"
+
+
+def _sort_brief(res: SortReply) -> str:
+    t = res.totals
+    return f"{t.sorted}/{t.cubes} cubes sorted, {t.skipped} skipped, {t.failed} failed"
 
 
 def run(
@@ -119,20 +134,14 @@ def run(
     print(f"starting omnisort serve --config {config}", flush=True)
     svc = start_service(config, out)
     folder = str(views_dir.resolve())
-    steps: list[tuple[str, Callable[[Client], Mapping[str, Any]]]] = [
-        (
-            "calibrate intrinsics",
-            lambda c: c.calibrate(
-                CalibrateRequest(what="intrinsics", folder=folder, square_mm=116.0)
-            ),
-        ),
-        (
-            "calibrate extrinsics",
-            lambda c: c.calibrate(CalibrateRequest(what="extrinsics", target="two-sided")),
-        ),
-        ("register_robot", lambda c: c.register_robot()),
-        ("map", lambda c: c.map()),
-        ("sort", lambda c: c.sort(SortRequest(max_objects=cubes))),
+    intrinsics = CalibrateRequest(what="intrinsics", folder=folder, square_mm=116.0)
+    extrinsics = CalibrateRequest(what="extrinsics", target="two-sided")
+    steps: list[tuple[str, Callable[[Client], str]]] = [
+        ("calibrate intrinsics", lambda c: _intrinsics_brief(c.calibrate(intrinsics))),
+        ("calibrate extrinsics", lambda c: _extrinsics_brief(c.calibrate(extrinsics))),
+        ("register_robot", lambda c: _register_brief(c.register_robot())),
+        ("map", lambda c: _map_brief(c.map())),
+        ("sort", lambda c: _sort_brief(c.sort(SortRequest(max_objects=cubes)))),
     ]
     summary: dict[str, Any] = {"port": svc.port, "steps": []}
     try:
@@ -140,7 +149,7 @@ def run(
             for title, step in steps:
                 t0 = time.monotonic()
                 try:
-                    ok, line = True, _brief(title, step(c))
+                    ok, line = True, step(c)
                 except CommandError as exc:
                     ok, line = False, f"error {exc.code}: {exc.message}"
                 dt = time.monotonic() - t0

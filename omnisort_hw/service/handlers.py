@@ -95,11 +95,11 @@ def picture(ctx: Context, request: PictureRequest) -> Reply:
 
 
 def capture(ctx: Context, request: CaptureRequest) -> Reply:
-    return ctx.cell.capture(request.encoding, request.format, request.laser)
+    return to_wire(ctx.cell.capture(request.encoding, request.format, request.laser))
 
 
 def laser(ctx: Context, request: LaserRequest) -> Reply:
-    return ctx.cell.laser(request.on)
+    return to_wire(ctx.cell.laser(request.on))
 
 
 def calibrate(ctx: Context, request: CalibrateRequest) -> Reply:
@@ -107,20 +107,20 @@ def calibrate(ctx: Context, request: CalibrateRequest) -> Reply:
         from omnisort_hw.pipeline.intrinsics import image_files
 
         images = tuple(image_files(str(request.folder)))
-        return ctx.cell.jobs.calibrate_intrinsics(request.intrinsics(images), ctx.cancel)
-    return ctx.cell.jobs.calibrate_extrinsics(request, ctx.cancel)
+        return to_wire(ctx.cell.jobs.calibrate_intrinsics(request.intrinsics(images), ctx.cancel))
+    return to_wire(ctx.cell.jobs.calibrate_extrinsics(request, ctx.cancel))
 
 
 def map_scene(ctx: Context, request: MapRequest) -> Reply:
-    return ctx.cell.jobs.map_scene(request, ctx.cancel)
+    return to_wire(ctx.cell.jobs.map_scene(request, ctx.cancel))
 
 
 def register_robot(ctx: Context, request: RegisterRequest) -> Reply:
-    return ctx.cell.jobs.register_robot(request, ctx.cancel)
+    return to_wire(ctx.cell.jobs.register_robot(request, ctx.cancel))
 
 
 def locate(ctx: Context, request: LocateRequest) -> Reply:
-    return ctx.cell.jobs.locate(request, ctx.cancel)
+    return to_wire(ctx.cell.jobs.locate(request, ctx.cancel))
 
 
 def move(ctx: Context, request: MoveRequest) -> Reply:
@@ -128,19 +128,19 @@ def move(ctx: Context, request: MoveRequest) -> Reply:
 
 
 def sort(ctx: Context, request: SortRequest) -> Reply:
-    return ctx.cell.jobs.sort(request, ctx.cancel, ctx.progress)
+    return to_wire(ctx.cell.jobs.sort(request, ctx.cancel, ctx.progress))
 
 
 def check(ctx: Context, request: CheckRequest) -> Reply:
-    return ctx.cell.drift.check(request.image)
+    return to_wire(ctx.cell.drift.check(request.image))
 
 
 def adopt(ctx: Context, request: AdoptRequest) -> Reply:
-    return ctx.cell.jobs.adopt(request)
+    return to_wire(ctx.cell.jobs.adopt(request))
 
 
 def acknowledge_drift(ctx: Context, _request: None) -> Reply:
-    return ctx.cell.drift.acknowledge()
+    return to_wire(ctx.cell.drift.acknowledge())
 
 
 HANDLERS: dict[str, Handler] = {

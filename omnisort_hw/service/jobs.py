@@ -63,11 +63,7 @@ class JobRunner:
         if self.states.state != State.FAULT:
             what = f"{job.cmd} stopped" if job is not None else "stop requested"
             self.states.set(State.STOPPED, what)
-        return {
-            "stopped_job": job.cmd if job is not None else None,
-            "state": self.states.state.value,
-            "problems": problems,
-        }
+        return StopReply(job.cmd if job is not None else None, self.states.state.value, problems)
 
     def _estop(self) -> StopReply:
         job = self._job
@@ -79,11 +75,7 @@ class JobRunner:
         problems = self.cell.emergency_stop()
         if job is not None:
             self._keep_stopping(job)
-        return {
-            "stopped_job": job.cmd if job is not None else None,
-            "state": self.states.state.value,
-            "problems": problems,
-        }
+        return StopReply(job.cmd if job is not None else None, self.states.state.value, problems)
 
     def _keep_stopping(self, job: Job, period_s: float = 0.1, limit_s: float = 10.0) -> None:
         """Stop the arm again every `period_s` until `job` ends (closes the window in which a

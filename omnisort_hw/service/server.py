@@ -48,6 +48,7 @@ from omnisort_hw.service.states import Job, State, StateMachine, Transition
 from omnisort_hw.service.status_reply import ServiceRecord, ServiceStatus
 from omnisort_hw.service.systemd import Notifier
 from omnisort_hw.service.transport import Transport
+from omnisort_hw.wire_records import to_wire
 
 R = TypeVar("R")
 log = logging.getLogger("omnisort.service")
@@ -318,8 +319,10 @@ class Service(Transport, JobRunner):
         if spec.kind == "job":
             return await self._run_job(req, emit)
         if spec.kind == "safety":
-            fn = self._stop if req.cmd == "stop" else self._estop
-            return await self._in_pool(self._safety, req, fn, self.config.quick_timeout_s)
+            stop = self._stop if req.cmd == "stop" else self._estop
+            return await self._in_pool(
+                self._safety, req, lambda: to_wire(stop()), self.config.quick_timeout_s
+            )
         if req.cmd == "reset":
             empty = bool(req.args.get("gripper_empty"))
             return await self._in_pool(

@@ -4,11 +4,11 @@ separation, which the technician may type (the cell file's `[target]` when left 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 from nicegui import ui
 
+from omnisort_hw.pipeline.replies import ExtrinsicsReply
 from omnisort_hw.ui.schema_form import typed_number
 from omnisort_hw.ui.widgets import number_input, tag
 
@@ -17,14 +17,12 @@ PARAMETER_COLUMNS = ("name", "value", "sigma")
 SEPARATION_LABEL = "wall separation (mm): empty for the cell file's"
 
 
-def parameter_rows(reply: Mapping[str, Any]) -> list[dict[str, str]]:
+def parameter_rows(reply: ExtrinsicsReply) -> list[dict[str, str]]:
     """An extrinsic calibration's parameters with their 1-sigma, for a table."""
-    params: Mapping[str, float] = reply.get("parameters") or {}
-    std: Mapping[str, float] = reply.get("std") or {}
     rows = []
-    for name, value in params.items():
+    for name, value in reply.parameters.items():
         unit = next((u for suffix, u in PARAMETER_UNITS.items() if name.endswith(suffix)), "")
-        sigma = std.get(name)
+        sigma = reply.std.get(name)
         rows.append(
             {
                 "name": name,

@@ -8,13 +8,13 @@ S in metres, shifted so the floor the robot stands on is the grid's plane.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from nicegui import run, ui
 
-from omnisort_hw.pipeline.replies import GeometryReply
+from omnisort_hw.pipeline.replies import GeometryReply, LocateReply, MapReply
 from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.overlay_svg import sigma_rgb
@@ -101,12 +101,12 @@ class Cell3D:
         key = (repr(geometry), id(mapped), id(located))
         if key != self._key:
             self._key = key
-            self.draw(geometry, mapped or {}, located or {})
+            self.draw(geometry, mapped, located)
 
     # -- drawing --------------------------------------------------------------------------
 
     def draw(
-        self, geometry: GeometryReply, map_reply: Mapping[str, Any], located: Mapping[str, Any]
+        self, geometry: GeometryReply, map_reply: MapReply | None, located: LocateReply | None
     ) -> None:
         """Everything again, from the replies (S in mm) to the scene (metres above the floor)."""
         floor = geometry.floor_z_mm
@@ -156,11 +156,11 @@ class Cell3D:
             drawn["bins"] = drawn.get("bins", 0) + 1
         self._draw_points(map_reply, at, drawn)
         size = geometry.cube_size_mm * MM
-        for cube in located.get("cubes") or []:
-            yaw = np.radians(float(cube.get("yaw_S_deg", 0.0)))
-            s.box(size, size, size).material(CUBE_COLOURS.get(cube["color"], "#888888")).rotate(
+        for cube in located.cubes if located is not None else []:
+            yaw = np.radians(cube.yaw_S_deg)
+            s.box(size, size, size).material(CUBE_COLOURS.get(cube.color, "#888888")).rotate(
                 0.0, 0.0, yaw
-            ).move(*at(cube["center_S_mm"]))
+            ).move(*at(cube.center_S_mm))
             drawn["cubes"] = drawn.get("cubes", 0) + 1
         if not self._looked:
             self._looked = True
@@ -174,11 +174,11 @@ class Cell3D:
             f" ({problems})" if problems else ""
         )
 
-    def _draw_points(self, reply: Mapping[str, Any], at: Any, drawn: dict[str, int]) -> None:
+    def _draw_points(self, reply: MapReply | None, at: Any, drawn: dict[str, int]) -> None:
         """The last map's points, coloured by their sigma across the plane (as on the live
         view: green at the smallest, red at the largest)."""
-        points: Sequence[Sequence[float]] = reply.get("points_S") or []
-        sigma: Sequence[float] = reply.get("sigma_normal_mm") or []
+        points = (reply.points_S if reply is not None else None) or []
+        sigma = (reply.sigma_normal_mm if reply is not None else None) or []
         if not points or len(sigma) != len(points):
             return
         lo, hi = min(sigma), max(sigma)

@@ -315,8 +315,8 @@ class CellPage:
         overlays = [
             o
             for o in (
-                map_overlay(self.ctx.jobs.result(CellCommands.map) or {}, pic.scale, unit),
-                cubes_overlay(self.ctx.jobs.result(CellCommands.locate) or {}, pic.scale, unit),
+                map_overlay(self.ctx.jobs.result(CellCommands.map), pic.scale, unit),
+                cubes_overlay(self.ctx.jobs.result(CellCommands.locate), pic.scale, unit),
             )
             if o is not None
         ]

@@ -17,12 +17,19 @@ Every action is a command of the protocol; the page only shows the replies.
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 from nicegui import background_tasks, ui
 
-from omnisort_hw.pipeline.replies import ViewsReply
+from omnisort_hw.pipeline.replies import (
+    AdoptReply,
+    ExtrinsicsReply,
+    IntrinsicsReply,
+    LocateReply,
+    MapReply,
+    ViewsReply,
+)
 from omnisort_hw.pipeline.requests import DEFAULT_BOARD, DetectRequest, MapRequest
 from omnisort_hw.ui.calibration_views import (
     extrinsics_args,
@@ -55,17 +62,16 @@ BOARD_DOWN = (
 )
 
 
-def intrinsics_lines(result: Mapping[str, Any]) -> list[str]:
+def intrinsics_lines(result: IntrinsicsReply) -> list[str]:
     """The intrinsics' figures a technician judges: the RMS against its cross-validated twin,
     the views used, and each rejected view with its reason."""
-    cv = (result.get("cross_validation") or {}).get("rms_px")
+    cv = result.cross_validation.rms_px
     lines = [
-        f"RMS {result.get('rms_px', float('nan')):.3f} px over {result.get('images_used')} "
-        "views; cross-validated RMS "
+        f"RMS {result.rms_px:.3f} px over {result.images_used} views; cross-validated RMS "
         + (f"{cv:.3f} px" if cv is not None else "not computed (fewer than 4 views)")
     ]
-    for rejected in result.get("images_rejected") or []:
-        lines.append(f"rejected {rejected['file'].rsplit('/', 1)[-1]}: {rejected['reason']}")
+    for rejected in result.images_rejected:
+        lines.append(f"rejected {rejected.file.rsplit('/', 1)[-1]}: {rejected.reason}")
     return lines
 
 
@@ -316,36 +322,36 @@ class CommissioningPanel:
             return
         what = self._what
         if what == "restore":
-            await self.history.ended(end.ok, end.message, dict(end.result or {}))
+            adopted = end.result if isinstance(end.result, AdoptReply) else None
+            await self.history.ended(end.ok, end.message, adopted)
             return
         step = self.steps[what]
-        result = end.result if end.ok and end.result is not None else None
-        level = step.ended(end, self._lines(what, result))
-        if result is not None:
-            await self._show_pictures(what, result, step.note)
+        result = end.result if end.ok else None
+        level = step.ended(end, self._lines(result))
+        await self._show_pictures(result, step.note)
         if what in VERIFY and level == "pass":
             self._verified()
 
-    def _lines(self, what: str, result: Mapping[str, Any] | None) -> list[str]:
-        """A step's own figures under its verdict."""
-        if result is None:
-            return []
-        if what == "intrinsics":
-            failed = (result.get("verdict") or {}).get("level") == "fail"
+    @staticmethod
+    def _lines(result: object) -> list[str]:
+        """A step's own figures under its verdict (its reply's record says which step)."""
+        if isinstance(result, IntrinsicsReply):
+            failed = result.verdict.level == "fail"
             return intrinsics_lines(result) + ([] if failed else [BOARD_DOWN])
-        if what == "laser-map":
-            return [f"{result.get('points_on_plane', 0)} points on the laser plane"]
-        if what == "cube-location":
-            return [f"{result.get('count', 0)} cubes located"]
+        if isinstance(result, MapReply):
+            return [f"{result.points_on_plane} points on the laser plane"]
+        if isinstance(result, LocateReply):
+            return [f"{result.count} cubes located"]
         return []
 
-    async def _show_pictures(self, what: str, result: Mapping[str, Any], note: Any) -> None:
-        pictures: list[tuple[str, Any]] = []
-        if what == "intrinsics":
-            pictures = [("report", self.intr_report), ("uncertainty_png", self.intr_uncertainty)]
-        elif what == "extrinsics":
+    async def _show_pictures(self, result: object, note: Any) -> None:
+        pictures: list[tuple[str | None, Any]] = []
+        if isinstance(result, IntrinsicsReply):
+            pictures = [(result.report, self.intr_report)]
+            pictures.append((result.uncertainty_png, self.intr_uncertainty))
+        elif isinstance(result, ExtrinsicsReply):
             self.extr_params.rows = parameter_rows(result)
             self.extr_params.update()
-            pictures = [("overlay_png", self.extr_picture)]
-        for key, image in pictures:  # after the note: a picture not sent says so in it
-            await show_picture(self.ctx, self.token(), result.get(key), image, note)
+            pictures = [(result.overlay_png, self.extr_picture)]
+        for path, image in pictures:  # after the note: a picture not sent says so in it
+            await show_picture(self.ctx, self.token(), path, image, note)

@@ -10,7 +10,7 @@ from typing import Any
 
 from nicegui import ui
 
-from omnisort_hw.pipeline.replies import VersionReply
+from omnisort_hw.pipeline.replies import AdoptReply, VersionReply
 from omnisort_hw.pipeline.requests import AdoptRequest, HistoryRequest
 from omnisort_hw.ui.link import CellCommands, Send, StartJob, call_of
 from omnisort_hw.ui.widgets import confirm, tag
@@ -89,14 +89,13 @@ class HistoryPanel:
         if self.start(call_of(CellCommands.adopt, AdoptRequest(**{kind: path}))):
             self.note.text = f"going back to {path}..."
 
-    async def ended(self, ok: bool, message: str, result: dict[str, Any] | None) -> None:
+    async def ended(self, ok: bool, message: str, result: AdoptReply | None) -> None:
         """The end of a restore this panel started: what is current now."""
         if not ok or result is None:
             self.note.text = f"FAIL: {message}"
         else:
-            adopted = result.get("adopted", {})
             self.note.text = "\n".join(
-                f"{kind}.json is now {a['from']} (checksum {a['checksum'][:15]})"
-                for kind, a in adopted.items()
+                f"{kind}.json is now {a.source} (checksum {a.checksum[:15]})"
+                for kind, a in result.adopted.items()
             )
         await self.load()

@@ -8,12 +8,13 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar, cast
 
 from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
-from omnisort_hw.ui.link import Call, ClientError, CommandError, ServiceLink
+from omnisort_hw.ui.link import Call, ClientError, CommandError, ReplyError, ServiceLink
 
 JOB_TIMEOUT_S = 3600.0
+R = TypeVar("R")
 
 
 @dataclass(frozen=True)
@@ -23,14 +24,14 @@ class JobEnd:
     cmd: str
     ok: bool
     message: str
-    result: Mapping[str, Any] | None
+    result: object | None  # the command's typed reply (a record, or its TypedDict)
     ended: float  # time.monotonic()
 
 
-def ended_text(cmd: str, result: Mapping[str, Any]) -> str:
+def ended_text(cmd: str, result: object) -> str:
     """A job's reply in a line: done, a sort's totals, then its verdict."""
     parts = [f"{cmd} done"]
-    totals = result.get("totals")
+    totals = result.get("totals") if isinstance(result, Mapping) else None
     if isinstance(totals, Mapping):
         counts = ("sorted", "skipped", "failed")
         parts[0] += ": " + ", ".join(f"{totals.get(k, 0)} {k}" for k in counts)
@@ -48,7 +49,7 @@ class JobRunner:
         self._lock = threading.Lock()
         self._running: tuple[str, str] | None = None  # (command, browser session)
         self.last: JobEnd | None = None
-        self.results: dict[str, Mapping[str, Any]] = {}  # the last result of each command
+        self.results: dict[str, object] = {}  # the last result of each command
         self.ended = 0  # how many jobs have ended (a page redraws what depends on them)
 
     def busy(self, browser: str) -> str | None:
@@ -75,10 +76,11 @@ class JobRunner:
             target=self._run, args=(job, token), name=f"ui-{job.command}", daemon=True
         ).start()
 
-    def result(self, command: Callable[..., Any]) -> Mapping[str, Any] | None:
-        """The last result of the job `command` (a `CellCommands` method), if one ended well."""
+    def result(self, command: Callable[..., R]) -> R | None:
+        """The last result of the job `command` (a `CellCommands` method), if one ended well:
+        that method's typed reply."""
         with self._lock:
-            return self.results.get(command.__name__)
+            return cast(R | None, self.results.get(command.__name__))
 
     def _run(self, job: Call[Any], token: str | None) -> None:
         cmd = job.command
@@ -87,6 +89,8 @@ class JobRunner:
             end = JobEnd(cmd, True, ended_text(cmd, result), result, time.monotonic())
         except CommandError as exc:
             end = JobEnd(cmd, False, f"{cmd}: {exc.code}: {exc.message}", None, time.monotonic())
+        except ReplyError as exc:
+            end = JobEnd(cmd, False, str(exc), None, time.monotonic())
         except ClientError as exc:
             message = (
                 f"{cmd}: the connection to the service was lost ({exc}); "

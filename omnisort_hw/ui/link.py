@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
-from omnisort_hw.service.client import Client, ClientError, CommandError
+from omnisort_hw.service.client import Client, ClientError, CommandError, ReplyError
 from omnisort_hw.service.commands import Call, CellCommands, call_of
 from omnisort_hw.service.states import JobRecord
 from omnisort_hw.service.status_reply import StatusReply
@@ -25,6 +25,7 @@ __all__ = [
     "ClientError",
     "CommandError",
     "Reader",
+    "ReplyError",
     "Send",
     "ServiceLink",
     "Snapshot",

@@ -5,12 +5,10 @@ computed here but scaling: the pixels are the service's (`map` with points, `loc
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from html import escape
-from typing import Any
 
-from omnisort_hw.pipeline.replies import DetectReply, ViewsReply
+from omnisort_hw.pipeline.replies import DetectReply, LocateReply, MapReply, ViewsReply
 
 MAX_POINTS = 800  # drawn of a map's points, evenly spaced: enough to see, light to send
 
@@ -35,12 +33,12 @@ def sigma_colour(sigma: float, lo: float, hi: float) -> str:
     return f"#{round(255 * red):02x}{round(255 * green):02x}00"
 
 
-def map_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:
+def map_overlay(reply: MapReply | None, scale: float, unit: float = 1.0) -> Overlay | None:
     """The map's points (`pixels`, camera px) coloured by `sigma_normal_mm`; None without
     points (a map asked without `points`). `unit`: the picture's px per px of a 960 px one
     (marks keep their size on the screen whatever the picture's)."""
-    pixels: Sequence[Sequence[float]] = reply.get("pixels") or []
-    sigma: Sequence[float] = reply.get("sigma_normal_mm") or []
+    pixels = (reply.pixels if reply is not None else None) or []
+    sigma = (reply.sigma_normal_mm if reply is not None else None) or []
     if not pixels or len(sigma) != len(pixels):
         return None
     step = max(1, -(-len(pixels) // MAX_POINTS))
@@ -57,17 +55,21 @@ def map_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Ov
     return Overlay(dots, legend)
 
 
-def cubes_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> Overlay | None:
+def cubes_overlay(reply: LocateReply | None, scale: float, unit: float = 1.0) -> Overlay | None:
     """Each located cube: its ellipse (`ellipse_px`, enlarged as `ellipse_scale` says) in its
     colour, and its index at its centre; None when the reply has no cube pixels."""
-    cubes = [c for c in reply.get("cubes") or [] if c.get("center_px") and c.get("ellipse_px")]
-    if not cubes:
+    shown = [
+        (c, c.center_px, c.ellipse_px)
+        for c in (reply.cubes if reply is not None else [])
+        if c.center_px and c.ellipse_px
+    ]
+    if not shown:
         return None
     parts = []
-    for i, cube in enumerate(cubes):
-        colour = escape(str(cube.get("color", "white")))
-        ring = " ".join(f"{u * scale:.1f},{v * scale:.1f}" for u, v in cube["ellipse_px"])
-        u, v = (c * scale for c in cube["center_px"])
+    for i, (cube, centre, ellipse) in enumerate(shown):
+        colour = escape(cube.color)
+        ring = " ".join(f"{u * scale:.1f},{v * scale:.1f}" for u, v in ellipse)
+        u, v = (c * scale for c in centre)
         parts.append(
             f'<polygon points="{ring}" fill="none" stroke="black" stroke-width="{4 * unit:.2f}" />'
             f'<polygon points="{ring}" fill="none" stroke="{colour}" '
@@ -76,9 +78,9 @@ def cubes_overlay(reply: Mapping[str, Any], scale: float, unit: float = 1.0) -> 
             f'stroke-width="{0.6 * unit:.2f}" font-size="{16 * unit:.1f}" font-weight="bold" '
             f'text-anchor="middle">{i}</text>'
         )
-    enlarge = cubes[0].get("ellipse_scale", 1)
-    legend = f"{len(cubes)} cubes: 95 % position ellipse drawn x{enlarge:g}, " + ", ".join(
-        f"{i} {c.get('color')} sigma {c.get('sigma_mm', 0):.2f} mm" for i, c in enumerate(cubes)
+    enlarge = shown[0][0].ellipse_scale or 1
+    legend = f"{len(shown)} cubes: 95 % position ellipse drawn x{enlarge:g}, " + ", ".join(
+        f"{i} {c.color} sigma {c.sigma_mm:.2f} mm" for i, (c, _, _) in enumerate(shown)
     )
     return Overlay("".join(parts), legend)
 

@@ -11,6 +11,7 @@ from typing import Any
 
 from nicegui import ui
 
+from omnisort_hw.pipeline.replies import DriftReply, ExtrinsicsReply
 from omnisort_hw.pipeline.requests import DetectRequest
 from omnisort_hw.ui.calibration_views import (
     extrinsics_args,
@@ -164,15 +165,15 @@ class RecoveryPanel:
             if self.watch.waiting:
                 self.steps[self._step].running(self.ctx.link.running_job())
             return
-        step = self.steps[self._step]
-        if self._step == "verify" and end.ok and end.result is not None:
-            turned = "DRIFT" if end.result.get("drift") else "no drift"
-            step.ended(end, [f"{turned}: turned {end.result.get('angle_deg', 0):.3f} deg"])
+        step, result = self.steps[self._step], end.result if end.ok else None
+        if isinstance(result, DriftReply):
+            turned = "DRIFT" if result.drift else "no drift"
+            step.ended(end, [f"{turned}: turned {result.angle_deg:.3f} deg"])
             return
         step.ended(end)
-        if self._step == "recalibration" and end.ok and end.result is not None:
-            self.params.rows = parameter_rows(end.result)
+        if isinstance(result, ExtrinsicsReply):
+            self.params.rows = parameter_rows(result)
             self.params.update()
             await show_picture(
-                self.ctx, self.token(), end.result.get("overlay_png"), self.residuals, step.note
+                self.ctx, self.token(), result.overlay_png, self.residuals, step.note
             )

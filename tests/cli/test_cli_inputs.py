@@ -145,11 +145,11 @@ def test_a_picture_that_cannot_be_written_costs_only_the_picture(
     blocked = tmp_path / "system_overlay.png"
     blocked.mkdir()
     out = write_picture(blocked, lambda: np.zeros((4, 4, 3), np.uint8))
-    assert out["overlay_png"] is None and str(blocked) in out["overlay_problem"]
+    assert out.overlay_png is None and str(blocked) in (out.overlay_problem or "")
 
     def broken() -> np.ndarray:
         raise IndexError("empty stripe")
 
     out = write_picture(tmp_path / "map_overlay.png", broken)
-    assert out["overlay_png"] is None and "IndexError: empty stripe" in out["overlay_problem"]
+    assert out.overlay_png is None and "IndexError: empty stripe" in (out.overlay_problem or "")
     assert not (tmp_path / "map_overlay.png").exists()

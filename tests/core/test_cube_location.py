@@ -101,7 +101,7 @@ def test_cubes_found_with_their_colours(scene_images: dict[str, Any]) -> None:
         expected = truth["cubes"][k]["colour"]
         assert c.color == (UNKNOWN if expected == "orange" else expected), c.summary()
     # The floor board's black squares, the bins and the walls are not cubes.
-    assert any("area" in r["reason"] for r in diag["rejected"] if r["color"] == "black")
+    assert any("area" in r.reason for r in diag["rejected"] if r.color == "black")
 
 
 def test_cube_centres_and_yaw_against_truth(scene_images: dict[str, Any]) -> None:

@@ -85,7 +85,7 @@ def test_segments_are_walls_with_their_distance_and_bearing(calib: SystemCalibra
         assert seg.length_mm == pytest.approx(np.linalg.norm(ends[1] - ends[0]), rel=1e-6)
         assert 600.0 <= seg.length_mm <= 600.0 / np.cos(np.radians(5.0))
     summary = a.summary()
-    assert summary["points"] == 120 and summary["distance_mm"] == pytest.approx(500.0, abs=0.5)
+    assert summary.points == 120 and summary.distance_mm == pytest.approx(500.0, abs=0.5)
 
 
 def test_a_gap_splits_a_wall_and_short_runs_are_dropped(calib: SystemCalibration) -> None:

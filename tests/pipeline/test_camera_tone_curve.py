@@ -41,9 +41,9 @@ def test_the_simulated_cell_calibrates_with_its_cameras_own_curve(tmp_path: Path
                 separation_mm=truth["target"]["separation_mm"],
             )
         )
-        assert result["tone_curve"] == "linear"
-        roll_err = result["parameters"]["cam_roll_deg"] - want["cam_roll_deg"]
-        roll_std = result["std"]["cam_roll_deg"]
+        assert result.tone_curve == "linear"
+        roll_err = result.parameters["cam_roll_deg"] - want["cam_roll_deg"]
+        roll_std = result.std["cam_roll_deg"]
         assert abs(roll_err) < 3 * roll_std, (roll_err, roll_std)
 
         # The same image calibrated as if the camera wrote sRGB: the borders' edges lean and

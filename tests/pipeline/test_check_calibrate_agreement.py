@@ -21,6 +21,7 @@ from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.drift_check import calibration_key, save_reference
 from omnisort_hw.pipeline.requests import CalibrateRequest
+from omnisort_hw.wire_records import to_wire
 from tests.cli_json import cli_result
 
 pytestmark = pytest.mark.timeout(600)
@@ -31,7 +32,7 @@ def cli(*args: str, ok_codes: tuple[int, ...] = (0,)) -> dict[str, Any]:
 
 
 def as_json(obj: Any) -> Any:
-    return json.loads(json.dumps(obj))
+    return json.loads(json.dumps(to_wire(obj)))
 
 
 def test_cli_check_is_the_watchdogs_check(tmp_path: Path) -> None:

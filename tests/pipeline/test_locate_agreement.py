@@ -15,6 +15,7 @@ from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.core.pick_planning import SortConfig
 from omnisort_hw.pipeline.requests import LocateRequest
+from omnisort_hw.wire_records import to_wire
 from tests.cli_json import cli_result
 from tests.pipeline.registered_scene import registered_scene
 
@@ -50,7 +51,7 @@ def test_cli_and_service_locate_the_same_cubes(tmp_path: Path) -> None:
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = cell.jobs.locate(LocateRequest(str(image_path)))
+    service = to_wire(cell.jobs.locate(LocateRequest(str(image_path))))
     reply = locate_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
     # The whole answer: the cubes, their count, the blobs rejected with their reasons and the
     # verdict; each door writes its picture where it keeps them (state dir; beside the file).

@@ -16,6 +16,7 @@ pytest.importorskip("pybullet", reason="the image is rendered by the simulated c
 from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.pipeline.requests import MapRequest
+from omnisort_hw.wire_records import to_wire
 from tests.cli_json import cli_result
 from tests.pipeline.registered_scene import registered_scene
 
@@ -33,7 +34,9 @@ def test_cli_and_service_map_the_same_points(tmp_path: Path) -> None:
     )
 
     cell = Cell(CellDevices(), store, config=load_cell_config(cell_file))
-    service = json.loads(json.dumps(cell.jobs.map_scene(MapRequest(str(image_path), points=True))))
+    service = json.loads(
+        json.dumps(to_wire(cell.jobs.map_scene(MapRequest(str(image_path), points=True))))
+    )
     cli = map_cli(str(image_path), "--system", str(system), "--config", str(cell_file))
     assert cli["points_S"] == service["points_S"] and cli["pixels"] == service["pixels"]
     assert cli["segments"] == service["segments"]

@@ -79,8 +79,8 @@ def test_picks_chain_bin_to_cube_and_plan_ahead_while_the_arm_moves(
             d.close()
         cell.close()
     totals = report.totals()
-    assert totals["collisions"] == 0, report.extra.get("collision_events")
-    assert totals["sorted"] == 3 and totals["sorted_ok"] == 3
+    assert totals.collisions == 0, report.extra.collision_events
+    assert totals.sorted == 3 and totals.sorted_ok == 3
     home = np.asarray(SortConfig().home_deg)
     at_home = [bool(np.max(np.abs(t - home)) < 0.5) for t in targets]
     assert at_home[-1] and not any(at_home[:-1]), at_home
@@ -88,7 +88,8 @@ def test_picks_chain_bin_to_cube_and_plan_ahead_while_the_arm_moves(
     assert threads[0] == threading.main_thread().name
     ahead = [t for t in threads[1:] if t.startswith("plan-ahead")]
     assert len(ahead) >= 2, threads
-    cycle = report.extra["cycle"]
+    cycle = report.extra.cycle
+    assert cycle is not None
     assert cycle["picks"] == 3 and cycle["plans"] >= 3
     # Motion on the arm's clock: the sim arm re-plans each move at its 240 Hz step (a move can
     # end up to one step of each rate later than planned), so it is never shorter than the

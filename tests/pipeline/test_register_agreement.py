@@ -18,6 +18,7 @@ pytest.importorskip("pybullet", reason="the image is rendered by the simulated c
 from omnisort_hw.cell.cell import Cell, CellDevices
 from omnisort_hw.config.cell import load_cell_config
 from omnisort_hw.pipeline.requests import RegisterRequest
+from omnisort_hw.wire_records import to_wire
 from tests.pipeline.registered_scene import registered_scene
 
 pytestmark = pytest.mark.timeout(300)
@@ -43,7 +44,9 @@ def test_cli_and_service_register_the_same_base(tmp_path: Path) -> None:
     )
     cell = Cell(CellDevices(), rs.store, config=load_cell_config(cell_file))
     image = str(rs.image_path)
-    service = json.loads(json.dumps(cell.jobs.register_robot(RegisterRequest(image, save=False))))
+    service = json.loads(
+        json.dumps(to_wire(cell.jobs.register_robot(RegisterRequest(image, save=False))))
+    )
     cmd = [sys.executable, "-m", "omnisort_hw.cli", "register-robot", image]
     cmd += ["--system", str(rs.system), "--config", str(cell_file), "--no-save", "--json"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)

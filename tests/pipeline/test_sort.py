@@ -149,14 +149,14 @@ def test_sort_a_small_scene_end_to_end(tmp_path: Path) -> None:
         cell.close()
     totals = report.totals()
     by_colour = {o.color: o for o in report.outcomes if o.color in ("red", "blue", UNKNOWN)}
-    assert totals["collisions"] == 0, report.extra["collision_events"]
+    assert totals.collisions == 0, report.extra.collision_events
     assert by_colour["red"].in_right_bin and by_colour["blue"].in_right_bin
-    assert totals["sorted_ok"] == 2 and totals["sorted"] == 2
+    assert totals.sorted_ok == 2 and totals.sorted == 2
     reasons = sorted(
         o.reason.split(":")[0].split(" (")[0] for o in report.outcomes if o.status == "skipped"
     )
     assert reasons == ["outside the workspace", "unknown colour", "unreachable"], reasons
-    assert totals["mean_position_error_mm"] <= 2.0
+    assert totals.mean_position_error_mm is not None and totals.mean_position_error_mm <= 2.0
     assert report.registration is not None
     T_est = np.asarray(report.registration["matrix"], float)
     from omnisort_hw.core.registration import pose_error
@@ -217,15 +217,15 @@ def test_service_commands_through_the_cell(tmp_path: Path) -> None:
         cancel = threading.Event()
         reg = cell.jobs.register_robot(RegisterRequest(), cancel)
         rb = store.load_system()["robot_base"]
-        assert rb == json.loads(json.dumps(reg["robot_base"]))
+        assert rb == json.loads(json.dumps(reg.robot_base))
         np.testing.assert_allclose(rb["xyz_mm"], truth["robot_base"]["xyz_mm"], atol=3.0)
         located = cell.jobs.locate(LocateRequest(), cancel)
-        assert located["count"] == 1 and located["cubes"][0]["color"] == "blue"
+        assert located.count == 1 and located.cubes[0].color == "blue"
         np.testing.assert_allclose(
-            located["cubes"][0]["center_B_mm"], truth["cubes"][0]["center_B_mm"], atol=3.0
+            located.cubes[0].center_B_mm, truth["cubes"][0]["center_B_mm"], atol=3.0
         )
         result = cell.jobs.sort(SortRequest(), cancel)
-        assert result["totals"]["sorted"] == 1, result
+        assert result.totals.sorted == 1, result
         verifier = SimVerifier(devices.arm)
         final = verifier.true_cubes()[0]
         assert verifier.bin_of(final.center_S) == "blue"

@@ -11,6 +11,7 @@ import time
 
 import pytest
 
+from omnisort_hw.pipeline.replies import LaserReply
 from omnisort_hw.pipeline.requests import LaserRequest, MoveRequest, SortRequest
 from omnisort_hw.request_fields import build, wire_args
 from omnisort_hw.service.client import Client, CommandError
@@ -61,8 +62,8 @@ def test_typed_calls_against_the_service(make_service) -> None:
         assert status["state"] == "idle"
         required, optional = StatusReply.__required_keys__, StatusReply.__optional_keys__
         assert required <= set(status) <= required | optional  # the declared reply
-        assert c.laser(LaserRequest(on=True)) == {"on": True}
-        assert c.laser() == {"on": True}  # omitted: read back
+        assert c.laser(LaserRequest(on=True)) == LaserReply(on=True)
+        assert c.laser() == LaserReply(on=True)  # omitted: read back
         events: list[dict] = []
         t0 = time.monotonic()
         c.move(MoveRequest(joints_deg=(10.0, 0, 0, 0, 0, 0)), on_event=events.append)

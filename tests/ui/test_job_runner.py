@@ -12,19 +12,30 @@ from collections.abc import Iterator
 
 import pytest
 
+from omnisort_hw.pipeline.replies import MapReply, VerdictReply
 from omnisort_hw.pipeline.requests import MapRequest
 from omnisort_hw.request_fields import wire_args
 from omnisort_hw.ui.job_runner import JobRunner
 from omnisort_hw.ui.link import CellCommands, ServiceLink, call_of
+from omnisort_hw.wire_records import to_wire
 from tests.ui.browser_page import wait_for
 
 WAIT_S = 10.0  # a guard against a hang, not a latency bound
+MAPPED = MapReply(
+    points=7,
+    points_on_plane=7,
+    echoes_dropped=0,
+    stripe_ends_dropped=0,
+    segments=[],
+    image={"path": "on.png"},
+    verdict=VerdictReply("laser map", ()),
+)
 
 
 @pytest.fixture()
 def peer() -> Iterator[tuple[int, threading.Event, list[dict[str, object]]]]:
     """A service stand-in at a loopback port: it records each request line and answers it
-    with an ok reply once `answer` is set."""
+    with an ok reply once `answer` is set: MAPPED, or what a test put in `seen[1]`."""
     answer = threading.Event()
     seen: list[dict[str, object]] = []
     server = socket.create_server(("127.0.0.1", 0))
@@ -37,7 +48,8 @@ def peer() -> Iterator[tuple[int, threading.Event, list[dict[str, object]]]]:
                 request = json.loads(f.readline())
                 seen.append(request)
                 answer.wait(WAIT_S)
-                reply = {"id": request.get("id"), "ok": True, "result": {"points_on_plane": 7}}
+                result = seen[1] if len(seen) > 1 else to_wire(MAPPED)
+                reply = {"id": request.get("id"), "ok": True, "result": result}
                 f.write(json.dumps(reply).encode() + b"\n")
                 f.flush()
 
@@ -63,5 +75,20 @@ def test_a_second_browser_is_told_the_job_is_another_browsers(peer) -> None:
     wait_for("the job's end", lambda: jobs.busy("browser-b") is None, WAIT_S)
     assert jobs.busy("browser-a") is None
     assert jobs.last is not None and jobs.last.ok and jobs.last.cmd == "map"
-    assert jobs.result(CellCommands.map) == {"points_on_plane": 7}
+    assert jobs.result(CellCommands.map) == MAPPED  # read as its record
     assert jobs.result(CellCommands.locate) is None
+
+
+def test_a_reply_that_does_not_fit_its_record_ends_the_job_saying_where(peer) -> None:
+    """A service of another version: the job ends failed, naming the record's field, and
+    the page can start the next one (nothing waits for an end that never comes)."""
+    port, answer, seen = peer
+    jobs = JobRunner(ServiceLink("127.0.0.1", port, timeout_s=WAIT_S))
+    jobs.start(call_of(CellCommands.map), "token", "browser-a")
+    wait_for("the request at the peer", lambda: seen, WAIT_S)
+    seen.append({"points_on_plane": 7})  # an old reply: no segments, no verdict...
+    answer.set()
+    wait_for("the job's end", lambda: jobs.busy("browser-a") is None, WAIT_S)
+    assert jobs.last is not None and not jobs.last.ok
+    assert "map: the service's reply does not fit MapReply." in jobs.last.message
+    assert jobs.result(CellCommands.map) is None

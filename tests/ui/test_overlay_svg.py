@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import re
 
-from omnisort_hw.pipeline.replies import DetectReply, LayerReply
+from omnisort_hw.core.records import CubeReply
+from omnisort_hw.pipeline.replies import (
+    DetectReply,
+    LayerReply,
+    LocateReply,
+    MapReply,
+    VerdictReply,
+)
 from omnisort_hw.ui.overlay_svg import (
     MAX_POINTS,
     cubes_overlay,
@@ -23,10 +30,39 @@ def test_sigma_colours_run_from_green_to_red() -> None:
     assert sigma_colour(0.2, 0.2, 0.2) == "#00ff00"  # one value: no range
 
 
+def _map(pixels: list[list[float]] | None, sigma: list[float] | None) -> MapReply:
+    """A map's reply with these pixels and sigmas (None: a map asked without points)."""
+    verdict = VerdictReply("laser map", ())
+    return MapReply(
+        points=len(pixels or []),
+        points_on_plane=len(pixels or []),
+        echoes_dropped=0,
+        stripe_ends_dropped=0,
+        segments=[],
+        pixels=pixels,
+        sigma_normal_mm=sigma,
+        image={},
+        verdict=verdict,
+    )
+
+
+def _cube(color: str, center_px: list[float] | None, ellipse_px: list[list[float]] | None,
+          sigma_mm: float = 0.0, ellipse_scale: float | None = None) -> CubeReply:  # fmt: skip
+    return CubeReply(
+        color, [0.0] * 3, [0.0] * 3, 0.0, 0.0, sigma_mm, [0.0, 0.0], [0.0, 0.0], 0.0, 0.0,
+        100, 50, 0, [], center_px=center_px, ellipse_px=ellipse_px, ellipse_scale=ellipse_scale,
+    )  # fmt: skip
+
+
+def _located(*cubes: CubeReply) -> LocateReply:
+    return LocateReply(
+        cubes=list(cubes), count=len(cubes), rejected=[], verdict=VerdictReply("locate", ())
+    )
+
+
 def test_map_points_are_scaled_and_thinned() -> None:
     n = 2 * MAX_POINTS + 1
-    reply = {"pixels": [[2.0 * i, 10.0] for i in range(n)], "sigma_normal_mm": [0.1] * n}
-    overlay = map_overlay(reply, 0.5)
+    overlay = map_overlay(_map([[2.0 * i, 10.0] for i in range(n)], [0.1] * n), 0.5)
     assert overlay is not None
     xs = [float(x) for x in re.findall(r'cx="([\d.]+)"', overlay.svg)]
     assert len(xs) <= MAX_POINTS and len(xs) >= MAX_POINTS // 2
@@ -36,25 +72,18 @@ def test_map_points_are_scaled_and_thinned() -> None:
 
 
 def test_no_overlay_without_pixels() -> None:
-    assert map_overlay({"points": 5}, 1.0) is None  # a map asked without points
-    assert map_overlay({"pixels": [[1, 2]], "sigma_normal_mm": []}, 1.0) is None
-    assert cubes_overlay({"cubes": [{"color": "red"}]}, 1.0) is None
+    assert map_overlay(_map(None, None), 1.0) is None  # a map asked without points
+    assert map_overlay(_map([[1, 2]], []), 1.0) is None
+    assert map_overlay(None, 1.0) is None and cubes_overlay(None, 1.0) is None
+    assert cubes_overlay(_located(_cube("red", None, None)), 1.0) is None
 
 
 def test_cubes_are_drawn_in_their_colour_with_their_index() -> None:
     ring = [[10.0, 0.0], [0.0, 10.0], [-10.0, 0.0]]
-    reply = {
-        "cubes": [
-            {
-                "color": "red",
-                "center_px": [100, 50],
-                "ellipse_px": ring,
-                "ellipse_scale": 10.0,
-                "sigma_mm": 1.234,
-            },
-            {"color": "<script>", "center_px": [10, 10], "ellipse_px": ring},
-        ]
-    }
+    reply = _located(
+        _cube("red", [100, 50], ring, sigma_mm=1.234, ellipse_scale=10.0),
+        _cube("<script>", [10, 10], ring),
+    )
     overlay = cubes_overlay(reply, 2.0)
     assert overlay is not None
     assert 'stroke="red"' in overlay.svg and "<script>" not in overlay.svg
