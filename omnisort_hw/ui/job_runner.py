@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar, cast
 
+from omnisort_hw.pipeline.replies import SortReply
 from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 from omnisort_hw.ui.link import Call, ClientError, CommandError, ReplyError, ServiceLink
 
@@ -31,10 +32,9 @@ class JobEnd:
 def ended_text(cmd: str, result: object) -> str:
     """A job's reply in a line: done, a sort's totals, then its verdict."""
     parts = [f"{cmd} done"]
-    totals = result.get("totals") if isinstance(result, Mapping) else None
-    if isinstance(totals, Mapping):
-        counts = ("sorted", "skipped", "failed")
-        parts[0] += ": " + ", ".join(f"{totals.get(k, 0)} {k}" for k in counts)
+    if isinstance(result, SortReply):
+        t = result.totals
+        parts[0] += f": {t.sorted} sorted, {t.skipped} skipped, {t.failed} failed"
     verdict = verdict_of(result)
     if verdict is not None:
         parts += [line.strip() for line in verdict_lines(verdict)]

@@ -18,6 +18,7 @@ from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration
 from omnisort_hw.pipeline.calibration_source import MemoryCalibration
 from omnisort_hw.pipeline.scene_check import keep_fraction
 from omnisort_hw.pipeline.sort import Sorter
+from omnisort_hw.wire_records import to_wire
 from sim_backend.sort_harness import SimVerifier, sim_registration_config, sim_sort_config
 from tests.pipeline.sorting_scene import sorting_scene, spy_linear_targets
 
@@ -91,7 +92,7 @@ def _sort(change: str) -> dict[str, Any]:
         truth = verifier.true_cubes()
         T_SB = verifier.T_SB()
         return {
-            "report": report.reply(),
+            "report": to_wire(report.reply()),  # as every door sends it
             "changed": changed,
             "bins": {t.body: verifier.bin_of(t.center_S) for t in truth},
             "colors": {t.body: t.color for t in truth},
