@@ -1,14 +1,19 @@
-"""The control channel's `truth` reply as typed records: what the virtual cell's renderer and
-physics hold (the camera's mounting, the laser, the target, the cubes, the arm), read once
-from the wire (`SimTruth.from_wire`), so that the Simulator tab reads fields, not keys. The
-virtual cell writes the reply (`sim_backend.virtual_cell.cell.VirtualCell.truth`); a test holds
-the two together. Lengths in mm, angles in degrees, points in S (cubes, target) or B (tool)."""
+"""The control channel's replies the Simulator tab reads, as typed records read by the
+replies' codec (`wire_records.from_wire`), so that the tab reads fields, not keys:
+- `truth`: what the virtual cell's renderer and physics hold (the camera's mounting, the laser,
+  the target, the cubes, the arm); the virtual cell writes it
+  (`sim_backend.virtual_cell.cell.VirtualCell.truth`) with more than the tab reads, and a test
+  holds the two together;
+- `describe`: each command's help and its arguments' JSON Schema (`sim_requests.describe_sim`
+  writes it).
+Lengths in mm, angles in degrees, points in S (cubes, target) or B (tool)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from omnisort_hw.wire_records import wire_key
 
 
 @dataclass(frozen=True)
@@ -49,12 +54,12 @@ class CubeTruth:
     bin: str | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SimTruth:
     """The virtual cell as its simulator holds it."""
 
-    camera: CameraTruth
-    laser: LaserTruth
+    camera: CameraTruth = wire_key("camera_rotation")
+    laser: LaserTruth = wire_key("laser_plane")
     laser_on: bool
     target: TargetTruth | None  # None: taken away
     cubes: tuple[CubeTruth, ...]
@@ -62,43 +67,20 @@ class SimTruth:
     tcp_B_mm: tuple[float, float, float]
     gripper_closed: bool
     held: bool
-    collisions: int
+    collisions: list[str]  # what touched what, so far
 
-    @classmethod
-    def from_wire(cls, d: Mapping[str, Any]) -> SimTruth:
-        """The `truth` reply's JSON object as records (KeyError naming a missing key)."""
-        cam, las, target = d["camera_rotation"], d["laser_plane"], d.get("target")
-        return cls(
-            camera=CameraTruth(
-                float(cam["roll_deg"]), float(cam["pitch_deg"]), float(cam["yaw_deg"])
-            ),
-            laser=LaserTruth(
-                float(las["roll_deg"]), float(las["pitch_deg"]), float(las["distance_mm"])
-            ),
-            laser_on=bool(d["laser_on"]),
-            target=None
-            if target is None
-            else TargetTruth(
-                str(target["kind"]),
-                (float(target["center_mm"][0]), float(target["center_mm"][1])),
-                float(target["yaw_deg"]),
-            ),
-            cubes=tuple(
-                CubeTruth(
-                    int(c["index"]),
-                    str(c["color"]),
-                    (
-                        float(c["center_S_mm"][0]),
-                        float(c["center_S_mm"][1]),
-                        float(c["center_S_mm"][2]),
-                    ),
-                    c.get("bin") or None,
-                )
-                for c in d["cubes"]
-            ),
-            joints_deg=tuple(float(q) for q in d["joints_deg"]),
-            tcp_B_mm=(float(d["tcp_B_mm"][0]), float(d["tcp_B_mm"][1]), float(d["tcp_B_mm"][2])),
-            gripper_closed=bool(d["gripper_closed"]),
-            held=bool(d["held"]),
-            collisions=len(d.get("collisions") or ()),
-        )
+
+@dataclass(frozen=True)
+class SimCommandDescription:
+    """A control-channel command as `describe` gives it: its help and its arguments' JSON
+    Schema (draft 2020-12)."""
+
+    help: str
+    args: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class SimDescription:
+    """The channel's `describe`: every command by name."""
+
+    commands: dict[str, SimCommandDescription]

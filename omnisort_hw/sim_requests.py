@@ -25,6 +25,7 @@ from omnisort_hw.request_fields import (
     schema_of,
     summary_line,
 )
+from omnisort_hw.sim_replies import SimCommandDescription, SimDescription
 
 HELD_VIEWS = 12
 """The held board's poses covering the field (the intrinsics' views), 0..HELD_VIEWS-1."""
@@ -232,8 +233,8 @@ class SimCommand:
         """The JSON Schema (draft 2020-12) of this command's arguments."""
         return schema_of(self.request, self.name, self.summary)
 
-    def describe(self) -> dict[str, Any]:
-        return {"help": self.summary, "args": self.schema()}
+    def describe(self) -> SimCommandDescription:
+        return SimCommandDescription(self.summary, self.schema())
 
 
 SIM_COMMANDS: dict[str, SimCommand] = {
@@ -274,9 +275,9 @@ def command_of(request: Any) -> str:
     return _COMMAND_OF[cls]
 
 
-def describe_sim() -> dict[str, Any]:
+def describe_sim() -> SimDescription:
     """The channel's `describe`: every command with its help and its arguments' JSON Schema."""
-    return {"commands": {name: c.describe() for name, c in SIM_COMMANDS.items()}}
+    return SimDescription({name: c.describe() for name, c in SIM_COMMANDS.items()})
 
 
 def validate(req: dict[str, Any]) -> tuple[str, Any]:

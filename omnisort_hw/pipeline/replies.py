@@ -479,3 +479,24 @@ class AcknowledgeReply:
 
     acknowledged: bool
     drift: Record | None
+
+
+@dataclass(frozen=True)
+class CommandDescription:
+    """A command as `describe` gives it: how it runs (`quick`, `job`, `safety`...), whether it
+    needs the operator's token off loopback, the state a job puts the cell in, its help and
+    its arguments' JSON Schema (draft 2020-12)."""
+
+    kind: str
+    needs_token: bool
+    job_state: str | None
+    help: str
+    args: Record
+
+
+@dataclass(frozen=True)
+class DescribeReply:
+    """`describe`: the schemas' dialect and every command by name."""
+
+    schema_dialect: str
+    commands: dict[str, CommandDescription]

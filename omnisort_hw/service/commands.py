@@ -19,6 +19,7 @@ from omnisort_hw.pipeline.replies import (
     AdoptReply,
     CalibrateReply,
     CaptureReply,
+    DescribeReply,
     DetectReply,
     DriftReply,
     ExtrinsicsReply,
@@ -108,8 +109,8 @@ class CellCommands:
     def status(self) -> StatusReply:
         return cast(StatusReply, self.execute("status"))
 
-    def describe(self) -> Result:
-        return self.execute("describe")
+    def describe(self) -> DescribeReply:
+        return _read(DescribeReply, "describe", self.execute("describe"))
 
     def view(self, request: ViewRequest | None = None) -> ViewReply:
         return _read(ViewReply, "view", self.execute("view", wire_args(request)))

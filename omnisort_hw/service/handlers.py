@@ -61,7 +61,7 @@ def status(ctx: Context, _request: None) -> StatusReply:
 
 
 def describe(ctx: Context, _request: None) -> Reply:
-    return describe_commands()
+    return to_wire(describe_commands())
 
 
 def view(ctx: Context, request: ViewRequest) -> Reply:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from omnisort_hw.pipeline import requests
+from omnisort_hw.pipeline.replies import CommandDescription, DescribeReply
 from omnisort_hw.request_fields import (
     SCHEMA_DIALECT,
     Arg,
@@ -114,15 +115,11 @@ class Command:
         """The JSON Schema (draft 2020-12) of this command's `args` object."""
         return schema_of(self.request, self.name, self.summary)
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> CommandDescription:
         """What a client needs to offer this command: how it runs, and its arguments."""
-        return {
-            "kind": self.kind,
-            "needs_token": self.needs_token,
-            "job_state": self.job_state,
-            "help": self.summary,
-            "args": self.schema(),
-        }
+        return CommandDescription(
+            self.kind, self.needs_token, self.job_state, self.summary, self.schema()
+        )
 
 
 @dataclass(frozen=True)
@@ -193,12 +190,9 @@ OPEN_COMMANDS = tuple(name for name, c in COMMANDS.items() if not c.needs_token)
 """The commands any client may send without the token: they read, or they stop."""
 
 
-def describe_commands() -> dict[str, Any]:
+def describe_commands() -> DescribeReply:
     """The `describe` reply: every command, with its arguments' JSON Schema."""
-    return {
-        "schema_dialect": SCHEMA_DIALECT,
-        "commands": {name: c.describe() for name, c in COMMANDS.items()},
-    }
+    return DescribeReply(SCHEMA_DIALECT, {name: c.describe() for name, c in COMMANDS.items()})
 
 
 def _reject_constant(name: str) -> Any:

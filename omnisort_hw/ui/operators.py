@@ -8,6 +8,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+from omnisort_hw.pipeline.replies import CommandDescription
 from omnisort_hw.request_fields import build
 from omnisort_hw.service.commands import Call, CellCommands, call_of
 from omnisort_hw.service.protocol import COMMANDS
@@ -31,7 +32,7 @@ class Operators:
         self.link, self.allowed = link, allowed
         self._tokens: dict[str, str] = {}
         self._lock = threading.Lock()
-        self.commands: dict[str, Any] = {}
+        self.commands: dict[str, CommandDescription] = {}  # as the service described them
 
     def token(self, browser: str) -> str | None:
         with self._lock:
@@ -54,7 +55,7 @@ class Operators:
             raise SignInError(f"the service cannot be reached: {exc}") from None
         with self._lock:
             self._tokens[browser] = token.strip()
-            self.commands = dict(described.get("commands") or {})
+            self.commands = dict(described.commands)
 
     def sign_out(self, browser: str) -> None:
         with self._lock:
@@ -65,7 +66,7 @@ class Operators:
         it; None before a sign-in."""
         with self._lock:
             spec = self.commands.get(command.__name__)
-        return dict(spec["args"]) if spec else None
+        return dict(spec.args) if spec else None
 
     def problems(self, command: Callable[..., Any], args: dict[str, Any]) -> list[str]:
         """What `command`'s schema finds wrong with `args`, each naming its field (nothing

@@ -20,18 +20,21 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 from nicegui import run, ui
 
 from omnisort_hw import sim_requests as sr
 from omnisort_hw.request_fields import build
 from omnisort_hw.sim_link import MOVE_TIMEOUT_S, SimControlError, SimLink
-from omnisort_hw.sim_replies import SimTruth
+from omnisort_hw.sim_replies import SimDescription, SimTruth
 from omnisort_hw.ui.schema_form import form_fields, problems, typed_number
 from omnisort_hw.ui.schema_widgets import SchemaForm
 from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.widgets import confirm, tag
+from omnisort_hw.wire_records import WireError, from_wire
+
+T = TypeVar("T")
 
 CUBE_COLUMNS = [
     {"name": k, "label": label, "field": k, "align": "left"}
@@ -201,10 +204,10 @@ class SimulatorPanel:
         async with self._describing:  # the timer and a button may both ask first
             if self._schemas:
                 return True
-            described = await self._control(sr.DescribeRequest())
+            described = self._read(SimDescription, await self._control(sr.DescribeRequest()))
             if described is None:
                 return False
-            self._schemas = {k: v["args"] for k, v in described["commands"].items()}
+            self._schemas = {k: v.args for k, v in described.commands.items()}
             for cmd, slot in self._slots.items():
                 skip = DECIDED_BY_BUTTONS.get(cmd, ())
                 fields = [f for f in form_fields(self._schemas[cmd]) if f.name not in skip]
@@ -234,10 +237,9 @@ class SimulatorPanel:
 
     async def _show_truth(self, quiet: bool = True) -> SimTruth | None:
         """The virtual cell's truth asked and shown (the forms filled from it the first time)."""
-        reply = await self._control(sr.TruthRequest(), quiet=quiet)
-        if reply is None:
+        truth = self._read(SimTruth, await self._control(sr.TruthRequest(), quiet=quiet))
+        if truth is None:
             return None
-        truth = SimTruth.from_wire(reply)
         if not self._filled:
             self._fill(truth)
         self.truth.text = "\n".join(truth_lines(truth))
@@ -284,6 +286,17 @@ class SimulatorPanel:
                     form.set(name, value)
 
     # -- acting ---------------------------------------------------------------------------
+
+    def _read(self, record: type[T], reply: dict[str, Any] | None) -> T | None:
+        """A reply of the channel read as its record; None, with why in the note, when it does
+        not fit (a virtual cell of another version)."""
+        if reply is None:
+            return None
+        try:
+            return from_wire(record, reply)
+        except WireError as exc:
+            self.note.text = f"the virtual cell's reply does not fit {exc}"
+            return None
 
     async def _control(self, request: Any, quiet: bool = False) -> dict[str, Any] | None:
         """The control-channel command of a request record (`SimLink.send`); its result, or

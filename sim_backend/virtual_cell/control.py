@@ -20,6 +20,7 @@ import numpy as np
 
 from omnisort_hw import sim_requests as sr
 from omnisort_hw.errors import MotionRefusedError
+from omnisort_hw.wire_records import to_wire
 from sim_backend.scene_images import write_render
 from sim_backend.virtual_cell.held_board import HELD_VIEWS
 from sim_backend.virtual_cell.servers import all_status
@@ -52,7 +53,7 @@ class ControlChannel:
     # ---- the cell's state ---------------------------------------------------------------------
 
     def _describe(self, req: sr.DescribeRequest) -> dict[str, Any]:
-        return sr.describe_sim()
+        return to_wire(sr.describe_sim())
 
     def _status(self, req: sr.NoArgs) -> dict[str, Any]:
         vc = self.vc

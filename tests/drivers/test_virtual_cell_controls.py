@@ -15,9 +15,10 @@ import pytest
 from jsonschema import Draft202012Validator
 
 from omnisort_hw.core.frames import laser_normal
-from omnisort_hw.sim_replies import SimTruth
+from omnisort_hw.sim_replies import SimDescription, SimTruth
 from omnisort_hw.sim_requests import SIM_COMMANDS
 from omnisort_hw.ui.sim_panel import cube_rows, truth_lines
+from omnisort_hw.wire_records import from_wire, to_wire
 from sim_backend.virtual_cell.launcher import VirtualCellError
 from tests.sim.virtual_cell_fixture import streamed_frame, virtual_cell
 
@@ -155,10 +156,12 @@ def test_the_arm_jogged_by_joints_and_by_xyz_and_the_gripper(vc) -> None:
 
 
 def test_the_channel_describes_its_commands_as_json_schema(vc) -> None:
-    described = vc.control("describe")["commands"]
+    raw = vc.control("describe")
+    described = from_wire(SimDescription, raw).commands  # the record holds it all
+    assert to_wire(from_wire(SimDescription, raw)) == raw
     assert set(described) == set(SIM_COMMANDS)
     for spec in described.values():
-        Draft202012Validator.check_schema(spec["args"])
+        Draft202012Validator.check_schema(spec.args)
     with pytest.raises(VirtualCellError, match="'angle_deg' must be a finite number within"):
         vc.control("knock", angle_deg=1000.0)
 
@@ -187,10 +190,10 @@ def test_the_target_taken_away_moved_and_changed(vc, tmp_path: Path) -> None:
 
 
 def test_the_truth_reads_as_the_simulator_tabs_records(vc) -> None:
-    """`truth` as the Simulator tab reads it (`SimTruth.from_wire`): every field the wire
+    """`truth` as the Simulator tab reads it (`from_wire(SimTruth, ...)`): every field the wire
     holds, the lines and cube rows the tab shows from them, and the target taken away."""
     raw = vc.control("truth")
-    truth = SimTruth.from_wire(raw)
+    truth = from_wire(SimTruth, raw)
     cam = raw["camera_rotation"]
     assert (truth.camera.roll_deg, truth.camera.pitch_deg, truth.camera.yaw_deg) == (
         cam["roll_deg"],
@@ -213,7 +216,7 @@ def test_the_truth_reads_as_the_simulator_tabs_records(vc) -> None:
     assert [r["index"] for r in cube_rows(truth)] == [c["index"] for c in raw["cubes"]]
     vc.control("target", timeout_s=60.0, on=False)
     try:
-        away = SimTruth.from_wire(vc.control("truth"))
+        away = from_wire(SimTruth, vc.control("truth"))
         assert away.target is None and "target: away" in truth_lines(away)
     finally:
         vc.control("target", timeout_s=60.0, kind="two-sided", x_mm=0.0, y_mm=650.0, yaw_deg=0.0)

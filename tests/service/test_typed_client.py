@@ -78,7 +78,7 @@ def test_typed_calls_against_the_service(make_service) -> None:
             c.move(MoveRequest(joints_deg=(1.0, 2.0)))
         assert refused.value.code == "bad_argument"
         assert refused.value.details["field"] == "joints_deg"
-        assert "calibrate" in c.describe()["commands"]
+        assert "calibrate" in c.describe().commands
     with h.client(token="wrong-token-xxxxxxxx") as c, pytest.raises(CommandError) as denied:
         c.laser(LaserRequest(on=False))
     assert denied.value.code == "unauthorized"

@@ -15,11 +15,11 @@ from sim_backend.scene import NAMED_COLORS
 
 
 def test_describe_is_json_schema_for_every_command() -> None:
-    described = sr.describe_sim()["commands"]
+    described = sr.describe_sim().commands
     assert set(described) == set(sr.SIM_COMMANDS)
     for name, spec in described.items():
-        Draft202012Validator.check_schema(spec["args"])
-        assert spec["help"], name
+        Draft202012Validator.check_schema(spec.args)
+        assert spec.help, name
 
 
 # (command, arguments, the field named, or None: accepted by both)
