@@ -14,7 +14,8 @@ import threading
 from typing import Any
 
 from omnisort_hw.request_fields import wire_args
-from omnisort_hw.sim_requests import command_of
+from omnisort_hw.sim_requests import SIM_COMMANDS, command_of
+from omnisort_hw.wire_records import WireError, from_wire
 
 DEFAULT_TIMEOUT_S = 10.0
 MOVE_TIMEOUT_S = 120.0  # a change the reply waits to see in a picture, or the arm to stand
@@ -42,7 +43,8 @@ class SimLink:
     def control(
         self, cmd: str, timeout_s: float = DEFAULT_TIMEOUT_S, **args: Any
     ) -> dict[str, Any]:
-        """Send `{"cmd": cmd, **args}`; the reply's result (SimControlError otherwise)."""
+        """Send `{"cmd": cmd, **args}`; the reply's result, checked against the reply record
+        its command declares (`sim_requests.SIM_COMMANDS`); SimControlError otherwise."""
         with self._lock:
             try:
                 if self._sock is None:
@@ -63,7 +65,16 @@ class SimLink:
             raise SimControlError(self.address, f"not a control-channel reply: {exc}") from exc
         if not reply.get("ok"):
             raise SimControlError(self.address, str(reply.get("error")))
-        return dict(reply.get("result") or {})
+        result = dict(reply.get("result") or {})
+        spec = SIM_COMMANDS.get(cmd)
+        if spec is not None:  # the reply its command declares (a cell of another version?)
+            try:
+                from_wire(spec.reply, result)
+            except WireError as exc:
+                raise SimControlError(
+                    self.address, f"{cmd}: the reply does not fit {exc}"
+                ) from None
+        return result
 
     def _drop(self) -> None:
         for closing in (self._rfile, self._sock):

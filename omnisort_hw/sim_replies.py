@@ -5,7 +5,9 @@ replies' codec (`wire_records.from_wire`), so that the tab reads fields, not key
   (`sim_backend.virtual_cell.cell.VirtualCell.truth`) with more than the tab reads, and a test
   holds the two together;
 - `describe`: each command's help and its arguments' JSON Schema (`sim_requests.describe_sim`
-  writes it).
+  writes it);
+- what each control did (`SimDone`, `SimBoardHeld`, ...: `sim_requests.SIM_COMMANDS` names
+  each command's), with whether a picture shows it yet (`SimShown.shown`).
 Lengths in mm, angles in degrees, points in S (cubes, target) or B (tool)."""
 
 from __future__ import annotations
@@ -84,3 +86,90 @@ class SimDescription:
     """The channel's `describe`: every command by name."""
 
     commands: dict[str, SimCommandDescription]
+
+
+Record = dict[str, Any]
+"""A record as the simulator keeps it (the laser plane and the target as system.json holds
+them, a cube's truth)."""
+
+
+@dataclass(frozen=True)
+class SimDone:
+    """A control that changes nothing a picture shows (a stop, a stall, its end)."""
+
+
+@dataclass(frozen=True)
+class SimDropped:
+    """`drop`: how many connections were closed."""
+
+    closed: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimShown:
+    """A control that changes the picture: whether a picture shows the change yet (False:
+    none did within its time)."""
+
+    shown: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimBoardHeld(SimShown):
+    """`board`: the pose held (None: put down) of the HELD_VIEWS poses."""
+
+    view: int | None
+    views: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimCameraTurned(SimShown):
+    """`camera` and `knock`: the camera's rotation in S now."""
+
+    R_SC: list[list[float]]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimLaserSet(SimShown):
+    """`laser`: the laser plane now."""
+
+    laser_plane: Record
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimTargetSet(SimShown):
+    """`target`: the target now (None: taken away)."""
+
+    target: Record | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimCubesSet(SimShown):
+    """`cube`: the cube moved, added or removed, and every cube now."""
+
+    index: int | None
+    cubes: list[Record]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimArmStood(SimShown):
+    """`joints` and `move_to`: the pendant's target, the move's time, the joints at rest."""
+
+    q_deg: list[float]
+    seconds: float
+    joints_deg: list[float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimGripperSet(SimShown):
+    """`gripper`: closed or open, and whether it holds a cube."""
+
+    closed: bool
+    holding: bool
+
+
+@dataclass(frozen=True)
+class SimRendered:
+    """`render`: the folder and the images written there."""
+
+    folder: str
+    images: list[str]

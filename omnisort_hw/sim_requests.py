@@ -25,7 +25,22 @@ from omnisort_hw.request_fields import (
     schema_of,
     summary_line,
 )
-from omnisort_hw.sim_replies import SimCommandDescription, SimDescription
+from omnisort_hw.sim_replies import (
+    Record,
+    SimArmStood,
+    SimBoardHeld,
+    SimCameraTurned,
+    SimCommandDescription,
+    SimCubesSet,
+    SimDescription,
+    SimDone,
+    SimDropped,
+    SimGripperSet,
+    SimLaserSet,
+    SimRendered,
+    SimTargetSet,
+    SimTruth,
+)
 
 HELD_VIEWS = 12
 """The held board's poses covering the field (the intrinsics' views), 0..HELD_VIEWS-1."""
@@ -218,11 +233,12 @@ class RenderRequest:
 
 @dataclass(frozen=True)
 class SimCommand:
-    """A control-channel command: its name, the record that declares its arguments, its help
-    (default: the record's first docstring line)."""
+    """A control-channel command: its name, the record that declares its arguments, the record
+    of its reply (`sim_replies`), its help (default: the request's first docstring line)."""
 
     name: str
     request: type[Any]
+    reply: Any  # a `sim_replies` record, or `Record` (the status: the controller's own keys)
     help: str = ""
 
     @property
@@ -240,25 +256,31 @@ class SimCommand:
 SIM_COMMANDS: dict[str, SimCommand] = {
     c.name: c
     for c in (
-        SimCommand("status", NoArgs, "the controller's modes, the laser, renders, late ticks"),
-        SimCommand("truth", TruthRequest),
-        SimCommand("describe", DescribeRequest),
-        SimCommand("protective_stop", NoArgs, "a protective stop, as a safety sensor triggers it"),
-        SimCommand("emergency_stop", NoArgs, "an emergency stop"),
-        SimCommand("release_emergency_stop", NoArgs, "the emergency stop button pulled out again"),
-        SimCommand("drop", DropRequest),
-        SimCommand("stall", StallRequest),
-        SimCommand("unstall", UnstallRequest),
-        SimCommand("board", BoardRequest),
-        SimCommand("camera", CameraRequest),
-        SimCommand("knock", KnockRequest),
-        SimCommand("laser", LaserRequest),
-        SimCommand("target", TargetRequest),
-        SimCommand("cube", CubeRequest),
-        SimCommand("joints", JointsRequest),
-        SimCommand("move_to", MoveToRequest),
-        SimCommand("gripper", GripperRequest),
-        SimCommand("render", RenderRequest),
+        SimCommand(
+            "status", NoArgs, Record, "the controller's modes, the laser, renders, late ticks"
+        ),
+        SimCommand("truth", TruthRequest, SimTruth),
+        SimCommand("describe", DescribeRequest, SimDescription),
+        SimCommand(
+            "protective_stop", NoArgs, SimDone, "a protective stop, as a safety sensor triggers it"
+        ),
+        SimCommand("emergency_stop", NoArgs, SimDone, "an emergency stop"),
+        SimCommand(
+            "release_emergency_stop", NoArgs, SimDone, "the emergency stop button pulled out again"
+        ),
+        SimCommand("drop", DropRequest, SimDropped),
+        SimCommand("stall", StallRequest, SimDone),
+        SimCommand("unstall", UnstallRequest, SimDone),
+        SimCommand("board", BoardRequest, SimBoardHeld),
+        SimCommand("camera", CameraRequest, SimCameraTurned),
+        SimCommand("knock", KnockRequest, SimCameraTurned),
+        SimCommand("laser", LaserRequest, SimLaserSet),
+        SimCommand("target", TargetRequest, SimTargetSet),
+        SimCommand("cube", CubeRequest, SimCubesSet),
+        SimCommand("joints", JointsRequest, SimArmStood),
+        SimCommand("move_to", MoveToRequest, SimArmStood),
+        SimCommand("gripper", GripperRequest, SimGripperSet),
+        SimCommand("render", RenderRequest, SimRendered),
     )
 }
 

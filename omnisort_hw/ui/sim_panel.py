@@ -27,7 +27,7 @@ from nicegui import run, ui
 from omnisort_hw import sim_requests as sr
 from omnisort_hw.request_fields import build
 from omnisort_hw.sim_link import MOVE_TIMEOUT_S, SimControlError, SimLink
-from omnisort_hw.sim_replies import SimDescription, SimTruth
+from omnisort_hw.sim_replies import SimDescription, SimShown, SimTruth
 from omnisort_hw.ui.schema_form import form_fields, problems, typed_number
 from omnisort_hw.ui.schema_widgets import SchemaForm
 from omnisort_hw.ui.session import BrowserSession
@@ -338,9 +338,11 @@ class SimulatorPanel:
             return None
         self.note.text = f"{cmd} ..."
         result = await self._control(build(request, given))
-        if result is None:
+        reply = self._read(sr.SIM_COMMANDS[cmd].reply, result)
+        if result is None or reply is None:
             return None
-        shown = "" if result.get("shown", True) else " (no picture shows it yet)"
+        unseen = isinstance(reply, SimShown) and not reply.shown
+        shown = " (no picture shows it yet)" if unseen else ""
         self.note.text = done.format_map(_Shown({**given, **result})) + shown
         await self._show_truth()
         return result

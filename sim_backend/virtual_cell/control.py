@@ -20,6 +20,19 @@ import numpy as np
 
 from omnisort_hw import sim_requests as sr
 from omnisort_hw.errors import MotionRefusedError
+from omnisort_hw.sim_replies import (
+    SimArmStood,
+    SimBoardHeld,
+    SimCameraTurned,
+    SimCubesSet,
+    SimDescription,
+    SimDone,
+    SimDropped,
+    SimGripperSet,
+    SimLaserSet,
+    SimRendered,
+    SimTargetSet,
+)
 from omnisort_hw.wire_records import to_wire
 from sim_backend.scene_images import write_render
 from sim_backend.virtual_cell.held_board import HELD_VIEWS
@@ -39,21 +52,23 @@ class ControlChannel:
     def __init__(self, vc: Any) -> None:
         self.vc = vc  # the `cell.VirtualCell` it belongs to (which builds this channel)
         self._renders = 0
-        self._handlers: dict[str, Callable[[Any], dict[str, Any]]] = {
+        self._handlers: dict[str, Callable[[Any], object]] = {
             name: getattr(self, f"_{name}") for name in sr.SIM_COMMANDS
         }
 
     def execute(self, req: dict[str, Any]) -> dict[str, Any]:
+        """The request's reply record (`SIM_COMMANDS` names each command's) as JSON."""
         cmd, request = sr.validate(req)
         try:
-            return self._handlers[cmd](request)
+            reply: dict[str, Any] = to_wire(self._handlers[cmd](request))
+            return reply
         except MotionRefusedError as exc:
             raise ValueError(str(exc)) from exc
 
     # ---- the cell's state ---------------------------------------------------------------------
 
-    def _describe(self, req: sr.DescribeRequest) -> dict[str, Any]:
-        return to_wire(sr.describe_sim())
+    def _describe(self, req: sr.DescribeRequest) -> SimDescription:
+        return sr.describe_sim()
 
     def _status(self, req: sr.NoArgs) -> dict[str, Any]:
         vc = self.vc
@@ -70,23 +85,23 @@ class ControlChannel:
 
     # ---- safety and faults ---------------------------------------------------------------------
 
-    def _protective_stop(self, req: sr.NoArgs) -> dict[str, Any]:
+    def _protective_stop(self, req: sr.NoArgs) -> SimDone:
         self.vc.ctl.protective_stop()
-        return {}
+        return SimDone()
 
-    def _emergency_stop(self, req: sr.NoArgs) -> dict[str, Any]:
+    def _emergency_stop(self, req: sr.NoArgs) -> SimDone:
         self.vc.ctl.emergency_stop()
-        return {}
+        return SimDone()
 
-    def _release_emergency_stop(self, req: sr.NoArgs) -> dict[str, Any]:
+    def _release_emergency_stop(self, req: sr.NoArgs) -> SimDone:
         self.vc.ctl.release_emergency_stop()
-        return {}
+        return SimDone()
 
     @staticmethod
     def _faces(what: str) -> tuple[str, ...]:
         return FACES if what == "all" else (what,)
 
-    def _drop(self, req: sr.DropRequest) -> dict[str, Any]:
+    def _drop(self, req: sr.DropRequest) -> SimDropped:
         vc, closed = self.vc, 0
         for face in self._faces(req.what):
             if face == "arm":
@@ -97,44 +112,44 @@ class ControlChannel:
                 closed += vc.camera.listener.drop()
             else:
                 vc.laser.drop()
-        return {"closed": closed}
+        return SimDropped(closed)
 
-    def _stall(self, req: sr.StallRequest) -> dict[str, Any]:
+    def _stall(self, req: sr.StallRequest) -> SimDone:
         for face in self._faces(req.what):
             self.vc.faults.stall(face, req.seconds)
-        return {}
+        return SimDone()
 
-    def _unstall(self, req: sr.UnstallRequest) -> dict[str, Any]:
+    def _unstall(self, req: sr.UnstallRequest) -> SimDone:
         for face in self._faces(req.what):
             self.vc.faults.clear(face)
-        return {}
+        return SimDone()
 
     # ---- what the camera sees -------------------------------------------------------------------
 
     def _shown(self) -> bool:
         return self.vc.frames.wait_shown(SHOWN_TIMEOUT_S)
 
-    def _board(self, req: sr.BoardRequest) -> dict[str, Any]:
+    def _board(self, req: sr.BoardRequest) -> SimBoardHeld:
         shown = self.vc.frames.hold_board(req.view, SHOWN_TIMEOUT_S)
-        return {"view": req.view, "views": HELD_VIEWS, "shown": shown}
+        return SimBoardHeld(view=req.view, views=HELD_VIEWS, shown=shown)
 
-    def _camera(self, req: sr.CameraRequest) -> dict[str, Any]:
+    def _camera(self, req: sr.CameraRequest) -> SimCameraTurned:
         R = self.vc.cell.mount_camera(req.roll_deg, req.pitch_deg, req.yaw_deg)
-        return {"R_SC": R.tolist(), "shown": self._shown()}
+        return SimCameraTurned(R_SC=R.tolist(), shown=self._shown())
 
-    def _knock(self, req: sr.KnockRequest) -> dict[str, Any]:
+    def _knock(self, req: sr.KnockRequest) -> SimCameraTurned:
         R = self.vc.cell.bump_camera(req.angle_deg, req.axis)
-        return {"R_SC": R.tolist(), "shown": self._shown()}
+        return SimCameraTurned(R_SC=R.tolist(), shown=self._shown())
 
-    def _laser(self, req: sr.LaserRequest) -> dict[str, Any]:
+    def _laser(self, req: sr.LaserRequest) -> SimLaserSet:
         cell = self.vc.cell
         cell.set_laser_plane(req.roll_deg, req.pitch_deg, req.distance_mm)
         if req.on is not None:
             with cell.lock:
                 cell.world.laser_on = req.on
-        return {"laser_plane": self.vc.truth()["laser_plane"], "shown": self._shown()}
+        return SimLaserSet(laser_plane=self.vc.truth()["laser_plane"], shown=self._shown())
 
-    def _target(self, req: sr.TargetRequest) -> dict[str, Any]:
+    def _target(self, req: sr.TargetRequest) -> SimTargetSet:
         x, y = req.x_mm, req.y_mm
         self.vc.cell.set_target(
             req.on,
@@ -142,9 +157,9 @@ class ControlChannel:
             None if x is None or y is None else (x, y),
             req.yaw_deg,
         )
-        return {"target": self.vc.truth()["target"], "shown": self._shown()}
+        return SimTargetSet(target=self.vc.truth()["target"], shown=self._shown())
 
-    def _cube(self, req: sr.CubeRequest) -> dict[str, Any]:
+    def _cube(self, req: sr.CubeRequest) -> SimCubesSet:
         cell, index, yaw = self.vc.cell, req.index, req.yaw_deg or 0.0
         if req.action == "move":
             assert index is not None and req.x_mm is not None and req.y_mm is not None
@@ -154,11 +169,11 @@ class ControlChannel:
             index = cell.add_cube(req.color, req.x_mm, req.y_mm, yaw)
         else:
             cell.remove_cube(index, held=self.vc.arm.gripper.held_body)
-        return {"index": index, "cubes": self.vc.truth()["cubes"], "shown": self._shown()}
+        return SimCubesSet(index=index, cubes=self.vc.truth()["cubes"], shown=self._shown())
 
     # ---- the arm from the pendant ----------------------------------------------------------------
 
-    def _stand(self, started: dict[str, Any]) -> dict[str, Any]:
+    def _stand(self, started: dict[str, Any]) -> SimArmStood:
         """Wait for the pendant's move to end (bounded), then for a picture of it."""
         ctl = self.vc.ctl
         deadline = time.monotonic() + started["seconds"] + MOVE_TIMEOUT_S
@@ -166,16 +181,17 @@ class ControlChannel:
             if time.monotonic() > deadline:
                 raise ValueError("the arm did not come to rest")
             time.sleep(0.02)
-        return {**started, "joints_deg": np.rad2deg(ctl.q).tolist(), "shown": self._shown()}
+        joints = np.rad2deg(ctl.q).tolist()
+        return SimArmStood(**started, joints_deg=joints, shown=self._shown())
 
-    def _joints(self, req: sr.JointsRequest) -> dict[str, Any]:
+    def _joints(self, req: sr.JointsRequest) -> SimArmStood:
         return self._stand(self.vc.ctl.pendant_move(q_deg=np.asarray(req.q_deg, float)))
 
-    def _move_to(self, req: sr.MoveToRequest) -> dict[str, Any]:
+    def _move_to(self, req: sr.MoveToRequest) -> SimArmStood:
         xyz = np.array([req.x_mm, req.y_mm, req.z_mm])
         return self._stand(self.vc.ctl.pendant_move(xyz_mm=xyz))
 
-    def _gripper(self, req: sr.GripperRequest) -> dict[str, Any]:
+    def _gripper(self, req: sr.GripperRequest) -> SimGripperSet:
         vc = self.vc
         if vc.ctl.moving:
             raise ValueError("the arm is moving: wait for it to stop")
@@ -184,15 +200,12 @@ class ControlChannel:
                 vc.arm.gripper.close()
             else:
                 vc.arm.gripper.open()
-        return {
-            "closed": req.closed,
-            "holding": vc.arm.gripper.held_body is not None,
-            "shown": self._shown(),
-        }
+        holding = vc.arm.gripper.held_body is not None
+        return SimGripperSet(closed=req.closed, holding=holding, shown=self._shown())
 
     # ---- pictures and their truth -----------------------------------------------------------
 
-    def _render(self, req: sr.RenderRequest) -> dict[str, Any]:
+    def _render(self, req: sr.RenderRequest) -> SimRendered:
         out = Path(req.folder).expanduser()
         frames = self.vc.frames
         written: list[str] = []
@@ -217,4 +230,4 @@ class ControlChannel:
                     frames.board = held
         except (OSError, RuntimeError) as exc:
             raise ValueError(f"render into {out}: {exc}") from exc
-        return {"folder": str(out), "images": written}
+        return SimRendered(str(out), written)

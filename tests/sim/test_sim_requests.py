@@ -4,13 +4,16 @@ the Simulator tab's forms, checked against the schema, and the channel agree).""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import pytest
 from jsonschema import Draft202012Validator
 
 from omnisort_hw import sim_requests as sr
+from omnisort_hw.sim_replies import Record, SimBoardHeld
 from omnisort_hw.ui.schema_form import problems
+from omnisort_hw.wire_records import WireError, from_wire
 from sim_backend.scene import NAMED_COLORS
 
 
@@ -76,3 +79,15 @@ def test_each_record_names_its_command() -> None:
     assert sr.command_of(sr.KnockRequest(angle_deg=0.3)) == "knock"
     with pytest.raises(ValueError, match="NoArgs"):
         sr.command_of(sr.NoArgs)
+
+
+def test_every_command_declares_its_reply_as_a_record() -> None:
+    """What the channel answers is declared beside what it is asked: a record of
+    `sim_replies` (read by the replies' codec), or the status's `Record` (the controller's own
+    keys). `SimLink.control` holds each reply to it."""
+    for name, spec in sr.SIM_COMMANDS.items():
+        assert spec.reply is Record or dataclasses.is_dataclass(spec.reply), name
+    held = from_wire(sr.SIM_COMMANDS["board"].reply, {"view": 3, "views": 12, "shown": True})
+    assert held == SimBoardHeld(view=3, views=12, shown=True)
+    with pytest.raises(WireError, match=r"SimBoardHeld\.shown: missing"):
+        from_wire(sr.SIM_COMMANDS["board"].reply, {"view": 3, "views": 12})
