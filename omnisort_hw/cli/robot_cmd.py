@@ -26,6 +26,7 @@ from omnisort_hw.cli.cell_file import load_cell
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
+from omnisort_hw.config.location_settings import LOCATION_KEYS, LocationSettings, location_changes
 from omnisort_hw.config.registration_settings import RegistrationSettings
 from omnisort_hw.errors import ConfigError, InputError
 from omnisort_hw.pipeline.replies import SortReply
@@ -63,13 +64,7 @@ def register(sub: Any) -> None:
         help="cell.toml: locate with its [sorting] section, as the service does; without an "
         "image, capture with its camera and laser",
     )
-    loc.add_argument(
-        "--cube-size", type=float, default=None, help="cube edge, mm (default 100 or --config)"
-    )
-    loc.add_argument("--color-table", type=Path, default=None, help="colour table (TOML or JSON)")
-    loc.add_argument(
-        "--region", default=None, help="xmin,xmax,ymin,ymax in S, mm (default: between walls)"
-    )
+    add_request_arguments(loc, LocationSettings)  # over --config's [sorting]
     loc.add_argument("--json", action="store_true")
     loc.add_argument("--log", type=output_file, default=None, help="write a rerun .rrd of the run")
     loc.set_defaults(func=cmd_locate)
@@ -107,16 +102,6 @@ def add_sorting_evaluation(esub: Any) -> None:
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     add_sweep_arguments(ev)
     ev.set_defaults(func=cmd_evaluate_sorting)
-
-
-def _numbers(text: str, n: int, what: str) -> tuple[float, ...]:
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError(f"{what} must be {n} comma-separated numbers, got {text!r}") from None
-    if len(vals) != n:
-        raise InputError(f"{what} must be {n} comma-separated numbers, got {text!r}")
-    return vals
 
 
 def _registration(args: argparse.Namespace) -> Any:
@@ -164,25 +149,17 @@ def cmd_register(args: argparse.Namespace) -> int:
 
 def _locate_config(resolved: Any, args: argparse.Namespace) -> Any:
     """The `[sorting]` record of `--config` as the rig resolved it (what the service locates
-    with), else the defaults; `--cube-size`, `--color-table` and `--region` override it."""
+    with), else the defaults; the flags of `LocationSettings` override it, checked as the
+    cell file's keys are."""
     from dataclasses import replace
 
-    from omnisort_hw.core.cube_location import ColorTable
     from omnisort_hw.core.pick_planning import SortConfig
 
     if args.config is not None and resolved is None:
         raise ConfigError(f"{args.config}: no [sorting] section")
     cfg = resolved if resolved is not None else SortConfig()
-    changes: dict[str, Any] = {}
-    if args.cube_size is not None:
-        if args.cube_size <= 0:
-            raise InputError(f"--cube-size must be positive, got {args.cube_size}")
-        changes["cube_size_mm"] = args.cube_size
-    if args.color_table is not None:
-        changes["colors"] = ColorTable.load(args.color_table)
-    if args.region is not None:
-        changes["region_S_mm"] = _numbers(args.region, 4, "--region")
-    return replace(cfg, **changes)
+    given = {name: getattr(args, name) for name in LOCATION_KEYS}
+    return replace(cfg, **location_changes(given, lambda a: a.cli_flag, InputError))
 
 
 def cmd_locate(args: argparse.Namespace) -> int:

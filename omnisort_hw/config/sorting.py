@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from omnisort_hw.config.location_settings import LOCATION_KEYS, location_changes
 from omnisort_hw.config.registration_settings import FITS, RegistrationSettings
 from omnisort_hw.core.checkerboard import BoardSpec
 from omnisort_hw.core.choices import DEFAULT_BOARD
@@ -90,7 +91,6 @@ def _number(data: Mapping[str, Any], key: str, default: float, path: str, lo: fl
 # `[sorting]` keys that are plain non-negative numbers, and every key the section knows.
 _SORT_NUMBERS = (
     "tcp_offset_mm",
-    "cube_size_mm",
     "gripper_stroke_mm",
     "grasp_above_center_mm",
     "approach_mm",
@@ -107,17 +107,16 @@ _SORT_NUMBERS = (
 REGISTRATION_KEYS = frozenset(a.name for a in args_of(RegistrationSettings))
 SORT_KEYS = {
     *_SORT_NUMBERS,
+    *LOCATION_KEYS,
     "from_scene",
     "robot_model",
     "home_deg",
     "floor_z_B_mm",
-    "region_S_mm",
     "workspace_B_mm",
     "use_laser",
     "bins",
     "obstacles",
     "colors",
-    "colors_file",
 }
 
 
@@ -147,12 +146,11 @@ def parse_sort_config(
         changes["robot_model"] = name
     if "home_deg" in data:
         changes["home_deg"] = _floats(data["home_deg"], 6, f"{path}.home_deg")
-    for key in ("region_S_mm", "workspace_B_mm"):
-        if key in data:
-            r = _floats(data[key], 4, f"{path}.{key}")
-            if r[0] >= r[1] or r[2] >= r[3]:
-                raise ConfigError(f"{path}.{key}: expected [xmin, xmax, ymin, ymax], got {r}")
-            changes[key] = r
+    if "workspace_B_mm" in data:
+        r = _floats(data["workspace_B_mm"], 4, f"{path}.workspace_B_mm")
+        if r[0] >= r[1] or r[2] >= r[3]:
+            raise ConfigError(f"{path}.workspace_B_mm: expected [xmin, xmax, ymin, ymax], got {r}")
+        changes["workspace_B_mm"] = r
     if "use_laser" in data:
         if not isinstance(data["use_laser"], bool):
             raise ConfigError(f"{path}.use_laser: expected true or false")
@@ -188,16 +186,12 @@ def parse_sort_config(
                 )
             )
         changes["obstacles"] = tuple(obs)
+    located = {k: data[k] for k in LOCATION_KEYS if k in data and k != "colors_file"}
+    if "colors" not in data and "colors_file" in data:
+        located["colors_file"] = data["colors_file"]
+    changes |= location_changes(located, lambda a: f"{path}.{a.name}", base_dir=base_dir)
     if "colors" in data:
         changes["colors"] = ColorTable.from_mapping(data["colors"], f"{path}.colors")
-    elif "colors_file" in data:
-        p = Path(str(data["colors_file"]))
-        if base_dir is not None and not p.is_absolute():
-            p = base_dir / p
-        try:
-            changes["colors"] = ColorTable.load(p)
-        except ConfigError as exc:
-            raise ConfigError(f"{path}.colors_file: {exc}") from None
     return replace(cfg, **changes)
 
 

@@ -106,3 +106,49 @@ def test_registration_keys_are_checked_by_their_declaration() -> None:
         registration_config(values, "register-robot", lambda a: a.cli_flag, InputError)
     with pytest.raises(SystemExit):
         parser.parse_args(["--offset", "1,2,x,4,5,6"])  # argparse: not numbers
+
+
+def test_location_keys_are_checked_by_their_declaration(tmp_path: Path) -> None:
+    """The `[sorting]` keys `locate` overrides are checked against `LocationSettings`, from
+    the file as from the flags (which are made from it), each problem naming its key, or its
+    flag, with the bound it broke."""
+    import argparse
+
+    from omnisort_hw.cli.request_flags import add_request_arguments
+    from omnisort_hw.config.location_settings import (
+        LOCATION_KEYS,
+        LocationSettings,
+        location_changes,
+    )
+    from omnisort_hw.errors import InputError
+
+    cases = {
+        "cube_size_mm": (0, "[sorting].cube_size_mm: must be a finite number within 1..1000 mm"),
+        "region_S_mm": ([0, 1, 2], "[sorting].region_S_mm: must be an array of 4 numbers"),
+    }
+    for key, (value, message) in cases.items():
+        with pytest.raises(ConfigError) as err:
+            parse_sort_config({key: value})
+        assert str(err.value).startswith(message), err.value
+    with pytest.raises(ConfigError, match=r"\[sorting\]\.region_S_mm: expected xmin < xmax"):
+        parse_sort_config({"region_S_mm": [500, -500, 0, 900]})
+    with pytest.raises(ConfigError, match=r"\[sorting\]\.colors_file: .*missing\.toml"):
+        parse_sort_config({"colors_file": "missing.toml"}, base_dir=tmp_path)
+    cfg = parse_sort_config({"cube_size_mm": 80, "region_S_mm": [-500, 500, 100, 900]})
+    assert (cfg.cube_size_mm, cfg.region_S_mm) == (80.0, (-500.0, 500.0, 100.0, 900.0))
+
+    parser = argparse.ArgumentParser()
+    add_request_arguments(parser, LocationSettings)
+    flags = {a.dest: a.option_strings for a in parser._actions if a.dest in LOCATION_KEYS}
+    assert flags == {
+        "cube_size_mm": ["--cube-size"],
+        "colors_file": ["--color-table"],
+        "region_S_mm": ["--region"],
+    }
+    args = parser.parse_args(["--cube-size", "0", "--region=-500,500,100,900"])
+    given = {k: getattr(args, k) for k in LOCATION_KEYS}
+    with pytest.raises(InputError, match=r"--cube-size: must be a finite number within 1\.\.1000"):
+        location_changes(given, lambda a: a.cli_flag, InputError)
+    args = parser.parse_args(["--cube-size", "80", "--region=-500,500,100,900"])
+    changes = location_changes({k: getattr(args, k) for k in LOCATION_KEYS}, lambda a: a.cli_flag)
+    assert changes == {"cube_size_mm": 80.0, "region_S_mm": (-500.0, 500.0, 100.0, 900.0)}
