@@ -172,3 +172,15 @@ def test_operator_sorts_stops_and_resumes_in_a_real_browser(
     )
     assert [r[0] for r in log] == [str(n) for n in range(1, located + 1)], log
     assert [r[1] for r in log] == ["1"] * sorted_first + ["2"] * len(outcomes), log
+
+    # E-stop latches the cell in fault, and Start is not offered; Reset (an operator's) takes
+    # it back to idle, and Start is offered again.
+    page.click("estop")
+    wait_for("the fault on the page", lambda: page.text("state") == "fault", UI_S)
+    assert service_status(svc.port)["state"] == "fault"
+    wait_for("Start disabled", lambda: not page.el("start-sort").is_enabled(), UI_S, 0.1)
+    page.click("reset")
+    wait_for("idle on the page", lambda: page.text("state") == "idle", UI_S)
+    assert service_status(svc.port)["state"] == "idle"
+    assert "reset: the cell left" in page.text("message"), page.text("message")
+    wait_for("Start enabled", lambda: page.el("start-sort").is_enabled(), UI_S, 0.1)

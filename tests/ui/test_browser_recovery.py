@@ -65,6 +65,33 @@ def test_recovery_after_a_bump_to_a_sorted_cell(
     ], "a cube was picked on the knocked calibration"
     page.shot("ui_drift")
 
+    # Acknowledge asks first: Cancel sends nothing and motion stays refused. Accepted, motion
+    # is allowed again on the operator's word (the picks checked by hand): the banner goes,
+    # until the next check (the sort's own, first) measures the camera turned again.
+    page.click("acknowledge")
+    wait_for("the question", lambda: page.visible("cancel"), UI_S)
+    page.click("cancel")
+    wait_for("the question gone", lambda: not page.visible("cancel"), UI_S)
+    st = service_status(svc.port)
+    assert st["drift"]["motion_refused"] and st["drift"]["acknowledged"] is None, st["drift"]
+    page.click("acknowledge")
+    page.confirm()
+    wait_for(
+        "the acknowledgement",
+        lambda: page.text("message") == "drift acknowledged: motion allowed again",
+        UI_S,
+    )
+    st = service_status(svc.port)
+    assert not st["drift"]["motion_refused"] and st["drift"]["acknowledged"], st["drift"]
+    wait_for("the banner gone", lambda: not page.visible("drift"), UI_S)
+    wait_for("Start enabled", lambda: page.el("start-sort").is_enabled(), UI_S, 0.1)
+    page.click("start-sort")
+    page.confirm()
+    wait_for("the banner again", lambda: page.visible("drift"), 120, 0.5)
+    st = service_status(svc.port)
+    assert st["drift"]["motion_refused"] and st["drift"]["acknowledged"] is None, st["drift"]
+    assert not [ev for ev in st["last_run"]["progress"] if "cube" in ev], "picked when knocked"
+
     # The simulated cell's laser is on from the start (the drift check leaves it so): off,
     # to see the page say why the target is not found.
     page.click("laser-off")
