@@ -47,10 +47,12 @@ from omnisort_hw.pipeline.arm_motion import ArmMover
 from omnisort_hw.pipeline.calibration_store import CalibrationStore
 from omnisort_hw.pipeline.gripper_load import assess
 from omnisort_hw.pipeline.replies import (
+    ArmSafety,
     CaptureReply,
     DetectReply,
     ImageReply,
     LaserReply,
+    MoveReply,
     PictureFileReply,
     ViewReply,
 )
@@ -528,7 +530,7 @@ class Cell:
         self.store.check_motion_allowed()
         self.drift.check_motion_allowed()
 
-    def move(self, request: MoveRequest, cancel: threading.Event | None = None) -> dict[str, Any]:
+    def move(self, request: MoveRequest, cancel: threading.Event | None = None) -> MoveReply:
         """Move to a joint target (joint space) or a Cartesian target (straight TCP line).
 
         Refused before anything reaches the arm when the calibration is not usable or the arm
@@ -565,11 +567,12 @@ class Cell:
             arm.gripper.open()
         self.journal.clear_in_flight("an operator confirmed the gripper is empty")
 
-    def check_safe_to_resume(self) -> dict[str, Any]:
-        """Raise the driver's SafetyStopError if the arm is still in a stop; else its safety."""
+    def check_safe_to_resume(self) -> ArmSafety | None:
+        """Raise the driver's SafetyStopError if the arm is still in a stop; else its safety
+        (None: no arm connected)."""
         arm = self.devices.arm
         if arm is None or not arm.is_connected:
-            return {"arm": None}
+            return None
         st = arm.safety_status()
         st.raise_if_stopped(arm.name)
-        return {"arm": {"robot_mode": st.robot_mode, "ok": st.ok}}
+        return ArmSafety(st.robot_mode, st.ok)

@@ -36,6 +36,7 @@ from omnisort_hw.config.devices import (
     config_error,
     parse_device_config,
 )
+from omnisort_hw.pipeline.replies import DeviceError as ReplyDeviceError
 
 if TYPE_CHECKING:
     from omnisort_hw.pipeline.sort import SceneLayout
@@ -55,11 +56,11 @@ class Devices:
     def items(self) -> list[tuple[str, Device | None]]:
         return [("camera", self.camera), ("laser", self.laser), ("arm", self.arm)]
 
-    def reconnect_lost(self) -> dict[str, Any]:
+    def reconnect_lost(self) -> tuple[list[str], dict[str, ReplyDeviceError]]:
         """Connect again every device that is no longer connected (the operator's reset after
         a fault): the ones that came back, and the ones still lost with their typed error."""
         back: list[str] = []
-        lost: dict[str, dict[str, str]] = {}
+        lost: dict[str, ReplyDeviceError] = {}
         for kind, dev in self.items():
             if dev is None or dev.is_connected:
                 continue
@@ -67,8 +68,8 @@ class Devices:
                 dev.connect()
                 back.append(kind)
             except DeviceError as exc:
-                lost[kind] = error_text(exc)
-        return {"reconnected": back, "lost": lost}
+                lost[kind] = ReplyDeviceError(**error_text(exc))
+        return back, lost
 
 
 def _open_sim(

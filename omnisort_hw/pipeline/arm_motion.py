@@ -11,13 +11,13 @@ import logging
 import threading
 import time
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
 from drivers.base import Arm, pose_matrix
 from omnisort_hw.core.motion import MotionLimits as PlanLimits
 from omnisort_hw.core.motion import plan_joint_move
+from omnisort_hw.pipeline.replies import MoveReply
 from omnisort_hw.pipeline.requests import MoveRequest
 from omnisort_hw.pipeline.rig import raise_if_cancelled
 from omnisort_hw.runlog import RunLog
@@ -33,7 +33,7 @@ class ArmMover:
 
     def move(
         self, arm: Arm, rl: RunLog, request: MoveRequest, cancel: threading.Event | None = None
-    ) -> dict[str, Any]:
+    ) -> MoveReply:
         """Move to the request's `joints_deg` (joint space), or to its `matrix` / `pose` ([x, y,
         z mm, rotation vector deg]) along a straight TCP line; returns the joints and TCP pose
         reached."""
@@ -67,7 +67,7 @@ class ArmMover:
         tcp = np.asarray(arm.tcp_pose(), float)
         self._log_joint_series(rl, "arm/executed", sampler.times, sampler.samples)
         rl.pose("arm/executed/tcp", tcp)
-        return {"joints_deg": np.round(end, 4).tolist(), "tcp_pose": np.round(tcp, 4).tolist()}
+        return MoveReply(np.round(end, 4).tolist(), np.round(tcp, 4).tolist())
 
     def _log_planned_joint_move(
         self, rl: RunLog, start: np.ndarray, target: np.ndarray, speed_deg_s: float | None

@@ -500,3 +500,46 @@ class DescribeReply:
 
     schema_dialect: str
     commands: dict[str, CommandDescription]
+
+
+@dataclass(frozen=True)
+class MoveReply:
+    """`move`: the joints (deg) and the TCP pose (4x4, mm) the arm reached."""
+
+    joints_deg: list[float]
+    tcp_pose: list[list[float]]
+
+
+@dataclass(frozen=True)
+class DeviceError:
+    """A device that could not be connected: its error's message and typed code."""
+
+    error: str
+    code: str
+
+
+@dataclass(frozen=True)
+class ArmSafety:
+    """The arm's safety after a stop: its robot mode, and whether it may move."""
+
+    robot_mode: str
+    ok: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class ResetReply:
+    """`reset`: the state left and the state now (idle), the devices connected again and the
+    ones still lost, and the arm's safety (None: no arm connected)."""
+
+    state: str
+    previous: str
+    reconnected: list[str]
+    lost: dict[str, DeviceError]
+    arm: ArmSafety | None
+
+
+@dataclass(frozen=True)
+class ShutdownReply:
+    """`shutdown`: the service is stopping."""
+
+    shutting_down: bool

@@ -29,8 +29,11 @@ from omnisort_hw.pipeline.replies import (
     LaserReply,
     LocateReply,
     MapReply,
+    MoveReply,
     PictureFileReply,
     RegisterReply,
+    ResetReply,
+    ShutdownReply,
     SortReply,
     StopReply,
     ViewReply,
@@ -154,8 +157,8 @@ class CellCommands:
     def locate(self, request: LocateRequest | None = None, on_event: OnEvent = None) -> LocateReply:
         return _read(LocateReply, "locate", self.execute("locate", wire_args(request), on_event))
 
-    def move(self, request: MoveRequest, on_event: OnEvent = None) -> Result:
-        return self.execute("move", wire_args(request), on_event)
+    def move(self, request: MoveRequest, on_event: OnEvent = None) -> MoveReply:
+        return _read(MoveReply, "move", self.execute("move", wire_args(request), on_event))
 
     def sort(self, request: SortRequest | None = None, on_event: OnEvent = None) -> SortReply:
         return _read(SortReply, "sort", self.execute("sort", wire_args(request), on_event))
@@ -175,11 +178,11 @@ class CellCommands:
     def estop(self) -> StopReply:
         return _read(StopReply, "estop", self.execute("estop"))
 
-    def reset(self, request: ResetRequest | None = None) -> Result:
-        return self.execute("reset", wire_args(request))
+    def reset(self, request: ResetRequest | None = None) -> ResetReply:
+        return _read(ResetReply, "reset", self.execute("reset", wire_args(request)))
 
-    def shutdown(self) -> Result:
-        return self.execute("shutdown")
+    def shutdown(self) -> ShutdownReply:
+        return _read(ShutdownReply, "shutdown", self.execute("shutdown"))
 
 
 @dataclass(frozen=True)

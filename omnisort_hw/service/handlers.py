@@ -124,7 +124,7 @@ def locate(ctx: Context, request: LocateRequest) -> Reply:
 
 
 def move(ctx: Context, request: MoveRequest) -> Reply:
-    return ctx.cell.move(request, ctx.cancel)
+    return to_wire(ctx.cell.move(request, ctx.cancel))
 
 
 def sort(ctx: Context, request: SortRequest) -> Reply:

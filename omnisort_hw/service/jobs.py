@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from omnisort_hw.pipeline.replies import StopReply
+from omnisort_hw.pipeline.replies import ResetReply, StopReply
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.error_replies import error_from_exception
 from omnisort_hw.service.handlers import HANDLERS, Context
@@ -90,19 +90,21 @@ class JobRunner:
 
         threading.Thread(target=loop, name="keep-stopping", daemon=True).start()
 
-    def _reset(self, gripper_empty: bool = False) -> dict[str, Any]:
+    def _reset(self, gripper_empty: bool = False) -> ResetReply:
         with self._job_lock:
             if self._job is not None:
                 raise proto.ProtocolError(
                     proto.BUSY, f"{self._job.cmd} is running; send stop first"
                 )
-            devices = self.cell.devices.reconnect_lost()
+            back, lost = self.cell.devices.reconnect_lost()
             safety = self.cell.check_safe_to_resume()
             if gripper_empty:
                 self.cell.confirm_gripper_empty()
             old = self.states.state
             self.states.set(State.IDLE, f"reset from {old.value}")
-        return {"state": State.IDLE.value, "previous": old.value, **safety, **devices}
+        return ResetReply(
+            state=State.IDLE.value, previous=old.value, reconnected=back, lost=lost, arm=safety
+        )
 
     async def _run_job(self, req: proto.Request, emit: Emit | None = None) -> dict[str, Any]:
         spec = req.command

@@ -33,6 +33,7 @@ from omnisort_hw import __version__
 from omnisort_hw.cell.cell import Cell
 from omnisort_hw.config.service import ServiceConfig
 from omnisort_hw.errors import MotionRefusedError, OmnisortError
+from omnisort_hw.pipeline.replies import ShutdownReply
 from omnisort_hw.service import protocol as proto
 from omnisort_hw.service.connection import (
     READ_CHUNK,
@@ -326,11 +327,11 @@ class Service(Transport, JobRunner):
         if req.cmd == "reset":
             empty = bool(req.args.get("gripper_empty"))
             return await self._in_pool(
-                self._quick, req, lambda: self._reset(empty), self.config.quick_timeout_s
+                self._quick, req, lambda: to_wire(self._reset(empty)), self.config.quick_timeout_s
             )
         if req.cmd == "shutdown":
             self.request_shutdown(f"shutdown requested (request {req.id})")
-            return proto.ok_reply(req.id, {"shutting_down": True})
+            return proto.ok_reply(req.id, to_wire(ShutdownReply(shutting_down=True)))
         if req.cmd in ("status", "describe"):
             # Answered in the event loop from the cell's snapshot: no device, no pool.
             ctx = Context(self.cell, threading.Event(), self.service_status)

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from omnisort_hw.pipeline.replies import LaserReply
+from omnisort_hw.pipeline.replies import LaserReply, MoveReply
 from omnisort_hw.pipeline.requests import LaserRequest, MoveRequest, SortRequest
 from omnisort_hw.request_fields import build, wire_args
 from omnisort_hw.service.client import Client, CommandError
@@ -66,8 +66,10 @@ def test_typed_calls_against_the_service(make_service) -> None:
         assert c.laser() == LaserReply(on=True)  # omitted: read back
         events: list[dict] = []
         t0 = time.monotonic()
-        c.move(MoveRequest(joints_deg=(10.0, 0, 0, 0, 0, 0)), on_event=events.append)
+        reached = c.move(MoveRequest(joints_deg=(10.0, 0, 0, 0, 0, 0)), on_event=events.append)
         took = time.monotonic() - t0
+        assert isinstance(reached, MoveReply) and len(reached.tcp_pose) == 4
+        assert reached.joints_deg == pytest.approx([10.0, 0, 0, 0, 0, 0], abs=0.01)
         assert events[0] == {"stage": "started", "cmd": "move", "expected_s": None}, events
         # The next move is told what the last one took on this cell (rounded to 0.1 s).
         again: list[dict] = []
@@ -79,6 +81,10 @@ def test_typed_calls_against_the_service(make_service) -> None:
         assert refused.value.code == "bad_argument"
         assert refused.value.details["field"] == "joints_deg"
         assert "calibrate" in c.describe().commands
+        st = c.stop()
+        assert (st.stopped_job, st.state) == (None, "stopped"), st
+        reset = c.reset()
+        assert (reset.previous, reset.state, reset.lost) == ("stopped", "idle", {}), reset
     with h.client(token="wrong-token-xxxxxxxx") as c, pytest.raises(CommandError) as denied:
         c.laser(LaserRequest(on=False))
     assert denied.value.code == "unauthorized"
