@@ -36,6 +36,7 @@ T = TypeVar("T")
 
 _ABSENT = "wire_absent"
 _KEY = "wire_key"
+_SCALARS = (float, int, str, bool, type(None))
 
 
 class WireError(OmnisortError, ValueError):
@@ -69,6 +70,8 @@ def to_wire(value: Any) -> Any:
             out[f.metadata.get(_KEY, f.name)] = to_wire(v)
         return out
     if isinstance(value, list | tuple):
+        if all(type(v) in _SCALARS for v in value):  # points, names: as they are
+            return list(value)
         return [to_wire(v) for v in value]
     if isinstance(value, Mapping):
         return {k: to_wire(v) for k, v in value.items()}
@@ -85,12 +88,17 @@ def _hints(cls: type) -> dict[str, Any]:
     return get_type_hints(cls)
 
 
+@functools.cache
+def _shape(tp: Any) -> tuple[Any, tuple[Any, ...]]:
+    return get_origin(tp), get_args(tp)
+
+
 def _read(tp: Any, data: Any, path: str) -> Any:
     if tp is Any:
         return data
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return _read_record(tp, data, path)
-    origin, args = get_origin(tp), get_args(tp)
+    origin, args = _shape(tp)
     if origin is Union or origin is types.UnionType:
         if data is None and type(None) in args:
             return None
@@ -117,7 +125,10 @@ def _read(tp: Any, data: Any, path: str) -> Any:
                 _read(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, data, strict=True))
             )
         item = args[0] if args else Any
-        read = [_read(item, v, f"{path}[{i}]") for i, v in enumerate(data)]
+        if item is float and all(type(v) in (float, int) for v in data):  # points: at once
+            read = [float(v) for v in data]
+        else:
+            read = [_read(item, v, f"{path}[{i}]") for i, v in enumerate(data)]
         return read if origin is list else tuple(read)
     if origin is dict:
         if not isinstance(data, Mapping):
