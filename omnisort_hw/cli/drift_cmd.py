@@ -72,17 +72,17 @@ def cmd_check(args: argparse.Namespace) -> int:
     if args.json:
         print_result(s)
     else:
-        b = s.board or {}
+        b = s.board
         print(
             f"{'DRIFT' if s.drift else 'ok'}: camera turned {s.angle_deg:.4f} deg "
             f"(rotation vector {s.rotvec_deg} deg in S, threshold {s.threshold_deg:.4f} "
             f"deg, from the {s.source})"
         )
-        if b:
+        if b is not None:
             print(
-                f"  board: {b['visible']}/{b['corners']} corners visible, residual median "
-                f"{b['residual_px_median']} px, max {b['residual_px_max']} px; base shift "
-                f"{b['base_shift_mm']} mm"
+                f"  board: {b.visible}/{b.corners} corners visible, residual median "
+                f"{b.residual_px_median} px, max {b.residual_px_max} px; base shift "
+                f"{b.base_shift_mm} mm"
             )
         print_verdict(s)
     return EXIT_DRIFT if res.drift else 0

@@ -40,7 +40,7 @@ from scipy.stats import f as f_dist
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.checkerboard import BoardSpec, to_gray
 from omnisort_hw.core.frames import invert_pose
-from omnisort_hw.core.records import DecisionSummary
+from omnisort_hw.core.records import BoardCheckReply, DecisionSummary
 from omnisort_hw.errors import FeatureNotFoundError, InputError
 
 FALSE_ALARM_RATE = 1e-6  # per check, for a camera that did not move
@@ -307,16 +307,16 @@ class BoardCheck:
     def n_visible(self) -> int:
         return int(self.visible.sum())
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> BoardCheckReply:
         res = np.linalg.norm(self.residual_px, axis=1) if self.residual_px.size else np.zeros(0)
-        return {
-            "corners": int(self.visible.size),
-            "visible": self.n_visible,
-            "residual_px_median": round(float(np.median(res)), 3) if res.size else None,
-            "residual_px_max": round(float(res.max()), 3) if res.size else None,
-            "base_shift_mm": _r(self.base_shift_mm, 3),
-            "base_shift_xyz_mm": [_r(v, 3) for v in self.base_shift_xyz_mm],
-        }
+        return BoardCheckReply(
+            corners=int(self.visible.size),
+            visible=self.n_visible,
+            residual_px_median=round(float(np.median(res)), 3) if res.size else None,
+            residual_px_max=round(float(res.max()), 3) if res.size else None,
+            base_shift_mm=_r(self.base_shift_mm, 3),
+            base_shift_xyz_mm=[_r(v, 3) for v in self.base_shift_xyz_mm],
+        )
 
 
 def _r(v: float, n: int) -> float | None:

@@ -36,6 +36,7 @@ from omnisort_hw.core.intrinsics import (
     _refit,
     pose_only_rms,
 )
+from omnisort_hw.core.records import CrossValidation
 
 ANGLES_DEG = (0.0, 45.0, 60.0, 70.0, 80.0)  # where the report states the uncertainty
 ANGLE_BAND_DEG = 2.5  # +- around each angle
@@ -244,7 +245,7 @@ def result_views(result: IntrinsicResult, board_points: np.ndarray) -> list[Imag
     ]
 
 
-def cross_validate(result: IntrinsicResult, board_points: np.ndarray) -> dict[str, Any]:
+def cross_validate(result: IntrinsicResult, board_points: np.ndarray) -> CrossValidation:
     """Held-out reprojection error (pooled RMS over the held-out corners, px): leave one view
     out, or two disjoint halves (alternate views) from CV_HALVES_FROM views on."""
     views = result_views(result, board_points)
@@ -256,7 +257,7 @@ def cross_validate(result: IntrinsicResult, board_points: np.ndarray) -> dict[st
         folds = [[k] for k in range(len(views))]
         scheme = "leave one view out"
     if len(views) - max(len(f) for f in folds) < 3:
-        return {"scheme": "none: fewer than 4 views", "rms_px": None}
+        return CrossValidation("none: fewer than 4 views", None)
     degree = result.degree
     prob = _Problem.build(views, degree, result.rho_scale, result.params[:2])
     sq, count, per_view = 0.0, 0, {}
@@ -269,12 +270,12 @@ def cross_validate(result: IntrinsicResult, board_points: np.ndarray) -> dict[st
             per_view[views[k].name] = round(rms, 4)
             sq += rms**2 * len(views[k].pixels)
             count += len(views[k].pixels)
-    return {
-        "scheme": scheme,
-        "rms_px": round(float(np.sqrt(sq / count)), 4),
-        "in_sample_rms_px": round(result.rms_px, 4),
-        "per_view_rms_px": per_view,
-    }
+    return CrossValidation(
+        scheme,
+        round(float(np.sqrt(sq / count)), 4),
+        in_sample_rms_px=round(result.rms_px, 4),
+        per_view_rms_px=per_view,
+    )
 
 
 # ---- repeated views ---------------------------------------------------------------------

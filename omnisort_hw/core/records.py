@@ -131,3 +131,17 @@ class CrossValidation:
     rms_px: float | None
     in_sample_rms_px: float | None = absent()
     per_view_rms_px: dict[str, float] | None = absent()
+
+
+@dataclass(frozen=True)
+class BoardCheckReply:
+    """The floor board in a drift check against the stored calibration's prediction: its
+    corners and those visible, their residuals (px; None without any), and the robot base's
+    shift it implies (mm; None where not finite)."""
+
+    corners: int
+    visible: int
+    residual_px_median: float | None
+    residual_px_max: float | None
+    base_shift_mm: float | None
+    base_shift_xyz_mm: list[float | None]

@@ -44,7 +44,7 @@ from omnisort_hw.pipeline.requests import IntrinsicsRequest
 from omnisort_hw.pipeline.rig import Rig, raise_if_cancelled
 from omnisort_hw.pipeline.verdict import Check, Verdict, graded
 from omnisort_hw.runlog import NullLog, RunLog
-from omnisort_hw.wire_records import from_wire
+from omnisort_hw.wire_records import from_wire, to_wire
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"})
 
@@ -310,7 +310,7 @@ def calibrate_intrinsics(
             "image_circle_radius_px": figures.circle_radius_px,
             "warning": figures.warning,
         },
-        "cross_validation": cross_validate(result, board.object_points()),
+        "cross_validation": to_wire(cross_validate(result, board.object_points())),
         "projection_uncertainty": unc.record(),
         "repeated_views": repeats,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),

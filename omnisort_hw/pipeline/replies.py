@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from omnisort_hw.core.records import (
+    BoardCheckReply,
     CrossValidation,
     CubeReply,
     DecisionSummary,
@@ -183,7 +184,7 @@ class DriftReply(DecisionSummary):
     checked_at: str
     image: str
     calibration_key: str
-    board: Record | None
+    board: BoardCheckReply | None
     verdict: VerdictReply
     board_problem: str | None = absent()
     reference_adopted: bool = absent(False)

@@ -103,10 +103,10 @@ def test_cross_validation_is_above_the_in_sample_rms_and_near_the_noise() -> Non
     truth = truth_model()
     result = calibrate(synthetic_views(truth, 3), truth.image_size, degree=6)
     cv = cross_validate(result, BOARD.object_points())
-    assert cv["scheme"] == "leave one view out"
-    assert cv["rms_px"] >= result.rms_px
+    assert cv.scheme == "leave one view out"
+    assert cv.rms_px is not None and cv.rms_px >= result.rms_px
     # 2D RMS of the noise is sqrt(2) NOISE_PX; held out, only a little above (12 views).
-    assert cv["rms_px"] < 1.3 * np.sqrt(2) * NOISE_PX
+    assert cv.rms_px < 1.3 * np.sqrt(2) * NOISE_PX
 
 
 def test_repeated_views_are_found() -> None:
