@@ -36,7 +36,7 @@ from omnisort_hw.core.intrinsics import (
     _refit,
     pose_only_rms,
 )
-from omnisort_hw.core.records import CrossValidation
+from omnisort_hw.core.records import CrossValidation, ProjectionSigma
 
 ANGLES_DEG = (0.0, 45.0, 60.0, 70.0, 80.0)  # where the report states the uncertainty
 ANGLE_BAND_DEG = 2.5  # +- around each angle
@@ -67,13 +67,13 @@ class ProjectionUncertainty:
             out[f"{a:g}"] = round(float(np.median(self.sigma_px[ok])), 4) if ok.any() else None
         return out
 
-    def record(self) -> dict[str, Any]:
-        return {
-            "what": "projection standard deviation, worst direction, at infinity (px)",
-            "board_poses": "marginalised",
-            "median_px_at_angle_deg": self.at_angles(),
-            "max_px_in_view": round(float(np.nanmax(self.sigma_px)), 4),
-        }
+    def record(self) -> ProjectionSigma:
+        return ProjectionSigma(
+            what="projection standard deviation, worst direction, at infinity (px)",
+            board_poses="marginalised",
+            median_px_at_angle_deg=self.at_angles(),
+            max_px_in_view=round(float(np.nanmax(self.sigma_px)), 4),
+        )
 
 
 def model_uncertainty(result: IntrinsicResult) -> dict[str, Any]:

@@ -145,3 +145,15 @@ class BoardCheckReply:
     residual_px_max: float | None
     base_shift_mm: float | None
     base_shift_xyz_mm: list[float | None]
+
+
+@dataclass(frozen=True)
+class ProjectionSigma:
+    """An intrinsic calibration's projection uncertainty as camera.json records it: what it is,
+    how the board poses were treated, the median sigma (px) at each angle off the axis (by the
+    angle in degrees; None where no view reached), and the largest in view."""
+
+    what: str
+    board_poses: str
+    median_px_at_angle_deg: dict[str, float | None]
+    max_px_in_view: float

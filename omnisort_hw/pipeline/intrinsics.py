@@ -36,7 +36,7 @@ from omnisort_hw.core.intrinsics_uncertainty import (
     unique_images,
 )
 from omnisort_hw.core.overlays import write_png
-from omnisort_hw.core.records import CrossValidation, RejectedImage
+from omnisort_hw.core.records import CrossValidation, ProjectionSigma, RejectedImage
 from omnisort_hw.errors import InputError, MotionRefusedError
 from omnisort_hw.pipeline.image_files import read_image
 from omnisort_hw.pipeline.replies import IntrinsicsReply
@@ -146,7 +146,7 @@ class IntrinsicsResult:
             board=rec["board"],
             coverage=rec["coverage"],
             cross_validation=from_wire(CrossValidation, rec["cross_validation"]),
-            projection_uncertainty=rec["projection_uncertainty"],
+            projection_uncertainty=from_wire(ProjectionSigma, rec["projection_uncertainty"]),
             repeated_views=rec["repeated_views"],
             created=rec["created"],
             outer_band_covered=figures.outer_coverage,
@@ -168,8 +168,8 @@ class IntrinsicsResult:
         """(projection sigma, the extrinsic goal in pixels) at RIM_ANGLE_DEG off the axis, or
         None when the uncertainty was not estimated there. The goal: ANGLE_GOAL_DEG of
         direction, in the model's own pixels per degree there."""
-        unc = self.calibration.record.get("projection_uncertainty", {})
-        sigma = unc.get("median_px_at_angle_deg", {}).get(f"{RIM_ANGLE_DEG:g}")
+        unc = from_wire(ProjectionSigma, self.calibration.record["projection_uncertainty"])
+        sigma = unc.median_px_at_angle_deg.get(f"{RIM_ANGLE_DEG:g}")
         if sigma is None:
             return None
         model = self.calibration.result.model
@@ -311,7 +311,7 @@ def calibrate_intrinsics(
             "warning": figures.warning,
         },
         "cross_validation": to_wire(cross_validate(result, board.object_points())),
-        "projection_uncertainty": unc.record(),
+        "projection_uncertainty": to_wire(unc.record()),
         "repeated_views": repeats,
         "created": datetime.now(UTC).isoformat(timespec="seconds"),
     }

@@ -23,6 +23,7 @@ from omnisort_hw.core.records import (
     LaserLineReply,
     PictureReply,
     PointSigmaReply,
+    ProjectionSigma,
     Record,
     RejectedBlob,
     RejectedImage,
@@ -142,7 +143,7 @@ class IntrinsicsReply:
     board: Record
     coverage: Record
     cross_validation: CrossValidation
-    projection_uncertainty: Record
+    projection_uncertainty: ProjectionSigma
     repeated_views: list[Record]
     created: str
     outer_band_covered: float | None

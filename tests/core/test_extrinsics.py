@@ -46,10 +46,10 @@ def test_closed_form_start_is_close() -> None:
     obs = observations(two_sided(MODEL, sc, seed=1, noise=NOISE), MODEL)
     start = closed_form(obs, sc.separation)
     truth = sc.angles_deg
-    got = np.degrees(start["x"][:5])
+    got = np.degrees(start.x[:5])
     want = [truth[k] for k in PARAMETERS[:5]]
     assert np.max(np.abs(got - want)) < 0.5
-    assert abs(start["d"] - truth["laser_distance_mm"]) < 10
+    assert abs(start.d - truth["laser_distance_mm"]) < 10
 
 
 def test_joint_accuracy_and_honest_std() -> None:

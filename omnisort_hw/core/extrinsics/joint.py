@@ -122,7 +122,18 @@ def _ad_direction(a: np.ndarray, d: np.ndarray, y: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def closed_form(obs: _Obs, separation: float, layout: TargetLayout | None = None) -> dict[str, Any]:
+@dataclass(frozen=True)
+class ClosedForm:
+    """The closed-form start of the joint fit: every unknown (`JointProblem`'s vector), and
+    the camera rotation, laser plane normal and distance it was made from."""
+
+    x: np.ndarray
+    R: np.ndarray
+    normal: np.ndarray
+    d: float
+
+
+def closed_form(obs: _Obs, separation: float, layout: TargetLayout | None = None) -> ClosedForm:
     """Initial estimate of all unknowns from the target's geometry (no iteration); with a
     measured `layout` the marker unknowns are the walls' near end Y0 alone (JointProblem)."""
     m = {s: great_circle_normal(obs.border[s]) for s in SIDES}
@@ -165,12 +176,7 @@ def closed_form(obs: _Obs, separation: float, layout: TargetLayout | None = None
         # The wall/floor line: its plane normal in S is ~ (-z_f, 0, x_w), as for the border.
         mf = R @ great_circle_normal(obs.floor["left"])
         x0.append(-mf[0] / mf[2] * x_left)
-    return {
-        "x": np.array(x0),
-        "R": R,
-        "normal": n,
-        "d": d,
-    }
+    return ClosedForm(np.array(x0), R, n, float(d))
 
 
 NAMES = (
@@ -312,7 +318,7 @@ def _solve(
     solve repeated until it moves no marker by more than 0.005 px."""
     start = closed_form(obs, separation_mm, layout)
     prob = JointProblem(obs, separation_mm, layout)
-    sol, noise = _refine(prob, start["x"])
+    sol, noise = _refine(prob, start.x)
     sizes = layout.marker_sizes(prob.marker_keys) if layout is not None else None
     if sizes is None or model is None:
         return sol, prob, noise
