@@ -37,6 +37,13 @@ T = TypeVar("T")
 _ABSENT = "wire_absent"
 _KEY = "wire_key"
 _SCALARS = (float, int, str, bool, type(None))
+_KIND_NAMES: dict[Any, str] = {
+    bool: "true or false",
+    int: "an integer",
+    float: "a number",
+    str: "a string",
+    type(None): "null",
+}
 
 
 class WireError(OmnisortError, ValueError):
@@ -83,6 +90,27 @@ def from_wire(cls: type[T], data: Any) -> T:
     return cast(T, _read(cls, data, cls.__name__))
 
 
+def read_value(tp: Any, data: Any, path: str) -> Any:
+    """`data` read as the annotation `tp` (a record, a list, a number...); WireError names
+    `path` (a cell file's `[laser].baudrate`) and what does not fit. The cell file's device
+    sections are read with it too."""
+    return _read(tp, data, path)
+
+
+def kind_name(tp: Any) -> str:
+    """What a value of the annotation `tp` is, in words for a message."""
+    origin, args = _shape(tp)
+    if origin is Union or origin is types.UnionType:
+        return " or ".join(kind_name(a) for a in args)
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in args)
+    if origin in (list, tuple):
+        return "a list of numbers" if args and args[0] in (float, int) else "a list"
+    if origin is dict or (isinstance(tp, type) and dataclasses.is_dataclass(tp)):
+        return "an object"
+    return _KIND_NAMES.get(tp, str(tp))
+
+
 @functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     return get_type_hints(cls)
@@ -110,17 +138,17 @@ def _read(tp: Any, data: Any, path: str) -> Any:
                 return _read(a, data, path)
             except WireError:
                 continue
-        raise WireError(path, f"{_shown(data)} fits none of {tp}")
+        raise WireError(path, f"must be {kind_name(tp)}, got {_shown(data)}")
     if origin is Literal:
         if data not in args:
-            raise WireError(path, f"{_shown(data)} is not one of {list(args)}")
+            raise WireError(path, f"must be {kind_name(tp)}, got {_shown(data)}")
         return data
     if origin in (list, tuple):
         if not isinstance(data, list | tuple):
-            raise WireError(path, f"expected a list, got {_shown(data)}")
+            raise WireError(path, f"must be {kind_name(tp)}, got {_shown(data)}")
         if origin is tuple and not (len(args) == 2 and args[1] is Ellipsis) and args:
             if len(args) != len(data):
-                raise WireError(path, f"expected {len(args)} values, got {len(data)}")
+                raise WireError(path, f"must be {len(args)} values, got {len(data)}")
             return tuple(
                 _read(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, data, strict=True))
             )
@@ -132,7 +160,7 @@ def _read(tp: Any, data: Any, path: str) -> Any:
         return read if origin is list else tuple(read)
     if origin is dict:
         if not isinstance(data, Mapping):
-            raise WireError(path, f"expected an object, got {_shown(data)}")
+            raise WireError(path, f"must be an object, got {_shown(data)}")
         value_type = args[1] if len(args) == 2 else Any
         return {str(k): _read(value_type, v, f"{path}.{k}") for k, v in data.items()}
     return _read_scalar(tp, data, path)
@@ -140,7 +168,7 @@ def _read(tp: Any, data: Any, path: str) -> Any:
 
 def _read_record(cls: type, data: Any, path: str) -> Any:
     if not isinstance(data, Mapping):
-        raise WireError(path, f"expected an object, got {_shown(data)}")
+        raise WireError(path, f"must be an object, got {_shown(data)}")
     hints, values = _hints(cls), {}
     for f in dataclasses.fields(cls):
         if not f.init:
@@ -169,10 +197,10 @@ def _read_scalar(tp: Any, data: Any, path: str) -> Any:
         if data is None:
             return None
     else:
-        raise WireError(path, f"the codec reads no {tp}")
-    raise WireError(path, f"expected {getattr(tp, '__name__', tp)}, got {_shown(data)}")
+        raise WireError(path, f"cannot be read as {tp}")
+    raise WireError(path, f"must be {kind_name(tp)}, got {_shown(data)}")
 
 
 def _shown(data: Any) -> str:
     text = repr(data)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return (text if len(text) <= 40 else text[:37] + "...") + f" ({type(data).__name__})"

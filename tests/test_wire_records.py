@@ -101,7 +101,8 @@ def test_a_missing_key_is_named() -> None:
     del wire["inner"]
     with pytest.raises(WireError, match=r"Outer\.inner: missing"):
         from_wire(Outer, wire)
-    with pytest.raises(WireError, match=r"GeometryReply: expected an object"):
+    not_an_object = r"GeometryReply: must be an object, got \[1, 2\] \(list\)"
+    with pytest.raises(WireError, match=not_an_object):
         from_wire(GeometryReply, [1, 2])
 
 
@@ -110,3 +111,13 @@ def test_a_null_float_is_nan_and_a_null_optional_is_none() -> None:
     declared reads back as NaN; where None is allowed it stays None."""
     read = from_wire(Outer, {**to_wire(_outer()), "ratio": None, "maybe": None})
     assert math.isnan(read.ratio) and read.maybe is None
+
+
+def test_the_protocol_writes_a_record_as_its_json_with_nan_as_null() -> None:
+    """A record that reaches the protocol's encoder unwritten is sent as its JSON (never its
+    repr), a NaN as null, as strict JSON needs."""
+    from omnisort_hw.service.protocol import encode
+
+    sent = json.loads(encode({"result": _outer(ratio=float("nan"))}))
+    assert sent["result"] == {**to_wire(_outer()), "ratio": None}
+    assert from_wire(Outer, sent["result"]).maybe is None

@@ -17,12 +17,11 @@ out means the cell has no such device (None). Other sections ([service], ...) ar
 from __future__ import annotations
 
 import dataclasses
-import types
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal, get_args, get_origin
+from typing import Any, Literal
 
 from drivers.errors import DeviceConfigError
 from drivers.modbus_laser import ModbusLaserConfig
@@ -31,6 +30,7 @@ from drivers.ur_arm import URArmConfig
 from drivers.v4l2_camera import V4L2CameraConfig
 from omnisort_hw.core.choices import LASER_COLORS
 from omnisort_hw.errors import ConfigError
+from omnisort_hw.wire_records import WireError, read_value
 
 DeviceKind = Literal["camera", "laser", "arm"]
 DEVICE_SECTIONS: tuple[DeviceKind, ...] = ("camera", "laser", "arm")
@@ -148,59 +148,14 @@ class CellDeviceConfig:
         return self.laser.color if self.laser is not None else "red"
 
 
-def _type_name(tp: Any) -> str:
-    if tp is bool:
-        return "true or false"
-    if tp is int:
-        return "an integer"
-    if tp is float:
-        return "a number"
-    if tp is str:
-        return "a string"
-    if get_origin(tp) is Literal:
-        return "one of " + ", ".join(repr(a) for a in get_args(tp))
-    if get_origin(tp) is tuple:
-        return "a list of numbers"
-    return str(tp)
-
-
 def _convert(tp: Any, value: Any, key: str) -> Any:
-    """`value` checked against the annotation `tp` (TOML types), converted where lossless."""
-    origin = get_origin(tp)
-    if origin in (types.UnionType, typing.Union):
-        for option in get_args(tp):
-            try:
-                return _convert(option, value, key)
-            except ConfigError:
-                continue
-        raise config_error(key, f"must be {' or '.join(_type_name(a) for a in get_args(tp))}")
-    if origin is Literal:
-        if value not in get_args(tp):
-            raise config_error(key, f"must be {_type_name(tp)}, got {value!r}")
-        return value
-    if origin is tuple:
-        if not isinstance(value, list | tuple):
-            raise config_error(key, f"must be a list of numbers, got {value!r}")
-        item_type = get_args(tp)[0]
-        return tuple(_convert(item_type, v, f"{key}[{i}]") for i, v in enumerate(value))
-    bad = f"must be {_type_name(tp)}, got {value!r} ({type(value).__name__})"
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise config_error(key, bad)
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise config_error(key, bad)
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise config_error(key, bad)
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise config_error(key, bad)
-        return value
-    raise config_error(key, f"unsupported setting type {tp}")
+    """`value` checked against the annotation `tp` (TOML types), converted where lossless
+    (an integer for a number, a list for a tuple): the replies' codec, a ConfigError naming
+    `key`."""
+    try:
+        return read_value(tp, value, key)
+    except WireError as exc:
+        raise config_error(exc.path, exc.problem) from None
 
 
 def build_config(cls: type, section: str, data: Mapping[str, Any]) -> Any:

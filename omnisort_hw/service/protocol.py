@@ -12,6 +12,7 @@ them); `COMMANDS` names the record, and unknown arguments are refused.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Callable, Mapping
@@ -31,6 +32,7 @@ from omnisort_hw.request_fields import (
     summary_line,
     type_name,
 )
+from omnisort_hw.wire_records import to_wire
 
 # Error codes of the protocol. Typed errors of the product and of the drivers keep their own
 # `code` inside `details` where it says more (e.g. device_timeout, bad_calibration_file).
@@ -328,6 +330,8 @@ def parse_request(line: bytes, authorize: Authorizer | None = None) -> Request:
 
 
 def _json_default(obj: Any) -> Any:
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return to_wire(obj)  # a reply record a door forgot to write: its JSON, not its repr
     tolist = getattr(obj, "tolist", None)
     if callable(tolist):
         return tolist()
@@ -352,6 +356,8 @@ def _denan(obj: Any) -> Any:
         return {str(k): _denan(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [_denan(v) for v in obj]
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return _denan(to_wire(obj))
     tolist = getattr(obj, "tolist", None)
     if callable(tolist):
         return _denan(tolist())
