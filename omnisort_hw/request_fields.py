@@ -23,7 +23,7 @@ import math
 import os
 import types
 import typing
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Literal, Protocol, TypeAlias
@@ -365,6 +365,29 @@ def check_args(
     if cls is not None:
         check_rules(cls, command, args)
     return args
+
+
+def check_given(
+    cls: type[RequestClass],
+    values: Mapping[str, Any],
+    where: str,
+    label: Callable[[Arg], str],
+    error: type[Exception],
+) -> dict[str, Any]:
+    """The values of `cls`'s arguments that are given (not None), each checked as a setting
+    (a cell file's key or a CLI flag: a relative path is taken as it is); a problem is an
+    `error` whose message starts with the key as `label` names it (`[registration].square_mm`,
+    or `--square`). `where`: what the values came from."""
+    checked: dict[str, Any] = {}
+    for arg in args_of(cls):
+        value = values.get(arg.name)
+        if value is None:
+            continue
+        try:
+            checked[arg.name] = check_value(arg, where, value, label=label(arg), cell_paths=False)
+        except ArgumentError as exc:
+            raise error(f"{label(arg)}: {exc.reason}") from None
+    return checked
 
 
 def build(cls: type[Any], args: Mapping[str, Any]) -> Any:

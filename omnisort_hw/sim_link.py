@@ -2,8 +2,8 @@
 back, each request bounded by a timeout. The Simulator tab and the test harness
 (`sim_backend.virtual_cell.launcher`) speak it; the service never does, so it never learns
 that its cell is simulated. It imports nothing of the simulator: the channel's commands are
-declared in `sim_requests` (docs/virtual_cell.md lists them), and `execute` sends a command's
-request record."""
+declared in `sim_requests` (docs/virtual_cell.md lists them), and `send` sends a command's
+request record and reads its reply as the record the command declares."""
 
 from __future__ import annotations
 
@@ -45,6 +45,19 @@ class SimLink:
     ) -> dict[str, Any]:
         """Send `{"cmd": cmd, **args}`; the reply's result, checked against the reply record
         its command declares (`sim_requests.SIM_COMMANDS`); SimControlError otherwise."""
+        return self._exchange(cmd, timeout_s, args)[0]
+
+    def send(self, request: Any, timeout_s: float = DEFAULT_TIMEOUT_S) -> object:
+        """The command a request record is declared for (`sim_requests.command_of`), sent with
+        its arguments; its reply read as the record the command declares. No caller names a
+        command by a string, nor reads a reply by a key."""
+        return self._exchange(command_of(request), timeout_s, wire_args(request))[1]
+
+    def _exchange(
+        self, cmd: str, timeout_s: float, args: dict[str, Any]
+    ) -> tuple[dict[str, Any], object]:
+        """One request: the reply's result, and the same read as its command's record (read
+        once, which checks it)."""
         with self._lock:
             try:
                 if self._sock is None:
@@ -67,14 +80,12 @@ class SimLink:
             raise SimControlError(self.address, str(reply.get("error")))
         result = dict(reply.get("result") or {})
         spec = SIM_COMMANDS.get(cmd)
-        if spec is not None:  # the reply its command declares (a cell of another version?)
-            try:
-                from_wire(spec.reply, result)
-            except WireError as exc:
-                raise SimControlError(
-                    self.address, f"{cmd}: the reply does not fit {exc}"
-                ) from None
-        return result
+        if spec is None:  # a command this side does not declare: its result as it came
+            return result, result
+        try:  # the reply its command declares (a cell of another version?)
+            return result, from_wire(spec.reply, result)
+        except WireError as exc:
+            raise SimControlError(self.address, f"{cmd}: the reply does not fit {exc}") from None
 
     def _drop(self) -> None:
         for closing in (self._rfile, self._sock):
@@ -86,15 +97,3 @@ class SimLink:
     def close(self) -> None:
         with self._lock:
             self._drop()
-
-    def execute(
-        self, cmd: str, request: Any = None, timeout_s: float = DEFAULT_TIMEOUT_S
-    ) -> dict[str, Any]:
-        """The command `cmd` with its request record's arguments (a `sim_requests` record, or
-        None: its defaults)."""
-        return self.control(cmd, timeout_s, **wire_args(request))
-
-    def send(self, request: Any, timeout_s: float = DEFAULT_TIMEOUT_S) -> dict[str, Any]:
-        """The command a request record is declared for (`sim_requests.command_of`), sent with
-        its arguments: no caller names a command by a string."""
-        return self.execute(command_of(request), request, timeout_s)

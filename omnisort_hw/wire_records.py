@@ -67,7 +67,8 @@ def absent(default: Any = None) -> Any:
 
 def to_wire(value: Any) -> Any:
     """A record (and the records, tuples and mappings it holds) as plain JSON values; a field
-    made with `absent()` is left out while it is None. Anything else is returned as it is."""
+    made with `absent()` is left out while it holds its default. Anything else is returned as
+    it is."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         out: dict[str, Any] = {}
         for f in dataclasses.fields(value):

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Mapping
-from typing import Any
 
 from omnisort_hw.wire_records import to_wire
 
@@ -27,14 +25,15 @@ def print_result(result: object, indent: int | None = None) -> None:
 
 def print_verdict(result: object) -> None:
     """A reply's verdict and its picture, as the last lines of a command's human output."""
+    from omnisort_hw.core.records import PictureReply
     from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 
-    reply: Mapping[str, Any] = to_wire(result)
-    if reply.get("overlay_png"):
-        print(f"picture: {reply['overlay_png']}")
-    elif reply.get("overlay_problem"):
-        print(f"no picture: {reply['overlay_problem']}")
-    verdict = verdict_of(reply)
+    if isinstance(result, PictureReply):
+        if result.overlay_png:
+            print(f"picture: {result.overlay_png}")
+        elif result.overlay_problem:
+            print(f"no picture: {result.overlay_problem}")
+    verdict = verdict_of(result)
     if verdict is not None:
         print("\n".join(verdict_lines(verdict)))
 

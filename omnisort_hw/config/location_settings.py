@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.errors import ConfigError, OmnisortError
-from omnisort_hw.request_fields import Arg, ArgumentError, args_of, check_value, param
+from omnisort_hw.request_fields import Arg, args_of, check_given, param
 
 CUBE_SIZE_RANGE_MM = (1.0, 1000.0)
 """A cube's edge the location can be asked for: from a sugar cube to a metre."""
@@ -63,16 +63,11 @@ def location_changes(
     `--cube-size`). A relative colour table resolves against `base_dir`."""
     from omnisort_hw.core.cube_location import ColorTable
 
+    declared = {a.name: a for a in args_of(LocationSettings)}
     changes: dict[str, Any] = {}
-    for arg in args_of(LocationSettings):
-        value = values.get(arg.name)
-        if value is None:
-            continue
-        try:
-            checked = check_value(arg, "[sorting]", value, label=label(arg), cell_paths=False)
-        except ArgumentError as exc:
-            raise error(f"{label(arg)}: {exc.reason}") from None
-        if arg.name == "colors_file":
+    for name, checked in check_given(LocationSettings, values, "[sorting]", label, error).items():
+        arg = declared[name]
+        if name == "colors_file":
             path = Path(checked)
             if base_dir is not None and not path.is_absolute():
                 path = base_dir / path
@@ -80,11 +75,11 @@ def location_changes(
                 changes["colors"] = ColorTable.load(path)
             except ConfigError as exc:
                 raise error(f"{label(arg)}: {exc}") from None
-        elif arg.name == "region_S_mm":
+        elif name == "region_S_mm":
             r = tuple(float(v) for v in checked)
             if r[0] >= r[1] or r[2] >= r[3]:
                 raise error(f"{label(arg)}: expected xmin < xmax and ymin < ymax, got {r}")
-            changes[arg.name] = r
+            changes[name] = r
         else:
-            changes[arg.name] = float(checked)
+            changes[name] = float(checked)
     return changes

@@ -27,7 +27,7 @@ from omnisort_hw.core.kinematics import get_model
 from omnisort_hw.core.pick_planning import BinSpec, ObstacleSpec, SortConfig
 from omnisort_hw.core.registration import pose_from_offset, tilt_prior_from_std
 from omnisort_hw.errors import ConfigError, OmnisortError
-from omnisort_hw.request_fields import Arg, ArgumentError, args_of, check_value
+from omnisort_hw.request_fields import Arg, args_of, check_given
 
 
 @dataclass(frozen=True)
@@ -216,15 +216,7 @@ def registration_config(
     if unknown:
         known = ", ".join(sorted(declared))
         raise error(f"{where}.{unknown[0]}: unknown key (known: {known})")
-    checked: dict[str, Any] = {}
-    for name, arg in declared.items():
-        value = values.get(name)
-        if value is None:
-            continue
-        try:
-            checked[name] = check_value(arg, where, value, label=label(arg), cell_paths=False)
-        except ArgumentError as exc:
-            raise error(f"{label(arg)}: {exc.reason}") from None
+    checked = check_given(RegistrationSettings, values, where, label, error)
     for name in ("square_mm", "offset"):
         if name not in checked:
             arg = declared[name]

@@ -69,10 +69,6 @@ class VerdictReply:
         object.__setattr__(self, "level", worst([c.level for c in self.checks]))
 
 
-VerdictWire = Record
-"""A verdict in a reply not yet a record: `to_wire(VerdictReply)`."""
-
-
 @dataclass(frozen=True, kw_only=True)
 class MapSummary:
     """A laser map's counts and segments, its points' sigmas in brief and whether the image

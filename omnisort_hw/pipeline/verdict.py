@@ -11,20 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from omnisort_hw.pipeline.replies import CheckReply, Level, VerdictReply, VerdictWire
-from omnisort_hw.wire_records import from_wire, to_wire
+from omnisort_hw.pipeline.replies import CheckReply, Level, VerdictReply
+from omnisort_hw.wire_records import from_wire
 
 Check = CheckReply
 """One criterion: its name, its level, the figure measured, the threshold, the advice."""
 
 Verdict = VerdictReply
 """The checks of one result; its level is the worst of theirs."""
-
-
-def to_wire_verdict(verdict: Verdict) -> VerdictWire:
-    """A verdict for a reply that is not a record yet (a TypedDict's `verdict`)."""
-    wire: VerdictWire = to_wire(verdict)
-    return wire
 
 
 def graded(

@@ -25,7 +25,7 @@ class JobEnd:
     cmd: str
     ok: bool
     message: str
-    result: object | None  # the command's typed reply (a record, or its TypedDict)
+    result: object | None  # the command's reply, read as its record
     ended: float  # time.monotonic()
 
 

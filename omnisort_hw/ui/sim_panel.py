@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any
 
 from nicegui import run, ui
 
@@ -32,9 +32,7 @@ from omnisort_hw.ui.schema_form import form_fields, problems, typed_number
 from omnisort_hw.ui.schema_widgets import SchemaForm
 from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.ui.widgets import confirm, tag
-from omnisort_hw.wire_records import WireError, from_wire
-
-T = TypeVar("T")
+from omnisort_hw.wire_records import to_wire
 
 CUBE_COLUMNS = [
     {"name": k, "label": label, "field": k, "align": "left"}
@@ -204,8 +202,8 @@ class SimulatorPanel:
         async with self._describing:  # the timer and a button may both ask first
             if self._schemas:
                 return True
-            described = self._read(SimDescription, await self._control(sr.DescribeRequest()))
-            if described is None:
+            described = await self._control(sr.DescribeRequest())
+            if not isinstance(described, SimDescription):
                 return False
             self._schemas = {k: v.args for k, v in described.commands.items()}
             for cmd, slot in self._slots.items():
@@ -237,8 +235,8 @@ class SimulatorPanel:
 
     async def _show_truth(self, quiet: bool = True) -> SimTruth | None:
         """The virtual cell's truth asked and shown (the forms filled from it the first time)."""
-        truth = self._read(SimTruth, await self._control(sr.TruthRequest(), quiet=quiet))
-        if truth is None:
+        truth = await self._control(sr.TruthRequest(), quiet=quiet)
+        if not isinstance(truth, SimTruth):
             return None
         if not self._filled:
             self._fill(truth)
@@ -287,20 +285,10 @@ class SimulatorPanel:
 
     # -- acting ---------------------------------------------------------------------------
 
-    def _read(self, record: type[T], reply: dict[str, Any] | None) -> T | None:
-        """A reply of the channel read as its record; None, with why in the note, when it does
-        not fit (a virtual cell of another version)."""
-        if reply is None:
-            return None
-        try:
-            return from_wire(record, reply)
-        except WireError as exc:
-            self.note.text = f"the virtual cell's reply does not fit {exc}"
-            return None
-
-    async def _control(self, request: Any, quiet: bool = False) -> dict[str, Any] | None:
-        """The control-channel command of a request record (`SimLink.send`); its result, or
-        None with why in the note."""
+    async def _control(self, request: Any, quiet: bool = False) -> object | None:
+        """The control-channel command of a request record (`SimLink.send`); its reply as the
+        record its command declares, or None with why in the note (refused, unreachable, or a
+        reply that does not fit: a virtual cell of another version)."""
         self._busy = True
         try:
             return await run.io_bound(self.sim.send, request, MOVE_TIMEOUT_S)
@@ -314,7 +302,7 @@ class SimulatorPanel:
 
     async def _act(
         self, request: type[Any], done: str, moves: str | None = None, **fixed: Any
-    ) -> dict[str, Any] | None:
+    ) -> None:
         """A signed-in operator's command, named by its request record's class, with its form's
         arguments and `fixed` (what the button decides): checked against the channel's schema
         (nothing sent when it refuses, each problem naming its field), confirmed when it
@@ -323,29 +311,27 @@ class SimulatorPanel:
         cmd = sr.command_of(request)
         if self.token() is None:
             self.note.text = f"{cmd}: sign in as operator first: nothing was sent"
-            return None
+            return
         if not await self._forms():
-            return None
+            return
         schema = self._schemas[cmd]
         form = self.forms.get(cmd)
         given = form.args(schema, **fixed) if form is not None else dict(fixed)
         found = problems(schema, given)
         if found:
             self.note.text = f"{cmd}: not sent: " + "; ".join(found)
-            return None
+            return
         if moves is not None and not await confirm(f"{moves}? The simulated arm will move."):
             self.note.text = "cancelled: nothing was sent"
-            return None
+            return
         self.note.text = f"{cmd} ..."
-        result = await self._control(build(request, given))
-        reply = self._read(sr.SIM_COMMANDS[cmd].reply, result)
-        if result is None or reply is None:
-            return None
+        reply = await self._control(build(request, given))
+        if reply is None:
+            return
         unseen = isinstance(reply, SimShown) and not reply.shown
         shown = " (no picture shows it yet)" if unseen else ""
-        self.note.text = done.format_map(_Shown({**given, **result})) + shown
+        self.note.text = done.format_map(_Shown({**given, **to_wire(reply)})) + shown
         await self._show_truth()
-        return result
 
     async def mount(self) -> None:
         done = "camera mounted at roll {roll_deg:g}, pitch {pitch_deg:g}, yaw {yaw_deg:g} deg"
