@@ -13,12 +13,15 @@ from __future__ import annotations
 import socket
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
 import numpy as np
 
 from drivers.errors import DeviceNotFoundError, DeviceTimeoutError
+
+if TYPE_CHECKING:  # OpenCV is imported by the backend that opens the capture
+    import cv2
 
 SCHEMES = {"http": 80, "https": 443, "rtsp": 554}
 
@@ -62,7 +65,7 @@ class StreamReader:
     it arrived, so the socket never backs up with old frames and `frame_after(t)` can return a
     frame that arrived after `t`. The thread owns the capture and releases it when it ends."""
 
-    def __init__(self, cap: Any, name: str) -> None:
+    def __init__(self, cap: cv2.VideoCapture, name: str) -> None:
         self._cap = cap
         self._cond = threading.Condition()
         self._frame: np.ndarray | None = None

@@ -230,7 +230,7 @@ def atomic_write_bytes(
 
 def atomic_write_json(
     path: str | os.PathLike[str],
-    obj: Any,
+    obj: object,
     keep_history: bool = True,
     history_keep: int | None = None,
 ) -> Path:

@@ -26,7 +26,7 @@ import typing
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import MISSING, dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Literal, Protocol, TypeAlias
+from typing import Any, ClassVar, Literal, Protocol, TypeAlias, TypeGuard
 
 from omnisort_hw.errors import InputError
 
@@ -178,7 +178,7 @@ def _declared_args(cls: type) -> tuple[Arg, ...]:
     return tuple(out)
 
 
-def type_name(value: Any) -> str:
+def type_name(value: object) -> str:
     """A value's JSON type name, for messages."""
     return {
         bool: "boolean",
@@ -195,7 +195,7 @@ def _bad(arg: Arg, command: str, what: str, label: str | None) -> ArgumentError:
     return ArgumentError(arg.name, f"{command}: argument {label or repr(arg.name)} {what}", what)
 
 
-def _is_number(value: Any) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
@@ -209,7 +209,7 @@ def _range_text(arg: Arg) -> str:
     return f"<= {arg.hi:g}{unit}" if arg.hi is not None else ""
 
 
-def _number(arg: Arg, command: str, value: Any, label: str | None, where: str = "") -> float:
+def _number(arg: Arg, command: str, value: object, label: str | None, where: str = "") -> float:
     if not _is_number(value):
         raise _bad(arg, command, f"{where}must be a number, got {type_name(value)}", label)
     try:
@@ -226,7 +226,7 @@ def _number(arg: Arg, command: str, value: Any, label: str | None, where: str = 
 
 
 def check_value(
-    arg: Arg, command: str, value: Any, *, label: str | None = None, cell_paths: bool = True
+    arg: Arg, command: str, value: object, *, label: str | None = None, cell_paths: bool = True
 ) -> Any:
     """The checked value of one given (not None) argument, or ArgumentError naming it (as
     `label`, default its name). `cell_paths`: a path must be absolute (a path on the cell PC,
@@ -240,8 +240,7 @@ def check_value(
         integral = isinstance(value, float) and math.isfinite(value) and value.is_integer()
         if not integral and (not isinstance(value, int) or isinstance(value, bool)):
             raise _bad(arg, command, f"must be an integer, got {type_name(value)}", label)
-        _number(arg, command, value, label)
-        return int(value)
+        return int(_number(arg, command, value, label))
     if arg.kind == "number":
         return _number(arg, command, value, label)
     if arg.kind in ("str", "path"):

@@ -65,7 +65,7 @@ def absent(default: Any = None) -> Any:
     return dataclasses.field(default=default, metadata={_ABSENT: True})
 
 
-def to_wire(value: Any) -> Any:
+def to_wire(value: object) -> Any:
     """A record (and the records, tuples and mappings it holds) as plain JSON values; a field
     made with `absent()` is left out while it holds its default. Anything else is returned as
     it is."""

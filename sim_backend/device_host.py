@@ -95,7 +95,7 @@ def decode_exception(encoded: tuple[str, str, tuple[Any, ...], dict[str, Any]]) 
 # -- the child ----------------------------------------------------------------------------------
 
 
-def _describe(obj: Any) -> dict[str, list[str]]:
+def _describe(obj: object) -> dict[str, list[str]]:
     """Public methods and data attributes of `obj`'s class and instance (what a proxy forwards)."""
     methods, attrs = [], []
     for name in dir(obj):
@@ -111,7 +111,7 @@ def _describe(obj: Any) -> dict[str, list[str]]:
     return {"methods": methods, "attrs": attrs}
 
 
-def _resolve(obj: Any, path: str) -> Any:
+def _resolve(obj: object, path: str) -> Any:
     for part in path.split("."):
         obj = getattr(obj, part)
     return obj

@@ -96,7 +96,7 @@ class _Remote:
             return self._get(name)
         raise AttributeError(f"{type(self).__name__} ({self._device}) has no attribute {name!r}")
 
-    def __setattr__(self, name: str, value: Any) -> None:
+    def __setattr__(self, name: str, value: object) -> None:
         if not name.startswith("_") and name in self._shape()["attrs"]:
             static = getattr(type(self), name, None)
             if not isinstance(static, property):
@@ -140,7 +140,7 @@ def _remote_property(name: str, settable: bool) -> property:
     def fget(self: _Remote) -> Any:
         return self._get(name)
 
-    def fset(self: _Remote, value: Any) -> None:
+    def fset(self: _Remote, value: object) -> None:
         self._host.call(self._device, self._target, "set", name, (value,))
 
     return property(fget, fset if settable else None)

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TypeAlias
 
 from omnisort_hw.fileio import output_file_problem, output_folder_problem
+
+Subcommands: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
+"""What `add_subparsers()` returns: each command module's `register()` adds its parsers to it."""
 
 
 def output_file(text: str) -> Path:

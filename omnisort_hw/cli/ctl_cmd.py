@@ -19,13 +19,14 @@ import os
 import sys
 from typing import Any
 
+from omnisort_hw.cli.arg_types import Subcommands
 from omnisort_hw.cli.output import EXIT_DRIFT
 
 EXIT_ERROR_REPLY = 1
 EXIT_UNREACHABLE = 3
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     p = sub.add_parser(
         "ctl",
         help="send one command to the running service and print the reply",

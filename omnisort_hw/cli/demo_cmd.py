@@ -19,10 +19,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.cli.arg_types import output_folder
+from omnisort_hw.cli.arg_types import Subcommands, output_folder
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     demo = sub.add_parser("demo", help="run the simulated cell end to end")
     demo.add_argument("--out", type=output_folder, default=Path("build/demo"))
     demo.add_argument("--seed", type=int, default=7)

@@ -15,12 +15,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from omnisort_hw.cli.arg_types import Subcommands
 from omnisort_hw.cli.output import print_result
 
 EXIT_DEVICE_FAILED = 1
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     devices = sub.add_parser("devices", help="list attached devices or check the configured ones")
     dsub = devices.add_subparsers(dest="devices_command", required=True, metavar="ACTION")
     p_list = dsub.add_parser("list", help="cameras and serial ports attached to this PC")

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.arg_types import Subcommands, output_file
 from omnisort_hw.cli.output import EXIT_DRIFT, print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     pass
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     p = sub.add_parser(
         "check", help="drift check: an image against the stored calibration and robot base"
     )
@@ -41,7 +41,7 @@ def register(sub: Any) -> None:
     p.set_defaults(func=cmd_check)
 
 
-def add_drift_evaluation(esub: Any) -> None:
+def add_drift_evaluation(esub: Subcommands) -> None:
     """`omnisort evaluate drift` (called by the `evaluate` command group)."""
     ev = esub.add_parser("drift", help="drift watchdog on simulated scenes: alarms and bumps")
     ev.add_argument("--seed", type=int, default=0)

@@ -8,11 +8,12 @@ from pathlib import Path
 from typing import Any
 
 from omnisort_hw.cli import drift_cmd, lighting_cmd, robot_cmd
+from omnisort_hw.cli.arg_types import Subcommands
 from omnisort_hw.cli.output import print_result
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     ev = sub.add_parser("evaluate", help="reproduce the published experiments on the simulator")
     esub = ev.add_subparsers(dest="evaluate_command", required=True, metavar="EXPERIMENT")
     t3 = esub.add_parser("table3", help="camera/laser calibration: all four methods vs truth")

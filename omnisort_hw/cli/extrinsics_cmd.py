@@ -6,9 +6,8 @@ import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
-from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.arg_types import Subcommands, output_file
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.core.records import PictureReply
@@ -17,7 +16,7 @@ from omnisort_hw.pipeline.requests import CalibrateRequest, MapRequest
 EXTRINSICS = {"what": "extrinsics"}
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     ext = sub.add_parser("extrinsics", help="calibrate camera rotation and laser plane")
     esub = ext.add_subparsers(dest="extrinsics_command", required=True, metavar="ACTION")
     cal = esub.add_parser("calibrate", help="from one image of a calibration target")

@@ -7,9 +7,8 @@ import sys
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
-from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.arg_types import Subcommands, output_file
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
 from omnisort_hw.pipeline.requests import CalibrateRequest
@@ -17,7 +16,7 @@ from omnisort_hw.pipeline.requests import CalibrateRequest
 INTRINSICS = {"what": "intrinsics"}
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     parser = sub.add_parser("intrinsics", help="calibrate the fisheye camera's intrinsics")
     isub = parser.add_subparsers(dest="intrinsics_command", required=True, metavar="ACTION")
 

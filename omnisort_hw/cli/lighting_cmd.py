@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
 
+from omnisort_hw.cli.arg_types import Subcommands
 from omnisort_hw.cli.output import print_result
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
 
 
-def add_lighting_evaluation(esub: Any) -> None:
+def add_lighting_evaluation(esub: Subcommands) -> None:
     """Register `evaluate lighting` in the `evaluate` group."""
     p = esub.add_parser(
         "lighting",

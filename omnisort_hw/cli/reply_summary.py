@@ -13,7 +13,7 @@ from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
 MAX_FIELDS = 12
 
 
-def _scalar(value: Any) -> bool:
+def _scalar(value: object) -> bool:
     return isinstance(value, str | int | float | bool) or value is None
 
 

@@ -14,7 +14,8 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
+
+from omnisort_hw.cli.arg_types import Subcommands
 
 LOOPBACK = "127.0.0.1"
 NO_DISPLAY = (
@@ -23,7 +24,7 @@ NO_DISPLAY = (
 )
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     p = sub.add_parser(
         "review",
         help="open a run's .rrd file in the rerun viewer (or --web, --png DIR, --list)",

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from omnisort_hw.cli.arg_types import output_file
+from omnisort_hw.cli.arg_types import Subcommands, output_file
 from omnisort_hw.cli.cell_file import load_cell
 from omnisort_hw.cli.output import print_result, print_verdict
 from omnisort_hw.cli.request_flags import add_request_arguments, request_from
@@ -34,7 +34,7 @@ from omnisort_hw.pipeline.requests import LocateRequest, RegisterRequest, SortRe
 from omnisort_hw.request_fields import args_of
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     reg = sub.add_parser(
         "register-robot", help="robot base pose T_SB from the floor checkerboard in one image"
     )
@@ -83,7 +83,7 @@ def register(sub: Any) -> None:
     srt.set_defaults(func=cmd_sort)
 
 
-def add_sorting_evaluation(esub: Any) -> None:
+def add_sorting_evaluation(esub: Subcommands) -> None:
     """`omnisort evaluate sorting` (called by the `evaluate` command group)."""
     ev = esub.add_parser(
         "sorting", help="random scenes on the simulated cell: register, locate, sort, verify"

@@ -6,10 +6,11 @@ import argparse
 import logging
 import os
 import sys
-from typing import Any
+
+from omnisort_hw.cli.arg_types import Subcommands
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     p = sub.add_parser(
         "serve",
         help="run the cell service (TCP line-delimited JSON; systemd Type=notify)",

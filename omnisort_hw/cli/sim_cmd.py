@@ -8,14 +8,13 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
-from omnisort_hw.cli.arg_types import output_folder
+from omnisort_hw.cli.arg_types import Subcommands, output_folder
 from omnisort_hw.cli.virtual_cell_args import add_arguments
 from omnisort_hw.errors import InputError
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     parser = sub.add_parser("sim", help="render images with ground truth from the simulated cell")
     ssub = parser.add_subparsers(dest="sim_command", required=True, metavar="ACTION")
 

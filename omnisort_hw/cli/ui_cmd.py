@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from typing import Any
+
+from omnisort_hw.cli.arg_types import Subcommands
 
 
-def register(sub: Any) -> None:
+def register(sub: Subcommands) -> None:
     p = sub.add_parser(
         "ui",
         help="serve the operator interface (a web page; a client of the running service)",

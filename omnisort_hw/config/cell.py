@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from omnisort_hw.config.capture import CaptureSettings, capture_settings
 from omnisort_hw.config.devices import CellDeviceConfig, parse_device_config
@@ -67,19 +66,21 @@ class TargetConfig:
     separation_mm: float | None = None
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any]) -> TargetConfig:
+    def from_mapping(cls, section: Mapping[str, object]) -> TargetConfig:
         unknown = sorted(set(section) - TARGET_KEYS)
         if unknown:
             known = ", ".join(sorted(TARGET_KEYS))
             raise ConfigError(f"[target].{unknown[0]}: unknown key (known: {known})")
         kind = section.get("kind")
-        if kind is not None and kind not in TARGETS:
+        if kind is not None and (not isinstance(kind, str) or kind not in TARGETS):
             raise ConfigError(f"[target].kind: one of {', '.join(TARGETS)}, got {kind!r}")
         sep = section.get("separation_mm")
-        problem = separation_problem(sep) if sep is not None else None
-        if problem:
+        if sep is None:
+            return cls(kind, None)
+        problem = separation_problem(sep)
+        if problem or not isinstance(sep, int | float):
             raise ConfigError(f"[target].separation_mm: {problem}")
-        return cls(kind, float(sep) if sep is not None else None)
+        return cls(kind, float(sep))
 
 
 @dataclass(frozen=True)
@@ -105,13 +106,13 @@ class CellConfig:
         return self.path.parent if self.path is not None else None
 
     @classmethod
-    def from_mapping(cls, doc: Mapping[str, Any], path: Path | None = None) -> CellConfig:
+    def from_mapping(cls, doc: Mapping[str, object], path: Path | None = None) -> CellConfig:
         """Parse a TOML document already loaded; relative paths are relative to its folder."""
         base = path.parent if path is not None else None
         unknown = sorted(set(doc) - set(SECTIONS))
         if unknown:
             raise ConfigError(f"[{unknown[0]}]: unknown section (known: {', '.join(SECTIONS)})")
-        tables: dict[str, Mapping[str, Any]] = {}
+        tables: dict[str, Mapping[str, object]] = {}
         for key in SECTIONS:
             value = doc.get(key, {})
             if not isinstance(value, Mapping):
@@ -126,7 +127,7 @@ class CellConfig:
             target=TargetConfig.from_mapping(tables["target"]),
             sorting=parse_sort_section(doc["sorting"], base) if "sorting" in doc else None,
             registration=(
-                parse_registration_config(doc["registration"]) if "registration" in doc else None
+                parse_registration_config(tables["registration"]) if "registration" in doc else None
             ),
             watchdog=WatchdogConfig.from_mapping(tables["watchdog"]),
             plc=PlcConfig.from_mapping(tables["plc"]),

@@ -83,7 +83,7 @@ SIM_SETTINGS: dict[str, dict[str, type]] = {
 SIM_SIGNED = frozenset({"seed", "bump_deg", "bump_after_grabs"})
 
 
-def check_sim_settings(kind: str, settings: Mapping[str, Any]) -> dict[str, Any]:
+def check_sim_settings(kind: str, settings: Mapping[str, object]) -> dict[str, Any]:
     """A `backend = "sim"` section's settings with their TOML types checked (ints accepted
     for floats), or a ConfigError naming `[kind].key`."""
     allowed = SIM_SETTINGS.get(kind)
@@ -148,7 +148,7 @@ class CellDeviceConfig:
         return self.laser.color if self.laser is not None else "red"
 
 
-def _convert(tp: Any, value: Any, key: str) -> Any:
+def _convert(tp: Any, value: object, key: str) -> Any:
     """`value` checked against the annotation `tp` (TOML types), converted where lossless
     (an integer for a number, a list for a tuple): the replies' codec, a ConfigError naming
     `key`."""
@@ -158,7 +158,7 @@ def _convert(tp: Any, value: Any, key: str) -> Any:
         raise config_error(exc.path, exc.problem) from None
 
 
-def build_config(cls: type, section: str, data: Mapping[str, Any]) -> Any:
+def build_config(cls: type, section: str, data: Mapping[str, object]) -> Any:
     """Instantiate the config dataclass `cls` from `data`, naming `[section].key` on any error."""
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
@@ -185,7 +185,7 @@ def build_config(cls: type, section: str, data: Mapping[str, Any]) -> Any:
 
 
 def parse_device_section(
-    kind: DeviceKind, data: Mapping[str, Any], base_dir: Path | None = None
+    kind: DeviceKind, data: object, base_dir: Path | None = None
 ) -> DeviceSection:
     """One `[camera]` / `[laser]` / `[arm]` table -> `DeviceSection`."""
     if not isinstance(data, Mapping):
@@ -201,11 +201,12 @@ def parse_device_section(
     settings = {k: v for k, v in data.items() if k != "backend"}
     color = "red"
     if kind == "laser" and "color" in settings:
-        color = settings.pop("color")
-        if color not in LASER_COLORS:
+        given = settings.pop("color")
+        if not isinstance(given, str) or given not in LASER_COLORS:
             raise config_error(
-                "[laser].color", f"{color!r} is not one of {', '.join(LASER_COLORS)}"
+                "[laser].color", f"{given!r} is not one of {', '.join(LASER_COLORS)}"
             )
+        color = given
     if backend == SIM_BACKEND:
         return DeviceSection(kind, backend, check_sim_settings(kind, settings), color)
     if kind == "camera" and base_dir is not None:
@@ -232,7 +233,9 @@ def _resolve_camera_file(settings: dict[str, Any], base_dir: Path) -> dict[str, 
     return out
 
 
-def parse_device_config(doc: Mapping[str, Any], base_dir: Path | None = None) -> CellDeviceConfig:
+def parse_device_config(
+    doc: Mapping[str, object], base_dir: Path | None = None
+) -> CellDeviceConfig:
     """The device sections of an already parsed cell document (other sections are ignored)."""
     found: dict[str, DeviceSection] = {}
     for kind in DEVICE_SECTIONS:

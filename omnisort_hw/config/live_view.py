@@ -5,7 +5,6 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from omnisort_hw.errors import ConfigError
 
@@ -26,7 +25,7 @@ class LiveViewConfig:
     memory_limit: str = "256MiB"
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any]) -> LiveViewConfig:
+    def from_mapping(cls, section: Mapping[str, object]) -> LiveViewConfig:
         live = section.get("live", False)
         if not isinstance(live, bool):
             raise ConfigError(f"[logging] live must be true or false, got {live!r}")

@@ -52,7 +52,7 @@ LOCATION_KEYS = frozenset(a.name for a in args_of(LocationSettings))
 
 
 def location_changes(
-    values: Mapping[str, Any],
+    values: Mapping[str, object],
     label: Callable[[Arg], str],
     error: type[OmnisortError] = ConfigError,
     base_dir: Path | None = None,

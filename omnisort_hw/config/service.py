@@ -6,7 +6,6 @@ import ipaddress
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from omnisort_hw.config.live_view import LIVE_KEYS, LiveViewConfig
 from omnisort_hw.errors import ConfigError
@@ -51,27 +50,29 @@ LOGGING_KEYS = (
 )
 
 
-def _check_keys(section: Mapping[str, Any], name: str, known: frozenset[str]) -> None:
+def _check_keys(section: Mapping[str, object], name: str, known: frozenset[str]) -> None:
     unknown = sorted(set(section) - known)
     if unknown:
         raise ConfigError(f"[{name}]: unknown key(s) {', '.join(unknown)}")
 
 
-def _number(section: Mapping[str, Any], name: str, key: str, default: float, lo: float) -> float:
+def _number(section: Mapping[str, object], name: str, key: str, default: float, lo: float) -> float:
     value = section.get(key, default)
     if isinstance(value, bool) or not isinstance(value, int | float) or value < lo:
         raise ConfigError(f"[{name}] {key} must be a number >= {lo:g}, got {value!r}")
     return float(value)
 
 
-def _integer(section: Mapping[str, Any], name: str, key: str, default: int, lo: int) -> int:
+def _integer(section: Mapping[str, object], name: str, key: str, default: int, lo: int) -> int:
     value = section.get(key, default)
     if isinstance(value, bool) or not isinstance(value, int) or value < lo:
         raise ConfigError(f"[{name}] {key} must be an integer >= {lo}, got {value!r}")
     return value
 
 
-def _path(section: Mapping[str, Any], name: str, key: str, default: str, base: Path | None) -> Path:
+def _path(
+    section: Mapping[str, object], name: str, key: str, default: str, base: Path | None
+) -> Path:
     value = section.get(key, default)
     if not isinstance(value, str) or not value:
         raise ConfigError(f"[{name}] {key} must be a non-empty path string")
@@ -86,7 +87,7 @@ def client_host(host: str) -> str:
     return "127.0.0.1" if host in ("0.0.0.0", "::") else host
 
 
-def listen_address(section: Mapping[str, Any]) -> tuple[str, int]:
+def listen_address(section: Mapping[str, object]) -> tuple[str, int]:
     """`[service]` host and port, checked (what the service binds, and its clients read)."""
     host = section.get("host", "127.0.0.1")
     if not isinstance(host, str) or not host:
@@ -124,7 +125,7 @@ class ServiceConfig:
 
     @classmethod
     def from_mapping(
-        cls, section: Mapping[str, Any], base_dir: Path | None = None
+        cls, section: Mapping[str, object], base_dir: Path | None = None
     ) -> ServiceConfig:
         """Parse `[service]`; a token may come inline (`token`) or from a file (`token_file`)."""
         name = "service"
@@ -186,7 +187,7 @@ class LoggingConfig:
 
     @classmethod
     def from_mapping(
-        cls, section: Mapping[str, Any], base_dir: Path | None = None
+        cls, section: Mapping[str, object], base_dir: Path | None = None
     ) -> LoggingConfig:
         """Parse `[logging]`."""
         name = "logging"

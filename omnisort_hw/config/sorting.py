@@ -81,11 +81,26 @@ def _floats(value: object, n: int | None, key: str) -> tuple[float, ...]:
     return tuple(out)
 
 
-def _number(data: Mapping[str, Any], key: str, default: float, path: str, lo: float) -> float:
+def _number(data: Mapping[str, object], key: str, default: float, path: str, lo: float) -> float:
     v = data.get(key, default)
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v < lo:
         raise ConfigError(f"{path}.{key}: expected a number >= {lo}, got {v!r}")
     return float(v)
+
+
+def _angle(data: Mapping[str, object], key: str, path: str) -> float:
+    """An angle in degrees (0 when not given): any finite number."""
+    v = data.get(key, 0.0)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise ConfigError(f"{path}.{key}: expected a number of degrees, got {v!r}")
+    return float(v)
+
+
+def _list(value: object, path: str) -> list[object]:
+    """An array of tables (`[[sorting.bins]]`)."""
+    if not isinstance(value, list):
+        raise ConfigError(f"{path}: expected an array of tables, got {value!r}")
+    return value
 
 
 # `[sorting]` keys that are plain non-negative numbers, and every key the section knows.
@@ -121,7 +136,7 @@ SORT_KEYS = {
 
 
 def parse_sort_config(
-    data: Mapping[str, Any], base: SortConfig | None = None, base_dir: Path | None = None
+    data: Mapping[str, object], base: SortConfig | None = None, base_dir: Path | None = None
 ) -> SortConfig:
     """`[sorting]` -> SortConfig (on top of `base`); a wrong key names `[sorting].key`."""
     path = "[sorting]"
@@ -157,7 +172,7 @@ def parse_sort_config(
         changes["use_laser"] = data["use_laser"]
     if "bins" in data:
         bins = []
-        for i, b in enumerate(data["bins"]):
+        for i, b in enumerate(_list(data["bins"], f"{path}.bins")):
             key = f"{path}.bins[{i}]"
             if not isinstance(b, Mapping) or "color" not in b or "center_B_mm" not in b:
                 raise ConfigError(f"{key}: needs color and center_B_mm")
@@ -166,13 +181,13 @@ def parse_sort_config(
                     str(b["color"]),
                     _floats(b["center_B_mm"], 2, f"{key}.center_B_mm"),  # type: ignore[arg-type]
                     _floats(b.get("size_mm", [240.0, 240.0, 120.0]), 3, f"{key}.size_mm"),  # type: ignore[arg-type]
-                    float(b.get("yaw_B_deg", 0.0)),
+                    _angle(b, "yaw_B_deg", key),
                 )
             )
         changes["bins"] = tuple(bins)
     if "obstacles" in data:
         obs = []
-        for i, o in enumerate(data["obstacles"]):
+        for i, o in enumerate(_list(data["obstacles"], f"{path}.obstacles")):
             key = f"{path}.obstacles[{i}]"
             if not isinstance(o, Mapping) or o.get("frame") not in ("S", "B"):
                 raise ConfigError(f'{key}.frame: must be "S" or "B"')
@@ -182,7 +197,7 @@ def parse_sort_config(
                     str(o["frame"]),
                     _floats(o.get("center_mm"), 3, f"{key}.center_mm"),  # type: ignore[arg-type]
                     _floats(o.get("size_mm"), 3, f"{key}.size_mm"),  # type: ignore[arg-type]
-                    float(o.get("yaw_deg", 0.0)),
+                    _angle(o, "yaw_deg", key),
                 )
             )
         changes["obstacles"] = tuple(obs)
@@ -191,17 +206,20 @@ def parse_sort_config(
         located["colors_file"] = data["colors_file"]
     changes |= location_changes(located, lambda a: f"{path}.{a.name}", base_dir=base_dir)
     if "colors" in data:
-        changes["colors"] = ColorTable.from_mapping(data["colors"], f"{path}.colors")
+        colors = data["colors"]
+        if not isinstance(colors, Mapping):
+            raise ConfigError(f"{path}.colors: must be a table of colour names")
+        changes["colors"] = ColorTable.from_mapping(colors, f"{path}.colors")
     return replace(cfg, **changes)
 
 
-def parse_registration_config(data: Mapping[str, Any]) -> RegistrationConfig:
+def parse_registration_config(data: Mapping[str, object]) -> RegistrationConfig:
     """`[registration]`: board = "9x6", square_mm, offset = [X, Y, Z, RX, RY, RZ], fit."""
     return registration_config(data, "[registration]", lambda a: f"[registration].{a.name}")
 
 
 def registration_config(
-    values: Mapping[str, Any],
+    values: Mapping[str, object],
     where: str,
     label: Callable[[Arg], str],
     error: type[OmnisortError] = ConfigError,

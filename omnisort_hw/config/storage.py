@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from omnisort_hw.errors import ConfigError
 
@@ -23,7 +22,7 @@ class StorageConfig:
 
     @classmethod
     def from_mapping(
-        cls, section: Mapping[str, Any], base_dir: Path | None = None
+        cls, section: Mapping[str, object], base_dir: Path | None = None
     ) -> StorageConfig:
         """Build from a parsed TOML section; relative paths are taken from `base_dir`."""
         unknown = sorted(set(section) - STORAGE_KEYS)

@@ -23,7 +23,7 @@ SEPARATION_RANGE_MM = (100.0, 10000.0)
 """Inner wall distances a wall target can have, mm: a value below is a typo or metres."""
 
 
-def separation_problem(value: Any) -> str | None:
+def separation_problem(value: object) -> str | None:
     """What is wrong with a measured inner wall distance `value` (mm), or None. The distance
     sets the scale of every extrinsic result, so there is no default and no unit guessing."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
@@ -46,7 +46,7 @@ _MARKER_KEYS = ("along_mm", "height_mm", "size_mm")
 _LENGTH_RANGE_MM = (0.0, 10000.0)
 
 
-def _number(value: Any, field: str, lo: float, hi: float) -> float:
+def _number(value: object, field: str, lo: float, hi: float) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ConfigError(f"{field}: expected a number of millimetres, got {value!r}")
     if not lo <= value <= hi:

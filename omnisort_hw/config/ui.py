@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from omnisort_hw.config.service import client_host, listen_address
 from omnisort_hw.config.toml_file import read_toml
@@ -44,7 +43,7 @@ class UiConfig:
     sim_control: tuple[str, int] | None = None
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any]) -> UiConfig:
+    def from_mapping(cls, section: Mapping[str, object]) -> UiConfig:
         n = "ui"
         _unknown(section, n, UI_KEYS)
         host = section.get("host", "127.0.0.1")

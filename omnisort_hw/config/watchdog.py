@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from omnisort_hw.config.service import is_loopback
 from omnisort_hw.errors import ConfigError
@@ -13,14 +12,14 @@ WATCHDOG_KEYS = frozenset({"period_s", "before_sort", "false_alarm_rate", "min_a
 PLC_KEYS = frozenset({"modbus_port", "host", "allow_commands"})
 
 
-def _unknown(section: Mapping[str, Any], name: str, known: frozenset[str]) -> None:
+def _unknown(section: Mapping[str, object], name: str, known: frozenset[str]) -> None:
     extra = sorted(set(section) - known)
     if extra:
         raise ConfigError(f"[{name}].{extra[0]}: unknown key (known: {', '.join(sorted(known))})")
 
 
 def _num(
-    section: Mapping[str, Any], name: str, key: str, default: float, lo: float, hi: float
+    section: Mapping[str, object], name: str, key: str, default: float, lo: float, hi: float
 ) -> float:
     v = section.get(key, default)
     if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
@@ -28,7 +27,7 @@ def _num(
     return float(v)
 
 
-def _bool(section: Mapping[str, Any], name: str, key: str, default: bool) -> bool:
+def _bool(section: Mapping[str, object], name: str, key: str, default: bool) -> bool:
     v = section.get(key, default)
     if not isinstance(v, bool):
         raise ConfigError(f"[{name}] {key} must be true or false, got {v!r}")
@@ -47,7 +46,7 @@ class WatchdogConfig:
     min_angle_deg: float = 0.02
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any]) -> WatchdogConfig:
+    def from_mapping(cls, section: Mapping[str, object]) -> WatchdogConfig:
         n = "watchdog"
         _unknown(section, n, WATCHDOG_KEYS)
         return cls(
@@ -68,7 +67,7 @@ class PlcConfig:
     allow_commands: bool = False
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any]) -> PlcConfig:
+    def from_mapping(cls, section: Mapping[str, object]) -> PlcConfig:
         n = "plc"
         _unknown(section, n, PLC_KEYS)
         port = section.get("modbus_port")

@@ -27,6 +27,7 @@ rotation, T_SB and the floor height.
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -76,21 +77,23 @@ class ColorTable:
         return cls(dict(DEFAULT_COLORS))
 
     @classmethod
-    def from_mapping(cls, data: Mapping[str, Any], source: str = "colours") -> ColorTable:
+    def from_mapping(cls, data: Mapping[str, object], source: str = "colours") -> ColorTable:
         """{name: [[h_lo, h_hi, s_lo, s_hi, v_lo, v_hi], ...]} (TOML/JSON), checked."""
         out: dict[str, tuple[tuple[int, int, int, int, int, int], ...]] = {}
         for name, value in data.items():
             key = f"{source}.{name}"
             if name == UNKNOWN:
                 raise ConfigError(f"{key}: {UNKNOWN!r} is reserved for unmatched objects")
-            rows = value if value and isinstance(value[0], list | tuple) else [value]
+            rows: Sequence[object] = [value]
+            if isinstance(value, list | tuple) and value and isinstance(value[0], list | tuple):
+                rows = value
             parsed = []
             for i, row in enumerate(rows):
-                if not isinstance(row, list | tuple) or len(row) != 6:
-                    raise ConfigError(f"{key}[{i}]: expected [h_lo, h_hi, s_lo, s_hi, v_lo, v_hi]")
-                if not all(isinstance(v, int) and not isinstance(v, bool) for v in row):
-                    raise ConfigError(f"{key}[{i}]: expected whole numbers, got {row!r}")
-                h0, h1, s0, s1, v0, v1 = row
+                row = row if isinstance(row, list | tuple) else [row]
+                whole = [v for v in row if isinstance(v, int) and not isinstance(v, bool)]
+                if len(row) != 6 or len(whole) != 6:
+                    raise ConfigError(f"{key}[{i}]: expected 6 whole numbers, got {row!r}")
+                h0, h1, s0, s1, v0, v1 = whole
                 if not (0 <= h0 <= h1 <= 179 and 0 <= s0 <= s1 <= 255 and 0 <= v0 <= v1 <= 255):
                     raise ConfigError(
                         f"{key}[{i}]: need 0 <= h_lo <= h_hi <= 179 and 0 <= lo <= hi <= 255 "
@@ -105,8 +108,6 @@ class ColorTable:
     @classmethod
     def load(cls, path: str | Path) -> ColorTable:
         """A colour table from a TOML or JSON file (a top-level `colors` table, or the file)."""
-        import json
-
         p = Path(path)
         try:
             text = p.read_text(encoding="utf-8")

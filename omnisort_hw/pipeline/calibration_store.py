@@ -61,7 +61,7 @@ OPTIONAL_KEYS: dict[str, tuple[str, ...]] = {"camera": (), "system": ("robot_bas
 Health = Literal["ok", "missing", "corrupt", "stale", "wrong_serial"]
 
 
-def _json_default(obj: Any) -> Any:
+def _json_default(obj: object) -> Any:
     """Serialise numpy arrays and scalars (the core hands over plain arrays) as JSON values."""
     tolist = getattr(obj, "tolist", None)
     if callable(tolist):

@@ -65,6 +65,7 @@ from omnisort_hw.wire_records import WireError, from_wire
 Result = dict[str, Any]
 OnEvent = Callable[[dict[str, Any]], None] | None
 R = TypeVar("R")
+R_co = TypeVar("R_co", covariant=True)
 T = TypeVar("T")
 Q = TypeVar("Q")
 
@@ -186,15 +187,15 @@ class CellCommands:
 
 
 @dataclass(frozen=True)
-class Call(Generic[R]):
+class Call(Generic[R_co]):
     """One command to send later on a connection chosen then (a door that opens its own, as
     the page's link and its job runner do): a `CellCommands` method, whose name is the
     protocol's command, and its request record (None: the method's default). Made by
     `call_of`, which checks the record against the method's, so no door names a command by a
     string."""
 
-    method: Callable[..., R]
-    request: Any = None
+    method: Callable[..., R_co]
+    request: object = None
 
     @property
     def command(self) -> str:
@@ -202,7 +203,7 @@ class Call(Generic[R]):
         that each method is named for its command)."""
         return str(self.method.__name__)
 
-    def send(self, client: CellCommands) -> R:
+    def send(self, client: CellCommands) -> R_co:
         """The command sent on `client`: the service's typed reply."""
         if self.request is None:
             return self.method(client)

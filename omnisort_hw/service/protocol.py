@@ -201,7 +201,7 @@ def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not valid JSON")
 
 
-def _depth(obj: Any, limit: int) -> int:
+def _depth(obj: object, limit: int) -> int:
     """Nesting depth of a parsed JSON value, stopping once past `limit`."""
     stack: list[tuple[Any, int]] = [(obj, 1)]
     deepest = 0
@@ -217,7 +217,7 @@ def _depth(obj: Any, limit: int) -> int:
     return deepest
 
 
-def peek_id(obj: Any) -> int | str | None:
+def peek_id(obj: object) -> int | str | None:
     """The request id if it is a valid one (so even an error reply can carry it)."""
     if not isinstance(obj, dict):
         return None
@@ -255,7 +255,7 @@ Emit = Callable[[dict[str, Any]], None]
 """Where a job's progress events go (in the loop thread), before its reply."""
 
 
-def validate_request(obj: Any, authorize: Authorizer | None = None) -> Request:
+def validate_request(obj: object, authorize: Authorizer | None = None) -> Request:
     """A decoded JSON value to a Request, checking every field; raises ProtocolError.
 
     `authorize(command, token, id)` runs once the command is known and before its arguments
@@ -329,7 +329,7 @@ def parse_request(line: bytes, authorize: Authorizer | None = None) -> Request:
         raise
 
 
-def _json_default(obj: Any) -> Any:
+def _json_default(obj: object) -> Any:
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return to_wire(obj)  # a reply record a door forgot to write: its JSON, not its repr
     tolist = getattr(obj, "tolist", None)
@@ -349,7 +349,7 @@ def encode(obj: Mapping[str, Any]) -> bytes:
     return text.encode("utf-8") + b"\n"
 
 
-def _denan(obj: Any) -> Any:
+def _denan(obj: object) -> Any:
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
     if isinstance(obj, Mapping):

@@ -27,7 +27,7 @@ EXPERIMENTS: dict[str, str] = {
 }
 
 
-def canonical_json(value: Any) -> str:
+def canonical_json(value: object) -> str:
     """The one text of a JSON value: sorted keys, no spaces, exact floats (repr)."""
     return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=True)
 

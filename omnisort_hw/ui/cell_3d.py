@@ -8,8 +8,7 @@ S in metres, shifted so the floor the robot stands on is the grid's plane.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from nicegui import run, ui
@@ -19,6 +18,9 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.link import CellCommands, ClientError, CommandError, call_of
 from omnisort_hw.ui.overlay_svg import sigma_rgb
 from omnisort_hw.ui.widgets import tag
+
+At = Callable[[Sequence[float] | np.ndarray], list[float]]
+"""A point in S (mm) where the scene draws it (m, about the view's centre)."""
 
 MM = 1e-3  # the scene's unit is the metre
 GEOMETRY = call_of(CellCommands.geometry)
@@ -46,7 +48,7 @@ class Cell3D:
         self.ctx = ctx
         self.visible = False
         self.drawn: dict[str, int] = {}  # what the scene holds now, counted (for the legend)
-        self._key: tuple[Any, ...] | None = None
+        self._key: tuple[object, ...] | None = None
         self._ticks = 0
         self._busy = False
         self._looked = False  # the view is set once; then it is the person's
@@ -174,7 +176,7 @@ class Cell3D:
             f" ({problems})" if problems else ""
         )
 
-    def _draw_points(self, reply: MapReply | None, at: Any, drawn: dict[str, int]) -> None:
+    def _draw_points(self, reply: MapReply | None, at: At, drawn: dict[str, int]) -> None:
         """The last map's points, coloured by their sigma across the plane (as on the live
         view: green at the smallest, red at the largest)."""
         points = (reply.points_S if reply is not None else None) or []

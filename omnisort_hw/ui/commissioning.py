@@ -272,7 +272,7 @@ class CommissioningPanel:
 
     # -- acting: the jobs -------------------------------------------------------------------
 
-    def _start(self, what: str, job: Call[Any] | list[str], doing: str = "") -> bool:
+    def _start(self, what: str, job: Call[object] | list[str], doing: str = "") -> bool:
         """Start a step's job (`what`: the step; `restore` has none), or (`job` a list: what
         its command's schema found wrong with the form) show why not (`GuidedStep.start`)."""
         step = self.steps.get(what)

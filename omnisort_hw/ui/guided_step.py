@@ -15,13 +15,13 @@ accepted in one flow and not in the other.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping
-from typing import Any
+from collections.abc import Callable
 
 from nicegui import ui
 
 from omnisort_hw.pipeline.replies import Level
 from omnisort_hw.pipeline.verdict import Verdict, verdict_lines, verdict_of
+from omnisort_hw.service.states import JobRecord
 from omnisort_hw.service.status_reading import job_text
 from omnisort_hw.ui.job_runner import JobEnd, JobWatch
 from omnisort_hw.ui.link import Call
@@ -111,13 +111,13 @@ class GuidedStep:
         """A job started: what it is doing (`running` shows how long it has run)."""
         self.reset(doing)
 
-    def running(self, job: Mapping[str, Any] | None) -> None:
+    def running(self, job: JobRecord | None) -> None:
         """While the step's job runs, under its note: its running time and how long the last
         such job took on this cell (the service's `status` job)."""
         if self.level is None and job:
             self.clock.text = job_text(job, last_event=False)
 
-    def start(self, watch: JobWatch, job: Call[Any] | list[str], doing: str) -> bool:
+    def start(self, watch: JobWatch, job: Call[object] | list[str], doing: str) -> bool:
         """Send the step's job through `watch`, or (`job` a list: the problems its command's
         schema found with the form, `Operators.checked`) nothing: the note says what is being
         done, or why nothing was sent."""

@@ -6,8 +6,6 @@ kept in its turn)."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from nicegui import ui
 
 from omnisort_hw.pipeline.replies import AdoptReply, VersionReply
@@ -41,8 +39,8 @@ class HistoryPanel:
             "Every calibration above was saved when it was made; the version before it is kept. "
             "Go back to a kept version if the new one proves worse."
         )
-        self.lists: dict[str, Any] = {}
-        self.pick: dict[str, Any] = {}
+        self.lists: dict[str, ui.label] = {}
+        self.pick: dict[str, ui.select] = {}
         for kind in KINDS:
             ui.label(f"{kind}.json").classes("font-bold")
             self.lists[kind] = tag(ui.label(""), f"history-{kind}").classes(

@@ -8,7 +8,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar, cast
+from typing import TypeVar, cast
 
 from omnisort_hw.pipeline.replies import SortReply
 from omnisort_hw.pipeline.verdict import verdict_lines, verdict_of
@@ -65,7 +65,7 @@ class JobRunner:
         where = "in this browser" if by == browser else "from another browser"
         return f"{cmd} started {where} is still running"
 
-    def start(self, job: Call[Any], token: str | None, browser: str) -> None:
+    def start(self, job: Call[object], token: str | None, browser: str) -> None:
         """Send the job for the page of `browser` (its session) and return; its end lands in
         `last`. RuntimeError, with `busy()`'s reason, if one is still running."""
         with self._lock:
@@ -82,7 +82,7 @@ class JobRunner:
         with self._lock:
             return cast(R | None, self.results.get(command.__name__))
 
-    def _run(self, job: Call[Any], token: str | None) -> None:
+    def _run(self, job: Call[object], token: str | None) -> None:
         cmd = job.command
         try:
             result = self.link.call(job, token=token, timeout_s=self.timeout_s)
@@ -110,7 +110,7 @@ class JobWatch:
     one way to start a job and notes how many jobs had ended, so a job that ends at once is
     not missed; `ended()` gives its end once."""
 
-    def __init__(self, jobs: JobRunner, start_job: Callable[[Call[Any]], bool]) -> None:
+    def __init__(self, jobs: JobRunner, start_job: Callable[[Call[object]], bool]) -> None:
         self.jobs, self.start_job = jobs, start_job
         self._waiting: tuple[str, int] | None = None  # (command, jobs ended when it started)
 
@@ -118,7 +118,7 @@ class JobWatch:
     def waiting(self) -> str | None:
         return self._waiting[0] if self._waiting else None
 
-    def start(self, job: Call[Any]) -> bool:
+    def start(self, job: Call[object]) -> bool:
         ended = self.jobs.ended
         if not self.start_job(job):
             return False

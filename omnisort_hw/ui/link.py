@@ -12,7 +12,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol, TypeVar
+from typing import Protocol, TypeVar
 
 from omnisort_hw.service.client import Client, ClientError, CommandError, ReplyError
 from omnisort_hw.service.commands import Call, CellCommands, call_of
@@ -44,7 +44,7 @@ class Send(Protocol):
     async def __call__(self, command: Call[R]) -> R | None: ...
 
 
-StartJob = Callable[[Call[Any]], bool]
+StartJob = Callable[[Call[object]], bool]
 """A page's way to start a job: False, with why shown, when it was not sent."""
 
 

@@ -4,9 +4,7 @@ folder, scaled and JPEG-encoded."""
 
 from __future__ import annotations
 
-from typing import Any
-
-from nicegui import run
+from nicegui import run, ui
 
 from omnisort_hw.pipeline.requests import PictureRequest
 from omnisort_hw.ui.context import UiContext
@@ -26,7 +24,7 @@ async def fetch_picture(ctx: UiContext, token: str, path: str, width: int = 960)
 
 
 async def show_picture(
-    ctx: UiContext, token: str | None, path: object, image: Any, note: Any
+    ctx: UiContext, token: str | None, path: object, image: ui.image, note: ui.label
 ) -> None:
     """The picture at `path` (a reply's) in the `image` element; none without a path or a
     token; why not appended to the `note` label when the service does not send it."""

@@ -7,8 +7,6 @@ replies. Started from the drift banner; open to a signed-in operator."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from nicegui import ui
 
 from omnisort_hw.pipeline.replies import DriftReply, ExtrinsicsReply
@@ -142,7 +140,7 @@ class RecoveryPanel:
         self.detection.active = False
         self.stepper.next()
 
-    def _start(self, step: str, job: Call[Any] | list[str], doing: str) -> None:
+    def _start(self, step: str, job: Call[object] | list[str], doing: str) -> None:
         if self.steps[step].start(self.watch, job, doing):
             self._step = step
 

@@ -16,7 +16,7 @@ from omnisort_hw.ui.schema_form import FormField, args_from_form, inapplicable
 from omnisort_hw.ui.widgets import tag
 
 
-def _text(value: Any) -> str:
+def _text(value: float | None) -> str:
     """A number as a box shows it: rounded to a thousandth, without trailing zeros."""
     return "" if value is None else f"{round(float(value), 3):g}"
 
@@ -69,13 +69,14 @@ class SchemaForm:
                 args.pop(name, None)
         return args
 
-    def set(self, name: str, value: Any) -> None:
+    def set(self, name: str, value: object) -> None:
         """One field shown at `value` (a number rounded as `_text`, a `numbers` field's list
         spread over its boxes)."""
         widget = self.inputs[name]
         if isinstance(widget, list):
-            for w, v in zip(widget, value, strict=False):
-                w.value = _text(v)
+            values = value if isinstance(value, list | tuple) else ()
+            for w, v in zip(widget, values, strict=False):
+                w.value = _text(v) if isinstance(v, int | float) else ""
         elif isinstance(value, int | float) and not isinstance(value, bool):
             widget.value = _text(value)
         else:

@@ -10,7 +10,7 @@ import inspect
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from nicegui import background_tasks, run, ui
 
@@ -104,7 +104,7 @@ class BrowserSession:
             return None
         return await self.send(command, token)
 
-    def start_job(self, job: Call[Any]) -> bool:
+    def start_job(self, job: Call[object]) -> bool:
         """Start a job on the service for this operator; False, with the reason said, when it
         was not sent. Motion is confirmed before this (the sort's Start), never here."""
         token = self.token()

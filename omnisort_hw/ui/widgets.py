@@ -2,18 +2,19 @@
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from nicegui import ui
+from nicegui.element import Element
 
-E = TypeVar("E")
+E = TypeVar("E", bound=Element)
 
 
 def tag(element: E, name: str) -> E:
     """Name an element for the tests: a marker for the simulated user, an attribute for a
     real browser."""
-    el: Any = element
-    return el.mark(name).props(f"data-test={name}")
+    element.mark(name).props(f"data-test={name}")
+    return element
 
 
 async def confirm(text: str) -> bool:
@@ -28,7 +29,7 @@ async def confirm(text: str) -> bool:
     return result is True
 
 
-def number_input(label: str, name: str, value: float | None = None) -> Any:
+def number_input(label: str, name: str, value: float | None = None) -> ui.input:
     """A number typed as text, named `name` for the tests: read it with
     `schema_form.typed_number`, so that what is not a number reaches the schema's check as
     typed (a browser's number field reports it as empty, which means the default)."""

@@ -18,21 +18,21 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from collections.abc import Iterable
 
 from omnisort_hw.core.kinematics import get_model
-from sim_backend.scene import load_scene
+from sim_backend.scene import Scene, load_scene
 from sim_backend.sort_harness import sim_registration_config, sim_sort_config
 
 # Near-lossless: JPEG quality 100 without chroma subsampling (benchmarks/ measures the cost).
 STREAM_QUERY = "quality=100&sampling=444"
 
 
-def _list(values: object) -> str:
-    return "[" + ", ".join(f"{float(v):.1f}" for v in values) + "]"  # type: ignore[attr-defined]
+def _list(values: Iterable[float]) -> str:
+    return "[" + ", ".join(f"{float(v):.1f}" for v in values) + "]"
 
 
-def _target_lines(scene: Any) -> list[str]:
+def _target_lines(scene: Scene) -> list[str]:
     """`[target]`: the two-sided target's kind and wall separation (the scene's)."""
     assert scene.target is not None
     return [
@@ -55,7 +55,7 @@ def _files_lines(state_dir: str, log_dir: str) -> list[str]:
     ]
 
 
-def _registration_lines(scene: Any) -> list[str]:
+def _registration_lines(scene: Scene) -> list[str]:
     """`[registration]`: the floor board and its pose in the robot base frame, from the scene."""
     reg = sim_registration_config(scene)
     return [

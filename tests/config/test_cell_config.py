@@ -45,7 +45,17 @@ def test_the_example_file_loads_into_every_section() -> None:
             "[registration]\nsquare_mm = 40\noffset = [0,0,0,0,0,0]\nfit = 'x'\n",
             "[registration].fit",
         ),
+        # Found by typing the parsed tables as `object`: each was a raw TypeError or ValueError.
+        ("[sorting]\nbins = 'red'\n", "[sorting].bins"),
+        (
+            "[[sorting.bins]]\ncolor = 'red'\ncenter_B_mm = [0, 0]\nyaw_B_deg = 'west'\n",
+            "[sorting].bins[0].yaw_B_deg",
+        ),
+        ("[sorting]\nobstacles = 3\n", "[sorting].obstacles"),
+        ("[sorting.colors]\nred = 5\n", "[sorting].colors.red"),
+        ("[sorting]\ncolors = 'red'\n", "[sorting].colors"),
         ("[target]\nkind = 'round'\n", "[target].kind"),
+        ("[target]\nkind = 2\n", "[target].kind"),
         ("[target]\nseparation_mm = 1.2924\n", "[target].separation_mm"),
         ("[target]\nseparation_mm = 'wide'\n", "[target].separation_mm"),
         ("[target]\nseperation_mm = 1292.4\n", "[target].seperation_mm"),
