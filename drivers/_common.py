@@ -9,7 +9,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from drivers.errors import (
     DeviceBusyError,
@@ -101,19 +101,20 @@ def call_with_timeout(fn: Callable[[], T], timeout_s: float, thread_name: str) -
     which is left to finish) when it has not returned, so the caller raises its own typed
     timeout. This bounds the wait only if the call releases the GIL.
     """
-    box: dict[str, Any] = {}
+    value: list[T] = []
+    error: list[BaseException] = []
 
     def run() -> None:
         try:
-            box["value"] = fn()
+            value.append(fn())
         except BaseException as exc:
-            box["error"] = exc
+            error.append(exc)
 
     worker = threading.Thread(target=run, name=thread_name, daemon=True)
     worker.start()
     worker.join(timeout_s)
     if worker.is_alive():
         raise StillRunningError(worker)
-    if "error" in box:
-        raise box["error"]
-    return box["value"]
+    if error:
+        raise error[0]
+    return value[0]

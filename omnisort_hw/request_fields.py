@@ -285,7 +285,7 @@ def check_value(
     return rows
 
 
-def _holds(condition: Condition, args: Mapping[str, Any]) -> bool:
+def _holds(condition: Condition, args: Mapping[str, object]) -> bool:
     other, values = condition
     value = args.get(other)
     if isinstance(values, _Given):
@@ -307,7 +307,7 @@ def condition_text(condition: Condition) -> str:
 def check_rules(
     cls: type[RequestClass],
     command: str,
-    args: Mapping[str, Any],
+    args: Mapping[str, object],
     labels: Mapping[str, str] | None = None,
     supplied: Collection[str] = (),
 ) -> None:
@@ -339,7 +339,7 @@ def check_rules(
 
 
 def check_args(
-    cls: type[RequestClass] | None, command: str, raw: Mapping[str, Any]
+    cls: type[RequestClass] | None, command: str, raw: Mapping[str, object]
 ) -> dict[str, Any]:
     """Every argument of `raw` checked against `cls`'s declaration (None: a command without
     arguments), the defaults filled in, then the rules between them; ArgumentError naming the
@@ -368,7 +368,7 @@ def check_args(
 
 def check_given(
     cls: type[RequestClass],
-    values: Mapping[str, Any],
+    values: Mapping[str, object],
     where: str,
     label: Callable[[Arg], str],
     error: type[Exception],

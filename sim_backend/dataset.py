@@ -83,7 +83,7 @@ def table3_bases(
     tone_curve: str = "srgb",
     scenes: Sequence[str | Path] = TABLE3_SCENES,
     effects: bool = False,
-    degrade: Mapping[str, Any] | None = None,
+    degrade: Mapping[str, object] | None = None,
 ) -> list[tuple[str, Scene]]:
     """(name, scene) of each target scene of the experiment, at `width`, with the simulated
     camera's tone curve; `effects`: through the colour camera's effects
@@ -131,7 +131,7 @@ def dataset_index(folder: Path) -> dict[str, Any] | None:
     return info
 
 
-def parameter_differences(have: Mapping[str, Any], wanted: Mapping[str, Any]) -> list[str]:
+def parameter_differences(have: Mapping[str, object], wanted: Mapping[str, object]) -> list[str]:
     """`KEY HAVE (asked WANTED)` for each parameter of `wanted` the dataset `have` records
     with another value (an index older than a parameter, `width`, is not compared on it)."""
     return [
@@ -141,7 +141,7 @@ def parameter_differences(have: Mapping[str, Any], wanted: Mapping[str, Any]) ->
     ]
 
 
-def dataset_problem(out: Path, wanted: Mapping[str, Any]) -> str | None:
+def dataset_problem(out: Path, wanted: Mapping[str, object]) -> str | None:
     """Why rendering the dataset `wanted` into `out` would destroy something: a dataset of
     other parameters (each named), or files that are no dataset. None: a new or empty folder,
     or the same dataset (rendered again, the same images)."""
@@ -172,7 +172,7 @@ def make_dataset(
     progress: bool = True,
     tone_curve: str = "srgb",
     effects: bool = False,
-    degrade: Mapping[str, Any] | None = None,
+    degrade: Mapping[str, object] | None = None,
 ) -> Path:
     """Render an experiment into `out_dir`; returns the path of `dataset.json`. `tone_curve`:
     the simulated camera's ("srgb" as real cameras, or "linear"), recorded in the index;

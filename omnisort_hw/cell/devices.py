@@ -155,7 +155,7 @@ def open_arm(section: DeviceSection, base_dir: Path | None = None) -> Arm:
 
 
 def open_devices(
-    config: Mapping[str, Any] | CellDeviceConfig,
+    config: Mapping[str, object] | CellDeviceConfig,
     config_path: Path | None = None,
     in_child: bool = False,
 ) -> Devices:

@@ -286,15 +286,15 @@ class CellJobs:
             fn, self.runlog, *args, cancel=cancel, what=what, **kwargs
         )
 
-    def save_camera(self, model: OcamModel, record: Mapping[str, Any]) -> Path:
+    def save_camera(self, model: OcamModel, record: Mapping[str, object]) -> Path:
         from omnisort_hw.core.camera_io import camera_record
 
         return self.store.save_camera(camera_record(model, **record))
 
-    def save_system(self, payload: Mapping[str, Any]) -> Path:
+    def save_system(self, payload: Mapping[str, object]) -> Path:
         return self.store.save_system(dict(payload))
 
-    def save_robot_base(self, record: Mapping[str, Any], image: np.ndarray) -> Path:
+    def save_robot_base(self, record: Mapping[str, object], image: np.ndarray) -> Path:
         """Into the store's system.json; `image` becomes the drift watchdog's reference."""
         payload = dict(self.store.load_system())
         payload["robot_base"] = dict(record)

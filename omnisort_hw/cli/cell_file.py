@@ -4,10 +4,14 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # imported by the function: a command's --help stays quick
+    from omnisort_hw.cell.devices import Devices
+    from omnisort_hw.config.cell import CellConfig
 
 
-def load_cell(config: Path, devices: bool = True) -> tuple[Any, Any]:
+def load_cell(config: Path, devices: bool = True) -> tuple[CellConfig, Devices | None]:
     """The cell file's typed record and (unless `devices` is False) its devices, unconnected."""
     from omnisort_hw.cell.devices import open_devices
     from omnisort_hw.config.cell import load_cell_config

@@ -17,9 +17,14 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from omnisort_hw.cli.arg_types import Subcommands, output_folder
+
+if TYPE_CHECKING:  # the command's heavy imports stay inside it
+    import numpy as np
+
+    from omnisort_hw.pipeline.laser_map import LaserMap
 
 
 def register(sub: Subcommands) -> None:
@@ -144,7 +149,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def write_overview(
-    path: Path, image: Any, laser_map: Any, found: dict[str, float], truth: dict[str, float]
+    path: Path,
+    image: np.ndarray,
+    laser_map: LaserMap,
+    found: dict[str, float],
+    truth: dict[str, float],
 ) -> Path:
     """The calibration image with the laser stripe found (green) and each segment's distance,
     and the calibrated parameters against the truth: a picture of one run."""

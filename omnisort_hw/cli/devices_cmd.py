@@ -13,10 +13,14 @@ import argparse
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from omnisort_hw.cli.arg_types import Subcommands
 from omnisort_hw.cli.output import print_result
+
+if TYPE_CHECKING:  # a command's --help stays quick
+    from drivers.base import Device
+    from omnisort_hw.config.devices import DeviceSection
 
 EXIT_DEVICE_FAILED = 1
 
@@ -79,7 +83,7 @@ class CheckRow:
     seconds: float
 
 
-def _where(section: Any) -> str:
+def _where(section: DeviceSection) -> str:
     cfg = section.settings
     if section.is_sim:
         return "simulated"
@@ -90,14 +94,18 @@ def _where(section: Any) -> str:
     return "?"
 
 
-def _exercise(kind: str, device: Any) -> str:
+def _exercise(device: Device) -> str:
     """Touch the device once and describe what it answered."""
-    if kind == "camera":
+    from drivers.base import Arm, Camera, LaserSwitch
+
+    if isinstance(device, Camera):
         frame = device.grab()
         h, w = frame.image.shape[:2]
         return f"frame {w}x{h}, serial {device.serial}"
-    if kind == "laser":
+    if isinstance(device, LaserSwitch):
         return f"laser is {'ON' if device.state() else 'OFF'}"
+    if not isinstance(device, Arm):
+        raise TypeError(f"{type(device).__name__} is not a camera, a laser or an arm")
     status = device.safety_status()
     q = device.joint_positions()
     joints = ", ".join(f"{v:.1f}" for v in q)
@@ -123,7 +131,7 @@ def check_devices(config_path: Path, only: list[str] | None = None) -> list[Chec
         try:
             device = openers[kind](section, cell.base_dir)
             with device:
-                detail = _exercise(kind, device)
+                detail = _exercise(device)
             ok, status = True, "ok"
         except Exception as exc:
             code = getattr(exc, "code", None)

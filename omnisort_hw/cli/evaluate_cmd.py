@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from omnisort_hw.cli import drift_cmd, lighting_cmd, robot_cmd
 from omnisort_hw.cli.arg_types import Subcommands
 from omnisort_hw.cli.output import print_result
 from omnisort_hw.cli.sweep_args import add_sweep_arguments, run_cli_sweep
+
+if TYPE_CHECKING:  # imported by the command that uses it: --help stays quick
+    from omnisort_hw.core.radiometry import ToneCurve
 
 
 def register(sub: Subcommands) -> None:
@@ -60,7 +64,7 @@ def register(sub: Subcommands) -> None:
 
 
 # Other experiments register here: each adds its own parser to the `evaluate` group.
-EXTENSIONS: list[Any] = [
+EXTENSIONS: list[Callable[[Subcommands], None]] = [
     robot_cmd.add_sorting_evaluation,
     drift_cmd.add_drift_evaluation,
     lighting_cmd.add_lighting_evaluation,
@@ -134,7 +138,7 @@ def cmd_table3(args: argparse.Namespace) -> int:
     return 0
 
 
-def _evaluate_data(args: argparse.Namespace, assume: Any) -> dict[str, Any]:
+def _evaluate_data(args: argparse.Namespace, assume: ToneCurve | None) -> dict[str, Any]:
     """--data: the dataset on disk (rendered into it first when it holds none)."""
     from omnisort_hw.evaluation.table3 import evaluate_dataset
     from sim_backend.dataset import dataset_index

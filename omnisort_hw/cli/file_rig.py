@@ -161,17 +161,17 @@ class FileRig:
             raise InputError("--out: the file to write is needed")
         return self.out
 
-    def save_camera(self, model: OcamModel, record: Mapping[str, Any]) -> Path:
+    def save_camera(self, model: OcamModel, record: Mapping[str, object]) -> Path:
         from omnisort_hw.core.camera_io import save_camera_json
 
         out = self._out()
         save_camera_json(out, model, **record)
         return out
 
-    def save_system(self, payload: Mapping[str, Any]) -> Path:
+    def save_system(self, payload: Mapping[str, object]) -> Path:
         return fileio.atomic_write_json(self._out(), dict(payload))
 
-    def save_robot_base(self, record: Mapping[str, Any], image: np.ndarray) -> Path:
+    def save_robot_base(self, record: Mapping[str, object], image: np.ndarray) -> Path:
         from omnisort_hw.pipeline.registration import write_robot_base
 
         return write_robot_base(self.system_path, record)

@@ -25,7 +25,7 @@ from omnisort_hw.request_fields import (
 )
 
 
-def _holds_fixed(arg: Arg, fixed: Mapping[str, Any]) -> bool:
+def _holds_fixed(arg: Arg, fixed: Mapping[str, object]) -> bool:
     """False when `arg` is only for other values of a fixed argument (intrinsics' `degree` on
     the extrinsics command)."""
     for other, values in arg.only_when:
@@ -35,7 +35,7 @@ def _holds_fixed(arg: Arg, fixed: Mapping[str, Any]) -> bool:
 
 
 def cli_args(
-    cls: type[RequestClass], fixed: Mapping[str, Any] = {}, skip: Collection[str] = ()
+    cls: type[RequestClass], fixed: Mapping[str, object] = {}, skip: Collection[str] = ()
 ) -> list[Arg]:
     """The arguments of `cls` a CLI command offers: all but the fixed, the skipped and those
     that only apply to other values of a fixed one."""
@@ -70,9 +70,9 @@ def add_request_arguments(
     parser: argparse.ArgumentParser,
     cls: type[RequestClass],
     *,
-    fixed: Mapping[str, Any] = {},
+    fixed: Mapping[str, object] = {},
     skip: Collection[str] = (),
-    defaults: Mapping[str, Any] = {},
+    defaults: Mapping[str, object] = {},
 ) -> None:
     """Add a flag per argument of `cls` (`cli_args`). `defaults` are this door's own defaults
     where they differ from the record's (the CLI draws a map's picture unless told not to).
@@ -109,7 +109,7 @@ def request_from(
     args: argparse.Namespace,
     command: str,
     *,
-    fixed: Mapping[str, Any] = {},
+    fixed: Mapping[str, object] = {},
     skip: Collection[str] = (),
 ) -> R:
     """The request `cls` of the parsed flags (and `fixed`), checked as the protocol checks it

@@ -28,7 +28,6 @@ Conventions: the camera now is R_SC_now = Rot(rotvec_S) . R_SC (rotation vector 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import cv2
 import numpy as np
@@ -182,7 +181,7 @@ def estimate_rotation(
         curs.append(cv2.pyrDown(curs[-1]))
     omega = np.zeros(3)  # rotation vector in C (rad)
     rng = np.random.default_rng(0)
-    final: dict[str, Any] = {}
+    final: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float] | None = None
     for level in range(LEVELS - 1, -1, -1):
         scale = float(2**level)
         r_img, c_img = refs[level], curs[level]
@@ -230,9 +229,10 @@ def estimate_rotation(
             gain = gain + step[3:]
             if np.linalg.norm(step[:3]) < 1e-8:
                 break
-        final = {"J": J[ok], "w": w, "r": rr, "P": rays_pixels(model, rays[ok]), "k": k}
+        final = (J[ok], w, rr, rays_pixels(model, rays[ok]), k)
     # Delete-one-block jackknife at the solution (one Gauss-Newton step from it without block k).
-    J, w, r, P, k = final["J"], final["w"], final["r"], final["P"], final["k"]
+    assert final is not None, "every level of the pyramid sets it"
+    J, w, r, P, k = final
     blocks = _block_ids(P, model)
     Jw = J * w[:, None]
     A_all, b_all = Jw.T @ J, Jw.T @ r

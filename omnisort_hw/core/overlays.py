@@ -21,13 +21,12 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
 
 from omnisort_hw.core.extrinsics.system_calibration import SystemCalibration, place_side_walls
-from omnisort_hw.core.features import BoardsFeatures, TargetFeatures
+from omnisort_hw.core.features import BoardsFeatures, TargetFeatures, WallFeatures
 from omnisort_hw.core.frames import great_circle_normal
 from omnisort_hw.core.mapping import Segment, to_plane_frame
 from omnisort_hw.core.records import PictureReply
@@ -257,7 +256,9 @@ def wall_geometry(calib: SystemCalibration, features: TargetFeatures) -> dict[st
     return geom
 
 
-def _extent(calib: SystemCalibration, wall: Any, axis: int, at: float) -> tuple[float, float]:
+def _extent(
+    calib: SystemCalibration, wall: WallFeatures, axis: int, at: float
+) -> tuple[float, float]:
     """Range along the wall of its detected features: their rays cut with the wall's plane
     (coordinate `axis` of S equal to `at`), widened by 4 % at each end."""
     px = [wall.border_px, wall.laser_px, wall.floor_px, *wall.markers_px.values()]

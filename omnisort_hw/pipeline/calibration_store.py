@@ -71,14 +71,14 @@ def _json_default(obj: object) -> Any:
     raise TypeError(f"cannot store a {type(obj).__name__} in a calibration file")
 
 
-def canonical_bytes(body: Mapping[str, Any]) -> bytes:
+def canonical_bytes(body: Mapping[str, object]) -> bytes:
     """The bytes the checksum covers: sorted keys, no whitespace, UTF-8."""
     return json.dumps(
         body, sort_keys=True, separators=(",", ":"), ensure_ascii=False, default=_json_default
     ).encode("utf-8")
 
 
-def checksum_of(body: Mapping[str, Any]) -> str:
+def checksum_of(body: Mapping[str, object]) -> str:
     """`sha256:<hex>` of the canonical JSON of `body` (which must not contain the checksum)."""
     return "sha256:" + hashlib.sha256(canonical_bytes(body)).hexdigest()
 
@@ -168,7 +168,9 @@ class CalibrationStore:
 
     # -- writing ---------------------------------------------------------------------------
 
-    def save(self, kind: str, payload: Mapping[str, Any], camera_serial: str | None = None) -> Path:
+    def save(
+        self, kind: str, payload: Mapping[str, object], camera_serial: str | None = None
+    ) -> Path:
         """Write `payload` as the current calibration of `kind`, keeping the previous version.
 
         The payload's own keys are stored as they are; `storage` and `checksum` are added.
@@ -207,11 +209,11 @@ class CalibrationStore:
                 f"the current file and {fileio.history_dir(path)} are unchanged"
             ) from exc
 
-    def save_camera(self, payload: Mapping[str, Any], camera_serial: str | None = None) -> Path:
+    def save_camera(self, payload: Mapping[str, object], camera_serial: str | None = None) -> Path:
         """Save the camera intrinsics (the OCam model dict) as `camera.json`."""
         return self.save("camera", payload, camera_serial)
 
-    def save_system(self, payload: Mapping[str, Any], camera_serial: str | None = None) -> Path:
+    def save_system(self, payload: Mapping[str, object], camera_serial: str | None = None) -> Path:
         """Save the system calibration as `system.json`."""
         return self.save("system", payload, camera_serial)
 

@@ -48,7 +48,7 @@ REFERENCE_META = "drift_reference.json"
 BOARD_BIAS_PX = 0.3
 
 
-def calibration_key(system_payload: Mapping[str, Any]) -> str:
+def calibration_key(system_payload: Mapping[str, object]) -> str:
     """What a drift result belongs to: the camera rotation, the model and the robot base."""
     keys = ("camera", "camera_rotation", "robot_base")
     body = {k: system_payload.get(k) for k in keys}
@@ -68,7 +68,7 @@ def load_drift_state(state_dir: str | Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
-def drift_refusal(state: Mapping[str, Any], key: str | None) -> str | None:
+def drift_refusal(state: Mapping[str, object], key: str | None) -> str | None:
     """Why motion is refused by the drift state `state` for the calibration `key`: a drift of
     that calibration that no operator acknowledged (a new calibration clears it by itself)."""
     drift = state.get("drift_detected")
@@ -157,7 +157,7 @@ class DriftResult:
 
 
 def registration_for(
-    system_payload: Mapping[str, Any], configured: RegistrationConfig | None
+    system_payload: Mapping[str, object], configured: RegistrationConfig | None
 ) -> RegistrationConfig | None:
     """The board a drift check compares: the cell file's `[registration]`, else the one
     system.json's `robot_base` was registered with (its board and offset are recorded), else
@@ -227,7 +227,7 @@ def run(rig: CheckRig, request: CheckRequest) -> DriftResult:
 def check_drift(
     image: np.ndarray,
     calib: SystemCalibration,
-    system_payload: Mapping[str, Any],
+    system_payload: Mapping[str, object],
     registration: RegistrationConfig | None,
     reference: np.ndarray | None,
     config: WatchdogConfig | None = None,

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -47,7 +46,7 @@ def read_image(path: str | Path) -> np.ndarray:
     return image
 
 
-def image_record(path: str | Path) -> dict[str, Any]:
+def image_record(path: str | Path) -> dict[str, str]:
     """The image file's record in system.json and replies: its path and SHA-256."""
     p = Path(path)
     return {"path": str(p), "sha256": hashlib.sha256(p.read_bytes()).hexdigest()}

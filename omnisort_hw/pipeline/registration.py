@@ -166,7 +166,7 @@ def log_registration(log: RunLog, reg: Registration) -> None:
     log.scalar("registration/rms_px", reg.rms_px)
 
 
-def write_robot_base(path: str | Path, record: Mapping[str, Any]) -> Path:
+def write_robot_base(path: str | Path, record: Mapping[str, object]) -> Path:
     """Put `robot_base` into a system.json (atomically, previous version kept).
 
     A file written by the calibration store (with a checksum) is re-saved through the store so

@@ -79,15 +79,15 @@ class Rig(CaptureRig, Protocol):
         """`fn(*args, log=..., **kwargs)`, CPU-bound work, logged to the rig's run log."""
         ...
 
-    def save_camera(self, model: OcamModel, record: Mapping[str, Any]) -> Path:
+    def save_camera(self, model: OcamModel, record: Mapping[str, object]) -> Path:
         """Write a new camera.json of `model` with its calibration `record`; its path."""
         ...
 
-    def save_system(self, payload: Mapping[str, Any]) -> Path:
+    def save_system(self, payload: Mapping[str, object]) -> Path:
         """Write a new system.json; its path."""
         ...
 
-    def save_robot_base(self, record: Mapping[str, Any], image: np.ndarray) -> Path:
+    def save_robot_base(self, record: Mapping[str, object], image: np.ndarray) -> Path:
         """Put a registration into system.json (and keep `image` as the drift reference where
         the rig watches drift); the file's path."""
         ...

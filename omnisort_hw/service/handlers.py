@@ -48,7 +48,7 @@ class Context:
     progress: Callable[[dict[str, Any]], None] | None = None
 
 
-Reply = Mapping[str, Any]
+Reply = Mapping[str, object]
 """A command's result: a use case's typed reply (`pipeline.replies`) or the cell's answer."""
 Handler = Callable[[Context, Any], Reply]
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import logging
 import uuid
-from typing import Any
 
 from omnisort_hw.config.live_view import LiveViewConfig
 from omnisort_hw.runlog import RunLog
@@ -31,7 +30,7 @@ class LiveView:
         import rerun as rr
 
         self.config = config
-        self.recording: Any = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
+        self.recording = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         sink = rr.GrpcServerSink(config.host, config.port, server_memory_limit=config.memory_limit)
         self.recording.set_sinks(sink)
         self.url: str = sink.uri

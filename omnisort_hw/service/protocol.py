@@ -310,7 +310,7 @@ def validate_request(obj: object, authorize: Authorizer | None = None) -> Reques
     return Request(id=rid, cmd=cmd, args=args, token=token, progress=progress)
 
 
-def validate_args(spec: Command, raw: Mapping[str, Any]) -> dict[str, Any]:
+def validate_args(spec: Command, raw: Mapping[str, object]) -> dict[str, Any]:
     """Check each argument of `spec` in `raw` (`request_fields.check_args`); unknown, missing
     or bad ones are bad_argument naming the field."""
     try:
@@ -340,7 +340,7 @@ def _json_default(obj: object) -> Any:
     return str(obj)
 
 
-def encode(obj: Mapping[str, Any]) -> bytes:
+def encode(obj: Mapping[str, object]) -> bytes:
     """One reply line: compact JSON (numpy values converted, NaN as null) and a newline."""
     try:
         text = json.dumps(obj, separators=(",", ":"), default=_json_default, allow_nan=False)
@@ -364,11 +364,11 @@ def _denan(obj: object) -> Any:
     return obj
 
 
-def ok_reply(rid: int | str | None, result: Mapping[str, Any]) -> dict[str, Any]:
+def ok_reply(rid: int | str | None, result: Mapping[str, object]) -> dict[str, Any]:
     return {"id": rid, "ok": True, "result": dict(result)}
 
 
-def progress_event(rid: int | str | None, event: Mapping[str, Any]) -> dict[str, Any]:
+def progress_event(rid: int | str | None, event: Mapping[str, object]) -> dict[str, Any]:
     """A line sent before a job's reply when the request asked for `progress`: it carries the
     request's id and no `ok`, so a client tells it from the reply."""
     return {"id": rid, "event": "progress", "progress": dict(event)}

@@ -13,7 +13,6 @@ import socket
 import subprocess
 from importlib import metadata
 from pathlib import Path
-from typing import Any
 
 BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 # The packages whose versions decide a trial's numbers.
@@ -57,7 +56,7 @@ def package_versions() -> dict[str, str | None]:
     return out
 
 
-def provenance() -> dict[str, Any]:
+def provenance() -> dict[str, object]:
     """This process's record: git revision, package versions, host, pid and the BLAS thread
     limits it runs under."""
     return {

@@ -37,7 +37,7 @@ class Trial:
     """What a trial computes: `config` and `seed` are its only inputs (JSON values)."""
 
     experiment: str
-    config: Mapping[str, Any]
+    config: Mapping[str, object]
     seed: int
 
     @property
@@ -70,7 +70,7 @@ class TrialOutput:
     timing: dict[str, Any] = field(default_factory=dict)
 
 
-def trial_function(experiment: str) -> Callable[[Mapping[str, Any], int], TrialOutput]:
+def trial_function(experiment: str) -> Callable[[Mapping[str, object], int], TrialOutput]:
     """The experiment's trial function (InputError for an unknown experiment)."""
     try:
         target = EXPERIMENTS[experiment]
@@ -81,7 +81,7 @@ def trial_function(experiment: str) -> Callable[[Mapping[str, Any], int], TrialO
     return getattr(importlib.import_module(module), name)
 
 
-def run_trial(trial: Mapping[str, Any]) -> dict[str, Any]:
+def run_trial(trial: Mapping[str, object]) -> dict[str, Any]:
     """Run one trial (a `Trial.to_dict()`) and return its row: the trial, its result, its
     timing (with the trial's wall and CPU time: the CPU time sizes a cluster whatever the
     machine's load) and the provenance of the process that ran it. The
@@ -103,7 +103,7 @@ def run_trial(trial: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def split_paths(row: Mapping[str, Any], paths: tuple[str, ...]) -> TrialOutput:
+def split_paths(row: Mapping[str, object], paths: tuple[str, ...]) -> TrialOutput:
     """Split a row into result and timing: `paths` ("key", "key.sub", ...) name its
     machine-dependent entries, moved to timing under the same path (absent ones skipped)."""
     result: dict[str, Any] = json.loads(canonical_json(row))
@@ -133,7 +133,7 @@ def _prune(d: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def merge_paths(result: Mapping[str, Any], timing: Mapping[str, Any]) -> dict[str, Any]:
+def merge_paths(result: Mapping[str, object], timing: Mapping[str, object]) -> dict[str, Any]:
     """The row `split_paths` split (the trial's own `wall_s` and `cpu_s`, added by
     `run_trial`, left out)."""
     row: dict[str, Any] = json.loads(canonical_json(result))
@@ -141,7 +141,7 @@ def merge_paths(result: Mapping[str, Any], timing: Mapping[str, Any]) -> dict[st
     return row
 
 
-def _merge(dst: dict[str, Any], src: Mapping[str, Any]) -> None:
+def _merge(dst: dict[str, Any], src: Mapping[str, object]) -> None:
     for k, v in src.items():
         if isinstance(v, dict) and isinstance(dst.get(k), dict):
             _merge(dst[k], v)

@@ -33,9 +33,9 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+from scipy.optimize import OptimizeResult
 
 from omnisort_hw.core.camera_model import OcamModel
 from omnisort_hw.core.extrinsics.covariance import fit_covariance
@@ -306,7 +306,7 @@ def _solve(
     separation_mm: float,
     layout: TargetLayout | None = None,
     model: OcamModel | None = None,
-) -> tuple[Any, JointProblem, dict[str, float]]:
+) -> tuple[OptimizeResult, JointProblem, dict[str, float]]:
     """LM from the closed-form start; then each kind of observation is weighted by its own
     noise (degraded laser points are noisier than border edges), points beyond 4 sigmas of
     their kind are dropped, and the weighted solve repeated: the maximum-likelihood fit, whose

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
 from omnisort_hw.core.extrinsics.system_calibration import PARAMETERS
 from omnisort_hw.core.frames import great_circle_normal
@@ -105,7 +105,7 @@ class _WeightedProblem:
         return dropped
 
 
-def _refine(prob: _WeightedProblem, x0: np.ndarray) -> tuple[Any, dict[str, float]]:
+def _refine(prob: _WeightedProblem, x0: np.ndarray) -> tuple[OptimizeResult, dict[str, float]]:
     """LM from x0, then twice: drop points beyond 4 sigmas of their kind, weight each kind by
     its measured noise and correlation, solve again. Returns the solution and the noise."""
     sol = least_squares(prob.residuals, x0, method="lm", x_scale="jac", max_nfev=400)
@@ -118,7 +118,7 @@ def _refine(prob: _WeightedProblem, x0: np.ndarray) -> tuple[Any, dict[str, floa
 
 
 def _outcome(
-    prob: _WeightedProblem, sol: Any, noise: dict[str, float]
+    prob: _WeightedProblem, sol: OptimizeResult, noise: dict[str, float]
 ) -> tuple[np.ndarray, dict[str, Any], dict[str, float]]:
     """What both targets report of a refinement: every parameter's standard deviation, the
     residual summary, and the std record of the parameters they share (degrees, mm). The
