@@ -12,11 +12,12 @@ pace, which neither figure holds. It also includes the browser driver's own mech
 click (the element found, shown, scrolled to the middle and at rest, then clicked: several
 WebDriver round trips, about 0.15 s a click on 2 cores), which a person does not have:
 `page_clicks_s` is their sum over the steps, and `page_less_clicks_over_ctl` the ratio without
-them.
+them. `page_jobs_s` and `ctl_jobs_s`: the service's own time of each job, from its journal.
 """
 
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from pathlib import Path
@@ -75,6 +76,10 @@ def run(shared: Path) -> dict[str, Any]:
                     else:
                         out["page_s"] = _in_page(config, svc.port, tmp)
                 truth = vc.truth()
+            # The service's own time of each job (its journal's `took_s`), as either door
+            # started it: whatever the door's own overhead, the same work should take as long.
+            took = json.loads((tmp / "state" / "job.json").read_text())["took_s"]
+            out[f"{door}_jobs_s"] = {**took, "total": round(sum(took.values()), 1)}
             errors = flow.calibration_errors(tmp / "state" / "system.json", truth)
             out[f"{door}_calibration_error"] = _rounded(errors)
     out["page_clicks_s"] = out["page_s"].pop("clicks")

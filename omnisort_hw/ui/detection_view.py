@@ -49,8 +49,9 @@ class LiveDetection:
         self.session.every(self.ctx.config.view_period_s, self.tick)
 
     async def tick(self) -> None:
-        """Ask once, unless not shown, still waiting for the last answer, or signed out."""
-        if not self.active or self._busy:
+        """Ask once, unless not shown, still waiting for the last answer, signed out, or the
+        cell busy with a job."""
+        if not self.active or self._busy or self.cell_busy():
             return
         token = self.token()
         if token is None:
@@ -73,6 +74,13 @@ class LiveDetection:
         if reply is None or not self.active:  # shutting down, or hidden meanwhile
             return
         self.show(reply)
+
+    def cell_busy(self) -> bool:
+        """A job is running: one this interface started (known at once) or one the service's
+        last status shows (from another door). A detection then waits: the job's frames are
+        its own (the laser switched, the floor checked), and on the cell's 2-core PC each
+        detection took the job's cores, so the page's calibrations ran longer than `ctl`'s."""
+        return self.ctx.jobs.running is not None or self.ctx.link.running_job() is not None
 
     def show(self, reply: DetectReply) -> None:
         picture = reply.picture

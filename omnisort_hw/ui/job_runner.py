@@ -52,6 +52,12 @@ class JobRunner:
         self.results: dict[str, object] = {}  # the last result of each command
         self.ended = 0  # how many jobs have ended (a page redraws what depends on them)
 
+    @property
+    def running(self) -> str | None:
+        """The command of the job this interface is running, or None."""
+        with self._lock:
+            return self._running[0] if self._running else None
+
     def busy(self, browser: str) -> str | None:
         """Why `browser` cannot start a job now (one of this interface is still running, in
         that browser or another), or None."""

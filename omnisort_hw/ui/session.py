@@ -46,6 +46,7 @@ class BrowserSession:
         self.message = ""  # what this browser was last told (the label under the header)
         self._stale: Callable[[], bool] | None = None
         self._refreshes: list[_Refresh] = []
+        self._ended_seen = ctx.jobs.ended  # the interface's jobs ended when last ticked
 
     # -- who ------------------------------------------------------------------------------
 
@@ -141,8 +142,15 @@ class BrowserSession:
         return min((r.period_s for r in self._refreshes), default=0.5)
 
     def tick(self) -> None:
-        """Each refresh that is due, in the order they asked. A coroutine runs as a task of its
-        own in the page's context, so a slow answer holds back no other refresh."""
+        """Each refresh that is due, in the order they asked; every one, after a job of this
+        interface has ended, so a step waiting for its job shows the end within a tick, not
+        within its own period. A coroutine runs as a task of its own in the page's context, so
+        a slow answer holds back no other refresh."""
+        ended = self.ctx.jobs.ended
+        if ended != self._ended_seen:
+            self._ended_seen = ended
+            for r in self._refreshes:
+                r.due = 0.0
         for r in self._refreshes:
             now = time.monotonic()
             if now < r.due or r.running:

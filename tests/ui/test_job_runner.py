@@ -5,6 +5,7 @@ on loopback that takes the request and answers when the test lets it."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
 import threading
@@ -12,11 +13,17 @@ from collections.abc import Iterator
 
 import pytest
 
+from omnisort_hw.config.ui import UiConfig
 from omnisort_hw.pipeline.replies import MapReply, VerdictReply
-from omnisort_hw.pipeline.requests import MapRequest
+from omnisort_hw.pipeline.requests import DetectRequest, MapRequest
 from omnisort_hw.request_fields import wire_args
+from omnisort_hw.ui.context import UiContext
+from omnisort_hw.ui.detection_view import LiveDetection
 from omnisort_hw.ui.job_runner import JobRunner
 from omnisort_hw.ui.link import CellCommands, ServiceLink, call_of
+from omnisort_hw.ui.live_feed import LiveFeed
+from omnisort_hw.ui.operators import Operators
+from omnisort_hw.ui.session import BrowserSession
 from omnisort_hw.wire_records import to_wire
 from tests.ui.browser_page import wait_for
 
@@ -92,3 +99,23 @@ def test_a_reply_that_does_not_fit_its_record_ends_the_job_saying_where(peer) ->
     assert jobs.last is not None and not jobs.last.ok
     assert "map: the service's reply does not fit MapReply." in jobs.last.message
     assert jobs.result(CellCommands.map) is None
+
+
+def test_a_live_detection_waits_while_a_job_runs(peer) -> None:
+    """While a job of the interface runs, a step's live detection asks nothing of the service
+    (the job's frames are its own, and the cell's cores its work); after it, it may ask."""
+    port, answer, seen = peer
+    link = ServiceLink("127.0.0.1", port, timeout_s=WAIT_S)  # its status is not read here
+    config = UiConfig()
+    ctx = UiContext(config, link, Operators(link, True), JobRunner(link), LiveFeed(link, 1, 320))
+    detection = LiveDetection(BrowserSession(ctx, "browser-a"), DetectRequest, "detect")
+    detection.active = True
+    assert ctx.jobs.running is None and not detection.cell_busy()
+    ctx.jobs.start(call_of(CellCommands.map), "token", "browser-a")
+    wait_for("the request at the peer", lambda: seen, WAIT_S)
+    assert ctx.jobs.running == "map" and detection.cell_busy()
+    asyncio.run(detection.tick())
+    assert [r["cmd"] for r in seen] == ["map"] and detection.last is None  # nothing asked
+    answer.set()
+    wait_for("the job's end", lambda: ctx.jobs.running is None, WAIT_S)
+    assert not detection.cell_busy()

@@ -1,8 +1,10 @@
 """The page's one timer (`BrowserSession.tick`): each panel's refresh runs at its own period, in
-the order they asked; the timer ticks at the shortest period asked."""
+the order they asked; the timer ticks at the shortest period asked; a job's end makes every
+refresh due at the next tick."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import cast
 
 import pytest
@@ -12,10 +14,15 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.session import BrowserSession
 
 
+def session_without_service() -> BrowserSession:
+    """A session whose timer runs with no service: of its context, only the jobs' count."""
+    return BrowserSession(cast(UiContext, SimpleNamespace(jobs=SimpleNamespace(ended=0))), "b")
+
+
 def test_each_refresh_runs_at_its_own_period(monkeypatch: pytest.MonkeyPatch) -> None:
     clock = [100.0]
     monkeypatch.setattr(session_module.time, "monotonic", lambda: clock[0])
-    s = BrowserSession(cast(UiContext, None), "b")  # the timer needs no service
+    s = session_without_service()
     ran: list[str] = []
     s.every(1.0, lambda: ran.append("status"))
     s.every(0.5, lambda: ran.append("view"))
@@ -26,3 +33,25 @@ def test_each_refresh_runs_at_its_own_period(monkeypatch: pytest.MonkeyPatch) ->
         clock[0] += s.tick_s
     assert ran.count("status") == 2 and ran.count("view") == 4 and ran.count("fast") == 8
     assert ran[:3] == ["status", "view", "fast"]  # the order they asked
+
+
+def test_a_jobs_end_makes_every_refresh_due_at_the_next_tick(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = [100.0]
+    monkeypatch.setattr(session_module.time, "monotonic", lambda: clock[0])
+    s = session_without_service()
+    ran: list[str] = []
+    s.every(0.25, lambda: ran.append("status"))
+    s.every(0.5, lambda: ran.append("step"))
+    s.tick()  # both run first, then each at its period
+    clock[0] += 0.25
+    s.tick()
+    assert ran == ["status", "step", "status"]  # the step is due only in another 0.25 s
+    s.ctx.jobs.ended += 1  # type: ignore[attr-defined]  # a job of this interface ended
+    clock[0] += 0.01
+    s.tick()
+    assert ran[3:] == ["status", "step"], ran  # both at once, the step not a period later
+    clock[0] += 0.01
+    s.tick()
+    assert ran[5:] == [], ran  # and then at their periods again

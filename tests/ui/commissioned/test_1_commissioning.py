@@ -7,13 +7,14 @@ commissioned cell. Each step's screenshot goes to docs/images (`make screenshots
 
 from __future__ import annotations
 
+import re
 import time
 
 import pytest
 
 from omnisort_hw.pipeline.extrinsics import ANGLE_STD_DEG, DISTANCE_STD_MM
 from tests.ui import commissioning_flow as flow
-from tests.ui.browser_page import UI_S, wait_for
+from tests.ui.browser_page import UI_S, Page, wait_for
 from tests.ui.commissioned.shared import Commissioned
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
@@ -43,6 +44,15 @@ def test_the_3d_tab_draws_the_commissioned_cell(commissioned: Commissioned) -> N
     time.sleep(1.0)  # three.js draws on its next frame (only the screenshot waits for it)
     page.shot("commission_3d", at="scene-3d")
     page.click("tab-cell")
+    # The live picture is asked for only while a tab shows it: back on its tab, it goes on.
+    shown = _picture_number(page)
+    wait_for("a newer live picture", lambda: _picture_number(page) > shown, UI_S, 0.25)
     # The camera, the laser plane, the base and its 7 joint origins, the 4 bins, the map.
     for part in ("camera: 1", "laser plane: 1", "arm joints: 8", "bins: 4", "map points: "):
         assert part in drawn, drawn
+
+
+def _picture_number(page: Page) -> int:
+    """The live picture's sequence number as the Cell tab says it (-1: none said)."""
+    match = re.match(r"picture (\d+) at", page.text("view-note"))
+    return int(match.group(1)) if match else -1
