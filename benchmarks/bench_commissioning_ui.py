@@ -1,5 +1,7 @@
-"""Commissioning the virtual cell from nothing through the operator interface's pages (the board
-held from the Simulator tab, the steps in the Commission tab), against the same steps through
+"""Commissioning the virtual cell from nothing through the operator interface's pages (each of
+the board's poses held from the views step's "Next board pose", as `ctl` holds each through the
+control channel; the browser test holds the first from the Simulator tab, which adds two tab
+changes), the steps in the Commission tab, against the same steps through
 `omnisort ctl` (`tests/ui/commissioning_flow.py`): 10 views of the held board, the intrinsics,
 the camera and laser plane from the two-sided target, the robot registration, the verification
 (map and locate). Each door on a fresh virtual cell (960 px) and a fresh `omnisort serve` on
@@ -51,7 +53,7 @@ def _in_page(config: Path, port: int, tmp: Path) -> dict[str, float]:
                 clicked[0] += time.monotonic() - start
 
             page.click = timed_click  # type: ignore[method-assign]
-            steps = flow.in_page(page, shots=False)
+            steps = flow.in_page(page, shots=False, first_from_simulator=False)
             return {**steps, "clicks": round(clicked[0], 1)}
         finally:
             quit_chromium(driver)

@@ -99,18 +99,30 @@ def sim_note_after(page: Page, button: str, starts: str, timeout_s: float = 60.0
         raise AssertionError(f"{exc}: the note says {page.text('sim-note')!r}") from None
 
 
-def in_page(page: Page, shots: bool = True, views: int = VIEWS) -> dict[str, float]:
+def in_page(
+    page: Page, shots: bool = True, views: int = VIEWS, first_from_simulator: bool = True
+) -> dict[str, float]:
     """Commission through the Commission tab, from the tab's opening to the verification's
-    verdict; the wall time of each step (s). `shots`: a screenshot of each step."""
+    verdict; the wall time of each step (s). `shots`: a screenshot of each step;
+    `first_from_simulator`: the board's first pose held from the Simulator tab (else from the
+    views step's own button, as the other poses are)."""
     laps = Laps()
-    views_in_page(page, laps, shots, views)
+    views_in_page(page, laps, shots, views, first_from_simulator)
     rest_in_page(page, laps, shots)
     return laps.total()
 
 
-def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS) -> None:
+def views_in_page(
+    page: Page,
+    laps: Laps,
+    shots: bool = True,
+    views: int = VIEWS,
+    first_from_simulator: bool = True,
+) -> None:
     """The Commission tab's first step: the views of the board held from the Simulator tab,
-    the intrinsics calibrated from them, and on to the next step (laps: views, intrinsics)."""
+    the intrinsics calibrated from them, and on to the next step (laps: views, intrinsics).
+    `first_from_simulator`: the first pose held from the Simulator tab (else, as the others,
+    from the step's "Next board pose")."""
 
     def shot(name: str, at: str) -> None:
         if shots:
@@ -123,7 +135,7 @@ def views_in_page(page: Page, laps: Laps, shots: bool = True, views: int = VIEWS
         # from the views step itself (the same channel command, offered there with a
         # simulated cell).
         held = f"board held at pose {k}"
-        if k == 0:
+        if k == 0 and first_from_simulator:
             show_tab(page, "tab-simulator", "add-view")
             sim_note_after(page, "sim-board-next", held)
             show_tab(page, "tab-commission", "sim-board-next")
