@@ -14,16 +14,21 @@ from omnisort_hw.ui.context import UiContext
 from omnisort_hw.ui.session import BrowserSession
 
 
+@pytest.fixture()
+def clock(monkeypatch: pytest.MonkeyPatch) -> list[float]:
+    """The session's clock, moved by the test (s)."""
+    now = [100.0]
+    monkeypatch.setattr(session_module.time, "monotonic", lambda: now[0])
+    return now
+
+
 def session_without_service() -> BrowserSession:
     """A session whose timer runs with no service: of its context, only the jobs' count."""
     return BrowserSession(cast(UiContext, SimpleNamespace(jobs=SimpleNamespace(ended=0))), "b")
 
 
-def test_each_refresh_runs_at_its_own_period(monkeypatch: pytest.MonkeyPatch) -> None:
-    clock = [100.0]
-    monkeypatch.setattr(session_module.time, "monotonic", lambda: clock[0])
-    s = session_without_service()
-    ran: list[str] = []
+def test_each_refresh_runs_at_its_own_period(clock: list[float]) -> None:
+    s, ran = session_without_service(), []
     s.every(1.0, lambda: ran.append("status"))
     s.every(0.5, lambda: ran.append("view"))
     s.every(0.25, lambda: ran.append("fast"))
@@ -35,13 +40,8 @@ def test_each_refresh_runs_at_its_own_period(monkeypatch: pytest.MonkeyPatch) ->
     assert ran[:3] == ["status", "view", "fast"]  # the order they asked
 
 
-def test_a_jobs_end_makes_every_refresh_due_at_the_next_tick(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    clock = [100.0]
-    monkeypatch.setattr(session_module.time, "monotonic", lambda: clock[0])
-    s = session_without_service()
-    ran: list[str] = []
+def test_a_jobs_end_makes_every_refresh_due_at_the_next_tick(clock: list[float]) -> None:
+    s, ran = session_without_service(), []
     s.every(0.25, lambda: ran.append("status"))
     s.every(0.5, lambda: ran.append("step"))
     s.tick()  # both run first, then each at its period
