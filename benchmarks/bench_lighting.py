@@ -6,10 +6,16 @@ default 1920), OMNISORT_BENCH_LIGHT_FRAMES (default 8), OMNISORT_BENCH_LIGHT_CHE
 seeds, comma separated, default "5": the same run on a seed nothing was tuned on, summarised),
 OMNISORT_BENCH_LIGHT_SMALL_SEEDS (default "11,97,131") at OMNISORT_BENCH_LIGHT_SMALL_WIDTH
 (default 1280, the CLI's default camera, where a cube's corner spans fewer pixels), summarised.
+
+`colour_camera`: the check seeds again through a colour camera's effects (crosstalk, chromatic
+aberration, bloom, Bayer demosaicing: `evaluate lighting --effects`), summarised beside the
+same seeds' plain figures (`check_seeds`). OMNISORT_BENCH_LIGHT_EFFECTS_ONLY=1 keeps the
+recorded figures and measures this part alone.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 from typing import Any
@@ -21,10 +27,17 @@ def _r(v: Any, k: int) -> Any:
     return round(float(v), k) if isinstance(v, (int, float)) else v
 
 
+RESULTS = Path(__file__).resolve().parent / "results.json"
+
+
 def run(shared: Path) -> dict[str, Any]:
     seed = int(os.environ.get("OMNISORT_BENCH_LIGHT_SEED", "0"))
     width = int(os.environ.get("OMNISORT_BENCH_LIGHT_WIDTH", "1920"))
     frames = int(os.environ.get("OMNISORT_BENCH_LIGHT_FRAMES", "8"))
+    checks = os.environ.get("OMNISORT_BENCH_LIGHT_CHECK_SEEDS", "5")
+    if os.environ.get("OMNISORT_BENCH_LIGHT_EFFECTS_ONLY") == "1":
+        kept = dict(json.loads(RESULTS.read_text())["lighting"])
+        return {**kept, "colour_camera": _summaries(checks, frames, width, effects=True)}
     result = evaluate_lighting(seed, frames, width, progress=True)
     figures: dict[str, Any] = {"seed": seed, "width": width, "frames": frames, "scenarios": {}}
     for name, sc in result["scenarios"].items():
@@ -52,18 +65,19 @@ def run(shared: Path) -> dict[str, Any]:
                 "response_gamma": rec.get("response_gamma"),
             }
         figures["scenarios"][name] = row
-    checks = os.environ.get("OMNISORT_BENCH_LIGHT_CHECK_SEEDS", "5")
     figures["check_seeds"] = _summaries(checks, frames, width)
+    figures["colour_camera"] = _summaries(checks, frames, width, effects=True)
     small = int(os.environ.get("OMNISORT_BENCH_LIGHT_SMALL_WIDTH", "1280"))
     seeds = os.environ.get("OMNISORT_BENCH_LIGHT_SMALL_SEEDS", "11,97,131")
     figures["small_width"] = {"width": small, "seeds": _summaries(seeds, frames, small)}
     return figures
 
 
-def _summaries(seeds: str, frames: int, width: int) -> dict[str, Any]:
-    """Every scenario on each of the comma-separated `seeds`, summarised per seed."""
+def _summaries(seeds: str, frames: int, width: int, effects: bool = False) -> dict[str, Any]:
+    """Every scenario on each of the comma-separated `seeds`, summarised per seed
+    (`effects`: through the colour camera's effects)."""
     return {
-        str(seed): _summary(evaluate_lighting(seed, frames, width, progress=True))
+        str(seed): _summary(evaluate_lighting(seed, frames, width, progress=True, effects=effects))
         for seed in (int(x) for x in seeds.split(",") if x.strip())
     }
 

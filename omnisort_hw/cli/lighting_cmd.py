@@ -28,6 +28,12 @@ def add_lighting_evaluation(esub: Subcommands) -> None:
         action="store_true",
         help="leave out the calibrations from each acquisition (the map's figures only)",
     )
+    p.add_argument(
+        "--effects",
+        action="store_true",
+        help="through a colour camera's effects as well (crosstalk, chromatic aberration, "
+        "bloom, Bayer demosaicing), as a real camera sees",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_sweep_arguments(p)
     p.set_defaults(func=cmd_lighting)
@@ -51,10 +57,15 @@ def cmd_lighting(args: argparse.Namespace) -> int:
     if args.width < 64:
         raise InputError(f"--width must be at least 64, got {args.width}")
     trials = lighting_trials(
-        args.seed, args.frames, args.width, chosen, calibrate=not args.no_calibration
+        args.seed,
+        args.frames,
+        args.width,
+        chosen,
+        calibrate=not args.no_calibration,
+        effects=args.effects,
     )
     run, _ = run_cli_sweep(args, "lighting", trials)
-    result = summarize_lighting(run.rows, args.seed, args.frames, args.width)
+    result = summarize_lighting(run.rows, args.seed, args.frames, args.width, args.effects)
     if args.json:
         print_result(result)
     else:

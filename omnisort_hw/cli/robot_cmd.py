@@ -98,6 +98,12 @@ def add_sorting_evaluation(esub: Subcommands) -> None:
         help="true camera/laser calibration, or one with the joint method's typical errors",
     )
     ev.add_argument("--max-angle", type=float, default=10.0, help="camera angles, +-deg")
+    ev.add_argument(
+        "--effects",
+        action="store_true",
+        help="each scene through a real colour camera (noise, blur, JPEG, crosstalk, chromatic "
+        "aberration, bloom, Bayer demosaicing), not as clean renders",
+    )
     ev.add_argument("--out", type=output_file, default=None, help="also write the result JSON here")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     add_sweep_arguments(ev)
@@ -256,7 +262,9 @@ def cmd_evaluate_sorting(args: argparse.Namespace) -> int:
         state = res.get("error") or f"{res['sorted_ok']}/{res['cubes']} sorted"
         print(f"  scene {res['scene'] + 1}/{args.scenes}: {state}", file=sys.stderr, flush=True)
 
-    trials = sorting_trials(args.scenes, args.seed, args.width, args.calibration, args.max_angle)
+    trials = sorting_trials(
+        args.scenes, args.seed, args.width, args.calibration, args.max_angle, effects=args.effects
+    )
     t0 = time.perf_counter()
     run, _ = run_cli_sweep(args, "sorting", trials, on_row=progress)
     result = summarize_rows(run.rows, time.perf_counter() - t0)

@@ -43,6 +43,7 @@ from omnisort_hw.pipeline.measurement_capture import (
 from omnisort_hw.sweeps.trial import Trial, TrialOutput, merge_paths, split_paths
 from sim_backend.devices import SimCamera, SimCell, SimLaserSwitch
 from sim_backend.hostile_light import SCENARIOS
+from sim_backend.scene import load_scene, with_camera_effects
 
 EVAL_GRAB_TIMEOUT_S = 900.0  # a first 1920 px render on a loaded machine takes minutes
 SPURIOUS_PX = 3.0
@@ -150,15 +151,32 @@ def _calibration_error(
     }
 
 
+def lighting_cell(name: str, seed: int, width: int, effects: bool = False) -> SimCell:
+    """The sorting cell under the lighting scenario `name`, its camera square at `width` px;
+    `effects`: through the colour camera's effects as well (crosstalk, chromatic aberration,
+    bloom, Bayer demosaicing: `scene.with_camera_effects`), as a real colour camera sees."""
+    scene = load_scene(SCENE)
+    scene = with_camera_effects(scene) if effects else scene
+    return SimCell.from_scene(scene, seed=seed, light=name, width=width, height=width)
+
+
 def run_scenario(
-    name: str, seed: int, frames: int = 8, width: int = 1280, calibrate: bool = True
+    name: str,
+    seed: int,
+    frames: int = 8,
+    width: int = 1280,
+    calibrate: bool = True,
+    effects: bool = False,
 ) -> dict[str, Any]:
-    """Single frame and measurement capture under one lighting scenario."""
-    cell = SimCell.from_scene(SCENE, seed=seed, light=name, width=width, height=width)
+    """Single frame and measurement capture under one lighting scenario (`effects`: through
+    the colour camera's effects, `lighting_cell`)."""
+    cell = lighting_cell(name, seed, width, effects)
     cam = SimCamera(cell, degraded=True, grab_timeout_s=EVAL_GRAB_TIMEOUT_S)
     laser = SimLaserSwitch(cell)
     tone = ToneCurve.parse(cam.tone_curve)
     result: dict[str, Any] = {"lighting": name, "seed": seed, "width": width}
+    if effects:
+        result["effects"] = True
     try:
         with cam, laser:
             laser.on()
@@ -210,12 +228,18 @@ def lighting_trials(
     width: int = 1280,
     scenarios: tuple[str, ...] = SCENARIOS,
     calibrate: bool = True,
+    effects: bool = False,
 ) -> list[Trial]:
     """One trial per scenario (the seed: the cell's noise seed, the same for every one);
-    `calibrate=False` leaves out the calibrations (the map's figures alone, faster)."""
-    config = {"frames": frames, "width": width}
+    `calibrate=False` leaves out the calibrations (the map's figures alone, faster);
+    `effects`: through the colour camera's effects (`lighting_cell`). A key left at its
+    default is not in the configuration, so the trials run before either existed keep their
+    identity."""
+    config: dict[str, Any] = {"frames": frames, "width": width}
     if not calibrate:
         config["calibrate"] = False
+    if effects:
+        config["effects"] = True
     return [Trial("lighting", {"scenario": name, **config}, seed) for name in scenarios]
 
 
@@ -227,16 +251,18 @@ def lighting_trial(config: Mapping[str, Any], seed: int) -> TrialOutput:
         int(config["frames"]),
         int(config["width"]),
         calibrate=bool(config.get("calibrate", True)),
+        effects=bool(config.get("effects", False)),
     )
     return split_paths(result, LIGHTING_TIMING)
 
 
 def summarize_lighting(
-    rows: Sequence[Mapping[str, Any]], seed: int, frames: int, width: int
+    rows: Sequence[Mapping[str, Any]], seed: int, frames: int, width: int, effects: bool = False
 ) -> dict[str, Any]:
     """`evaluate_lighting`'s object from a sweep's lighting rows (manifest order)."""
     scenarios = {r["config"]["scenario"]: merge_paths(r["result"], r["timing"]) for r in rows}
-    return {"seed": seed, "frames": frames, "width": width, "scenarios": scenarios}
+    out = {"seed": seed, "frames": frames, "width": width, "scenarios": scenarios}
+    return {**out, "effects": True} if effects else out
 
 
 def evaluate_lighting(
@@ -245,13 +271,17 @@ def evaluate_lighting(
     width: int = 1280,
     scenarios: tuple[str, ...] = SCENARIOS,
     progress: bool = True,
+    effects: bool = False,
 ) -> dict[str, Any]:
-    """Every scenario (see the module docstring), in this process; JSON-ready."""
+    """Every scenario (see the module docstring), in this process; JSON-ready. `effects`:
+    through the colour camera's effects (`lighting_cell`)."""
     from tqdm import tqdm
 
     out: dict[str, Any] = {"seed": seed, "frames": frames, "width": width, "scenarios": {}}
+    if effects:
+        out["effects"] = True
     for name in tqdm(scenarios, desc="lighting", unit="scenario", disable=not progress):
-        out["scenarios"][name] = run_scenario(name, seed, frames, width)
+        out["scenarios"][name] = run_scenario(name, seed, frames, width, effects=effects)
     return out
 
 

@@ -24,7 +24,14 @@ from omnisort_hw.pipeline.calibration_source import MemoryCalibration
 from omnisort_hw.runlog import NullLog, RunLog
 from omnisort_hw.sweeps.trial import Trial, TrialOutput, merge_paths, split_paths
 from sim_backend.devices import SimArm, SimCamera, SimCell, SimLaserSwitch
-from sim_backend.scene import NAMED_COLORS, Color, CubeSpec, load_scene, sized
+from sim_backend.scene import (
+    NAMED_COLORS,
+    Color,
+    CubeSpec,
+    load_scene,
+    sized,
+    with_camera_effects,
+)
 from sim_backend.scene import BinSpec as SceneBin
 from sim_backend.sort_harness import (
     SimVerifier,
@@ -158,10 +165,15 @@ def sorting_trials(
     calibration: str = "truth",
     max_angle_deg: float = 10.0,
     cubes: tuple[int, int] = (3, 6),
+    effects: bool = False,
 ) -> list[Trial]:
     """The experiment's scenes as trials: the seeded draws (cube count, layout, calibration
     errors) are made here, in the order the experiment always made them, and written into
-    each trial's configuration; a trial's seed is its simulated cell's noise seed."""
+    each trial's configuration; a trial's seed is its simulated cell's noise seed.
+    `effects`: each scene seen through a real colour camera (the sensor's noise, blur and
+    JPEG with crosstalk, chromatic aberration, bloom and Bayer demosaicing:
+    `scene.with_camera_effects`), not as clean renders; left out of the configuration when
+    False, so the trials made before it keep their identity."""
     if calibration not in ("truth", "perturbed"):
         raise InputError(f"--calibration must be truth or perturbed, got {calibration!r}")
     rng = np.random.default_rng(seed)
@@ -178,6 +190,8 @@ def sorting_trials(
         }
         if calibration == "perturbed":
             config["calibration_errors"] = draw_calibration_errors(rng)
+        if effects:
+            config["effects"] = True
         trials.append(Trial("sorting", config, seed * 1000 + k))
     return trials
 
@@ -197,8 +211,9 @@ def sort_scene(config: Mapping[str, Any], seed: int, log: RunLog) -> dict[str, A
     k, n = int(config["scene"]), len(config["layout"]["cubes"])
     cfg = sim_sort_config(scene, cfg0)
     reg_cfg = sim_registration_config(scene)
-    cell = SimCell(scene, seed=seed)
-    cam, laser, arm = SimCamera(cell), SimLaserSwitch(cell), SimArm(cell)
+    effects = bool(config.get("effects", False))
+    cell = SimCell(with_camera_effects(scene) if effects else scene, seed=seed)
+    cam, laser, arm = SimCamera(cell, degraded=effects), SimLaserSwitch(cell), SimArm(cell)
     row: dict[str, Any] = {"scene": k, "cubes": n}
     try:
         for d in (cam, laser, arm):
@@ -261,6 +276,7 @@ def evaluate_sorting(
     cubes: tuple[int, int] = (3, 6),
     progress: Callable[[int, dict[str, Any]], None] | None = None,
     log: RunLog = NullLog,
+    effects: bool = False,
 ) -> dict[str, Any]:
     """The random-scene experiment on the simulated cell, in this process: per scene,
     register the robot from the image, locate, sort, verify against the simulator's state;
@@ -270,14 +286,15 @@ def evaluate_sorting(
     joint method's typical errors (0.1 deg per camera angle, 0.15 deg per laser angle, 3 mm
     laser distance, Gaussian) to emulate a calibrated cell.
     """
-    trials = sorting_trials(scenes, seed, width, calibration, max_angle_deg, cubes)
+    trials = sorting_trials(scenes, seed, width, calibration, max_angle_deg, cubes, effects)
     rows: list[dict[str, Any]] = []
     t_all = time.perf_counter()
     for trial in trials:
         rows.append(sort_scene(trial.config, trial.seed, log))
         if progress is not None:
             progress(len(rows) - 1, rows[-1])
-    return summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration)
+    out = summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration)
+    return {**out, "effects": True} if effects else out
 
 
 def summarize_rows(rows: Sequence[Mapping[str, Any]], wall_s: float) -> dict[str, Any]:
@@ -286,7 +303,8 @@ def summarize_rows(rows: Sequence[Mapping[str, Any]], wall_s: float) -> dict[str
         raise InputError("no sorting rows to summarise")
     c = rows[0]["config"]
     scene_rows = [merge_paths(r["result"], r["timing"]) for r in rows]
-    return summarize_sorting(scene_rows, wall_s, c["sweep_seed"], c["width"], c["calibration"])
+    out = summarize_sorting(scene_rows, wall_s, c["sweep_seed"], c["width"], c["calibration"])
+    return {**out, "effects": True} if c.get("effects") else out
 
 
 def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
