@@ -85,14 +85,8 @@ def test_two_stripes_both_found() -> None:
     a, b = ((100.3, 40.0), (160.7, 440.0)), ((200.0, 300.25), (450.0, 250.6))
     img = to_u8(draw_line(draw_line(background(1), *a), *b))
     pts = laser_stripe_points(img)
-
-    def on(line: tuple) -> np.ndarray:
-        # Within 8 px of an end the fit window reaches past the stripe's end (the test
-        # above): up to 1 px off there, 0.5 px elsewhere.
-        near_end = distance_from_ends(pts, *line) <= 8.0
-        return distance_to_line(pts, *line) < np.where(near_end, 1.0, 0.5)
-
-    near_a, near_b = on(a), on(b)
+    near_a = distance_to_line(pts, *a) < 0.5
+    near_b = distance_to_line(pts, *b) < 0.5
     assert near_a.sum() > 40 and near_b.sum() > 25
     assert np.all(near_a | near_b)
 

@@ -78,27 +78,3 @@ def test_a_white_glint_without_red_flanks_is_no_core() -> None:
     streak = np.abs(v - centre_v(u)) < 3.0
     img[streak] = 255
     assert laser_stripe_points(img).shape[0] == 0
-
-
-def test_a_thin_line_on_the_colour_mosaic_is_found_at_its_centre_at_every_phase() -> None:
-    """A thin line (sigma 1.2 px) along the rows of a Bayer sensor keeps one phase against the
-    mosaic along its whole length, as a wall's stripe near a row does: the sensor sampled red
-    on every other row, and the demosaicing drew straight lines between the samples. Before
-    the rule for the mosaic (`core.stripe_profile`) the first moment above 30 % of the peak
-    was up to 0.33 px off, by the phase: a bias no averaging of frames removes. Each phase's
-    mean error is now within the extractor's tenth of a pixel (module docstring)."""
-    fx = EffectParams((1.0, 0.08, 0.35), (0.0, 0.0), 0.0, 0.0, bayer=True)
-    params = replace(PARAMS, effects=fx)
-    v = np.mgrid[0:SIZE, 0:SIZE][0].astype(np.float32)
-    biases = []
-    for k, offset in enumerate(np.arange(8) / 4.0):  # a 2 px period, in quarter pixels
-        laser = 0.9 * np.exp(-0.5 * ((v - 100.0 - offset) / 1.2) ** 2)
-        base = np.full((SIZE, SIZE, 3), 0.08, np.float32)
-        rng = np.random.default_rng(k)
-        opt = OpticalImage.prepare(base, laser, LaserSpec(), params, rng)
-        image = expose(opt, params, Exposure(pixel_format="BGR3"), np.random.default_rng(k + 1))
-        pts = laser_stripe_points(image[0])
-        inside = (pts[:, 0] > 20) & (pts[:, 0] < SIZE - 20) & (np.abs(pts[:, 1] - 100.0) < 3)
-        assert inside.sum() > 150, inside.sum()  # the line, across the frame's inside
-        biases.append(float(np.median(pts[inside, 1] - 100.0 - offset)))
-    assert max(abs(b) for b in biases) < 0.1, np.round(biases, 3)
