@@ -81,19 +81,20 @@ def _floats(value: object, n: int | None, key: str) -> tuple[float, ...]:
     return tuple(out)
 
 
-def _number(data: Mapping[str, object], key: str, default: float, path: str, lo: float) -> float:
+def _number(
+    data: Mapping[str, object], key: str, default: float, path: str, lo: float | None
+) -> float:
+    """A finite number (`default` when not given), at least `lo` unless it is None."""
     v = data.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v < lo:
-        raise ConfigError(f"{path}.{key}: expected a number >= {lo}, got {v!r}")
-    return float(v)
-
-
-def _angle(data: Mapping[str, object], key: str, path: str) -> float:
-    """An angle in degrees (0 when not given): any finite number."""
-    v = data.get(key, 0.0)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise ConfigError(f"{path}.{key}: expected a number of degrees, got {v!r}")
-    return float(v)
+    if (
+        isinstance(v, int | float)
+        and not isinstance(v, bool)
+        and math.isfinite(v)
+        and (lo is None or v >= lo)
+    ):
+        return float(v)
+    bound = "" if lo is None else f" >= {lo}"
+    raise ConfigError(f"{path}.{key}: expected a number{bound}, got {v!r}")
 
 
 def _list(value: object, path: str) -> list[object]:
@@ -181,7 +182,7 @@ def parse_sort_config(
                     str(b["color"]),
                     _floats(b["center_B_mm"], 2, f"{key}.center_B_mm"),  # type: ignore[arg-type]
                     _floats(b.get("size_mm", [240.0, 240.0, 120.0]), 3, f"{key}.size_mm"),  # type: ignore[arg-type]
-                    _angle(b, "yaw_B_deg", key),
+                    _number(b, "yaw_B_deg", 0.0, key, None),
                 )
             )
         changes["bins"] = tuple(bins)
@@ -197,7 +198,7 @@ def parse_sort_config(
                     str(o["frame"]),
                     _floats(o.get("center_mm"), 3, f"{key}.center_mm"),  # type: ignore[arg-type]
                     _floats(o.get("size_mm"), 3, f"{key}.size_mm"),  # type: ignore[arg-type]
-                    _angle(o, "yaw_deg", key),
+                    _number(o, "yaw_deg", 0.0, key, None),
                 )
             )
         changes["obstacles"] = tuple(obs)

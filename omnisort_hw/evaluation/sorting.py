@@ -293,8 +293,7 @@ def evaluate_sorting(
         rows.append(sort_scene(trial.config, trial.seed, log))
         if progress is not None:
             progress(len(rows) - 1, rows[-1])
-    out = summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration)
-    return {**out, "effects": True} if effects else out
+    return summarize_sorting(rows, time.perf_counter() - t_all, seed, width, calibration, effects)
 
 
 def summarize_rows(rows: Sequence[Mapping[str, Any]], wall_s: float) -> dict[str, Any]:
@@ -303,8 +302,9 @@ def summarize_rows(rows: Sequence[Mapping[str, Any]], wall_s: float) -> dict[str
         raise InputError("no sorting rows to summarise")
     c = rows[0]["config"]
     scene_rows = [merge_paths(r["result"], r["timing"]) for r in rows]
-    out = summarize_sorting(scene_rows, wall_s, c["sweep_seed"], c["width"], c["calibration"])
-    return {**out, "effects": True} if c.get("effects") else out
+    return summarize_sorting(
+        scene_rows, wall_s, c["sweep_seed"], c["width"], c["calibration"], c.get("effects", False)
+    )
 
 
 def planning_only(scenes: int = 8, seed: int = 0) -> dict[str, Any]:
@@ -391,7 +391,12 @@ def perturb_calibration(calib: SystemCalibration, rng: np.random.Generator) -> S
 
 
 def summarize_sorting(
-    rows: Sequence[dict[str, Any]], wall_s: float, seed: int, width: int, calibration: str
+    rows: Sequence[dict[str, Any]],
+    wall_s: float,
+    seed: int,
+    width: int,
+    calibration: str,
+    effects: bool = False,
 ) -> dict[str, Any]:
     """Totals of the random-scene experiment (the keys `evaluate sorting --json` prints)."""
     cubes = int(sum(r["cubes"] for r in rows))
@@ -425,11 +430,13 @@ def summarize_sorting(
     def pmax(v: Sequence[float]) -> float | None:
         return round(float(np.max(v)), 4) if v else None
 
+    seen = {"effects": True} if effects else {}  # through the colour camera: said when so
     return {
         "scenes": len(rows),
         "seed": seed,
         "width": width,
         "calibration": calibration,
+        **seen,
         "cubes": cubes,
         "sorted_ok": ok,
         "success_rate": round(ok / cubes, 4) if cubes else None,
